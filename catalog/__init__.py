@@ -1,0 +1,5 @@
+"""Where data lives: the store layout, Parquet/Zarr/GLB readers and writers, lineage, SQL views."""
+
+from catalog.store import Store, StoreError
+
+__all__ = ["Store", "StoreError"]

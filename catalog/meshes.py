@@ -1,0 +1,64 @@
+"""Standardized meshes as GLB files: one node per part, written atomically.
+
+glTF is Y-up; our frames are Z-up (+X forward). The conversion happens here and nowhere else:
+on save ``(x, y, z) -> (x, z, -y)``, on load the inverse. It is an exact permutation and sign
+flip, so nothing but float32 rounding (glTF positions are float32) changes a vertex.
+"""
+
+from __future__ import annotations
+
+import io
+import typing
+
+import numpy as np
+import trimesh
+
+from catalog.store import Store, StoreError
+from stages.geometry import MeshPart
+
+_Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
+
+
+def glb_bytes(parts: typing.Sequence[MeshPart]) -> bytes:
+    """Serialize parts into one GLB (geometry names ``p000``, ``p001``... keep the part order)."""
+    scene = trimesh.Scene()
+    for i, part in enumerate(parts):
+        mesh = trimesh.Trimesh(vertices=part.vertices @ _Z_UP_TO_Y_UP.T, faces=part.faces,
+                               process=False)
+        mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=np.tile(part.color, (len(part.faces), 1)))
+        scene.add_geometry(mesh, geom_name=f"p{i:03d}", node_name=f"p{i:03d}_{part.name}")
+    return scene.export(file_type="glb")
+
+
+def load_glb_arrays(data: bytes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(vertices, faces) per part of a GLB written by :func:`glb_bytes`, in part order, Z-up."""
+    scene = trimesh.load(io.BytesIO(data), file_type="glb", force="scene", process=False)
+    out = []
+    for name in sorted(scene.geometry):
+        g = scene.geometry[name]
+        v = np.asarray(g.vertices, dtype=np.float64) @ _Z_UP_TO_Y_UP  # inverse of an orthonormal map
+        out.append((v, np.asarray(g.faces, dtype=np.int64)))
+    return out
+
+
+class MeshStore:
+    """GLB meshes in a store, addressed by store-relative path."""
+
+    def __init__(self, store: Store):
+        self.store = store
+
+    def save(self, rel: str, parts: typing.Sequence[MeshPart]) -> str:
+        if not parts:
+            raise ValueError(f"{rel}: a mesh needs at least one part")
+        return self.store.write_bytes(rel, glb_bytes(parts))
+
+    def exists(self, rel: str) -> bool:
+        return self.store.exists(rel)
+
+    def load(self, rel: str) -> list[tuple[np.ndarray, np.ndarray]]:
+        try:
+            return load_glb_arrays(self.store.read_bytes(rel))
+        except StoreError:
+            raise
+        except Exception as exc:
+            raise StoreError(f"cannot read mesh {rel} in {self.store.url}: {exc}") from None

@@ -1,0 +1,113 @@
+"""Occupancy volumes in Zarr v3: ``occupancy.zarr/<sequence>/<res>/{semantic,instance}``.
+
+Each array is ``(frame, x, y, z)``; a chunk is one frame's ``chunk_edge x chunk_edge x Z`` column
+block, so a task that writes one whole frame writes whole chunks and no two tasks ever touch the
+same chunk. Arrays are created by the driver before any task runs (:meth:`OccupancyStore.create`)
+and carry the grid spec, voxel size, origin, frame and taxonomy version in their attributes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import zarr
+from zarr.storage import FsspecStore, LocalStore
+
+from catalog.store import OCCUPANCY_ZARR, Store
+from schemas.grid import GridSpec
+from schemas.taxonomy import TAXONOMY_VERSION
+
+# array name -> dtype, description
+OCCUPANCY_ARRAYS: dict[str, tuple[str, str]] = {
+    "semantic": ("uint8", "semantic class id per voxel (0 = free), CarlaOcc 30-class taxonomy"),
+    "instance": ("uint32", "instance id per voxel, unique within the sequence (0 = stuff or free)"),
+}
+
+
+def array_fingerprint(data: np.ndarray) -> str:
+    """Content fingerprint of an array: dtype, shape and bytes."""
+    h = hashlib.sha256(f"{data.dtype.str}{data.shape}".encode())
+    h.update(np.ascontiguousarray(data).tobytes())
+    return "sha256:" + h.hexdigest()[:24]
+
+
+def zarr_store(store: Store, name: str):
+    """A zarr store object over ``<root>/<name>`` (local directory or fsspec URL)."""
+    if store.is_local:
+        return LocalStore(store.path(name))
+    return FsspecStore.from_url(store.uri(name))
+
+
+class OccupancyStore:
+    """The occupancy Zarr hierarchy of a store."""
+
+    def __init__(self, store: Store):
+        self.store = store
+
+    def _root(self, mode: str) -> zarr.Group:
+        return zarr.open_group(store=zarr_store(self.store, OCCUPANCY_ZARR), mode=mode)
+
+    @staticmethod
+    def array_path(sequence_id: str, grid: GridSpec, name: str) -> str:
+        return f"{sequence_id}/{grid.key}/{name}"
+
+    def output_key(self, sequence_id: str, grid: GridSpec, name: str, frame: int) -> str:
+        """Lineage key of one frame of one array: ``occupancy.zarr/<seq>/<res>/<name>[<frame>]``."""
+        return f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}[{frame}]"
+
+    def create(self, sequence_id: str, grid: GridSpec, frame_count: int, chunk_edge: int,
+               extra_attrs: dict | None = None) -> None:
+        """Create (or keep, when identical) the arrays of one sequence at one resolution.
+
+        An existing array with the same shape, dtype, chunks and grid is kept with its data; one
+        that differs (another region, another frame count) is replaced.
+        """
+        root = self._root("a")
+        X, Y, Z = grid.shape
+        shape = (frame_count, X, Y, Z)
+        chunks = (1, min(chunk_edge, X), min(chunk_edge, Y), Z)
+        attrs = {
+            **grid.attrs(),
+            "dims": ["frame", "x", "y", "z"],
+            "sequence_id": sequence_id,
+            "taxonomy_version": TAXONOMY_VERSION,
+            **(extra_attrs or {}),
+        }
+        for name, (dtype, description) in OCCUPANCY_ARRAYS.items():
+            path = self.array_path(sequence_id, grid, name)
+            want = {**attrs, "description": description}
+            if path in root:
+                arr = root[path]
+                if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
+                        and str(arr.dtype) == dtype and dict(arr.attrs) == want):
+                    continue
+            root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
+                              overwrite=True, attributes=want)
+
+    def exists(self, sequence_id: str, grid: GridSpec, name: str, frame: int | None = None) -> bool:
+        try:
+            arr = self._root("r")[self.array_path(sequence_id, grid, name)]
+        except (KeyError, FileNotFoundError, zarr.errors.GroupNotFoundError):
+            return False
+        return frame is None or 0 <= frame < arr.shape[0]
+
+    def open(self, sequence_id: str, grid: GridSpec, name: str, mode: str = "r") -> zarr.Array:
+        root = self._root(mode)
+        return root[self.array_path(sequence_id, grid, name)]
+
+    def write_frame(self, sequence_id: str, grid: GridSpec, frame: int,
+                    arrays: dict[str, np.ndarray]) -> dict[str, str]:
+        """Write one frame of each array (whole chunks); returns lineage key -> fingerprint."""
+        out = {}
+        for name, data in arrays.items():
+            arr = self.open(sequence_id, grid, name, mode="r+")
+            if data.shape != arr.shape[1:]:
+                raise ValueError(f"{name}: frame shape {data.shape} != array {arr.shape[1:]}")
+            arr[frame] = data.astype(arr.dtype, copy=False)
+            out[self.output_key(sequence_id, grid, name, frame)] = array_fingerprint(data)
+        return out
+
+    def read_frame(self, sequence_id: str, grid: GridSpec, frame: int,
+                   names: tuple[str, ...] = ("semantic", "instance")) -> dict[str, np.ndarray]:
+        return {n: self.open(sequence_id, grid, n)[frame] for n in names}

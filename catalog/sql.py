@@ -1,0 +1,92 @@
+"""Read-only SQL over the catalog with DuckDB.
+
+Every table of the store is loaded (it is small metadata: assets, parts, placements, sequences,
+frames, actors, runs, quality...) and registered as a DuckDB view, plus ``classes`` (the taxonomy
+table). Then external access is switched off and the configuration locked, so a query can read
+those views and nothing else. Before running, each statement's type is checked: anything but a
+query (INSERT, UPDATE, DELETE, COPY, CREATE, DROP, ATTACH, INSTALL, LOAD, SET, writing PRAGMAs...)
+is refused with :class:`QueryRefused`; a syntax error raises :class:`QueryError` with DuckDB's
+message.
+"""
+
+from __future__ import annotations
+
+import duckdb
+import pyarrow as pa
+
+from catalog.parquet import ParquetTable
+from catalog.store import Store
+from schemas import records, taxonomy
+
+# statement types that only read
+_READ_TYPES = {duckdb.StatementType.SELECT, duckdb.StatementType.EXPLAIN}
+# PRAGMAs that only describe (everything else, e.g. enable_profiling or memory_limit, is refused)
+_READ_PRAGMAS = {"table_info", "show_tables", "show_tables_expanded", "show", "database_list",
+                 "functions", "version", "platform", "storage_info"}
+
+
+class QueryError(Exception):
+    """The SQL is malformed or failed (DuckDB's message)."""
+
+
+class QueryRefused(QueryError):
+    """The SQL would write or reach outside the catalog."""
+
+
+def _model_tables() -> dict[str, type[records.Record]]:
+    return {m.TABLE: m for m in records.PERSISTED}
+
+
+def catalog_tables(store: Store) -> dict[str, pa.Table]:
+    """Every catalog table of the store as Arrow (empty tables keep their schema)."""
+    out = {name: ParquetTable(store, model).load_arrow() for name, model in _model_tables().items()}
+    rows = taxonomy.table_rows()
+    out["classes"] = pa.Table.from_pylist(rows)
+    return out
+
+
+def check_read_only(sql: str) -> list[duckdb.Statement]:
+    """Parse ``sql`` and refuse any statement that is not a read; returns the statements."""
+    try:
+        statements = duckdb.extract_statements(sql)
+    except duckdb.Error as exc:
+        raise QueryError(str(exc)) from None
+    if not statements:
+        raise QueryError("empty query")
+    for st in statements:
+        if st.type in _READ_TYPES:
+            continue
+        if st.type == duckdb.StatementType.PRAGMA:
+            name = st.query.strip().split(None, 1)[1].split("(")[0].split("=")[0].strip().lower()
+            if name in _READ_PRAGMAS:
+                continue
+        kind = str(st.type).split(".")[-1]
+        raise QueryRefused(
+            f"refused: {kind} statements are not allowed; the catalog is read-only "
+            f"(use SELECT ... FROM one of the catalog views)"
+        )
+    return statements
+
+
+def connect(store: Store) -> duckdb.DuckDBPyConnection:
+    """An in-memory DuckDB connection with every catalog table as a view, sealed for reading."""
+    con = duckdb.connect(":memory:")
+    for name, table in catalog_tables(store).items():
+        con.register(name, table)
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
+    return con
+
+
+def query(store: Store, sql: str) -> tuple[list[str], list[tuple]]:
+    """Run a read-only query; returns (column names, rows)."""
+    check_read_only(sql)
+    con = connect(store)
+    try:
+        rel = con.execute(sql)
+        cols = [d[0] for d in rel.description] if rel.description else []
+        return cols, rel.fetchall()
+    except duckdb.Error as exc:
+        raise QueryError(str(exc).strip()) from None
+    finally:
+        con.close()

@@ -1,0 +1,169 @@
+"""A dataset root (a local path or any fsspec URL) and the one place that knows its layout.
+
+Every write of a whole file goes through :meth:`Store.write_bytes`, which writes to a hidden
+temporary name in the same directory and renames it into place, so a crash never leaves a
+half-written file under its final name (readers glob ``*.parquet``/``*.glb`` and never see the
+``.tmp-*`` names).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import posixpath
+import uuid
+from dataclasses import dataclass
+
+import fsspec
+
+# Store layout (DESIGN.md "Store layout"): table name -> directory of Parquet files.
+TABLE_DIRS: dict[str, str] = {
+    "assets": "admesh/assets",
+    "parts": "admesh/parts",
+    "quarantine": "admesh/quarantine",
+    "placements": "scenes/placements",
+    "sequences": "scenes/sequences",
+    "frames": "scenes/frames",
+    "actors": "scenes/actors",
+    "quality": "metrics/quality",
+    "quality_classes": "metrics/quality_classes",
+    "runs": "catalog/runs",
+}
+OCCUPANCY_ZARR = "occupancy.zarr"
+ADMESH_MESHES = "admesh/meshes"
+SCENE_MESHES = "scenes/meshes"
+METRICS_DIR = "metrics"
+
+
+class StoreError(Exception):
+    """A store problem a user can fix (unwritable root, missing input...)."""
+
+
+def fingerprint_bytes(data: bytes) -> str:
+    """Content fingerprint of a file: ``sha256:`` and the first 24 hex digits."""
+    return "sha256:" + hashlib.sha256(data).hexdigest()[:24]
+
+
+@dataclass(frozen=True)
+class Store:
+    """A dataset root. ``url`` is a local path or an fsspec URL such as ``memory://ds``."""
+
+    url: str
+
+    def __post_init__(self) -> None:
+        url = self.url
+        if "://" not in url:
+            url = os.path.abspath(os.path.expanduser(url))
+        object.__setattr__(self, "url", url.rstrip("/") or "/")
+
+    # -- filesystem -------------------------------------------------------------------------
+    @property
+    def fs(self) -> fsspec.AbstractFileSystem:
+        fs, _ = fsspec.core.url_to_fs(self.url)
+        return fs
+
+    @property
+    def root(self) -> str:
+        _, path = fsspec.core.url_to_fs(self.url)
+        return path
+
+    @property
+    def is_local(self) -> bool:
+        return "://" not in self.url or self.url.startswith("file://")
+
+    def path(self, rel: str) -> str:
+        """Filesystem path of a store-relative path."""
+        return posixpath.join(self.root, rel) if rel else self.root
+
+    def uri(self, rel: str) -> str:
+        """URL (or absolute local path) of a store-relative path."""
+        return f"{self.url}/{rel}" if rel else self.url
+
+    def exists(self, rel: str) -> bool:
+        return self.fs.exists(self.path(rel))
+
+    def read_bytes(self, rel: str) -> bytes:
+        try:
+            return self.fs.cat_file(self.path(rel))
+        except FileNotFoundError:
+            raise StoreError(f"missing in the store {self.url}: {rel}") from None
+
+    def write_bytes(self, rel: str, data: bytes) -> str:
+        """Write a whole file atomically (temporary name, then rename); returns its fingerprint."""
+        fs, final = self.fs, self.path(rel)
+        parent = posixpath.dirname(final)
+        fs.makedirs(parent, exist_ok=True)
+        tmp = posixpath.join(parent, f".tmp-{uuid.uuid4().hex}-{posixpath.basename(final)}.partial")
+        try:
+            with fs.open(tmp, "wb") as fh:
+                fh.write(data)
+            if self.is_local:
+                os.replace(tmp, final)  # atomic on POSIX
+            else:
+                fs.mv(tmp, final)
+        finally:
+            if fs.exists(tmp):
+                fs.rm(tmp)
+        return fingerprint_bytes(data)
+
+    def fingerprint(self, rel: str) -> str | None:
+        """Fingerprint of a stored file, or None when it does not exist."""
+        try:
+            return fingerprint_bytes(self.fs.cat_file(self.path(rel)))
+        except FileNotFoundError:
+            return None
+
+    def glob(self, rel_dir: str, suffix: str) -> list[str]:
+        """Store-relative paths of the files under ``rel_dir`` (recursively) ending in ``suffix``,
+        sorted; temporary files are never listed."""
+        base = self.path(rel_dir)
+        if not self.fs.exists(base):
+            return []
+        out = []
+        for p in self.fs.find(base):
+            name = posixpath.basename(p)
+            if name.endswith(suffix) and not name.startswith(".tmp-"):
+                out.append(posixpath.relpath(p if p.startswith("/") or not base.startswith("/") else p, self.root))
+        return sorted(out)
+
+    def remove(self, rel: str) -> None:
+        if self.exists(rel):
+            self.fs.rm(self.path(rel), recursive=True)
+
+    def check_writable(self) -> None:
+        """Raise :class:`StoreError` naming the root when it cannot be written (touches nothing
+        that already exists: creates the root if missing and a probe file it deletes)."""
+        fs, root = self.fs, self.root
+        try:
+            if fs.exists(root) and not fs.isdir(root):
+                raise StoreError(f"dataset root {self.url} is a file, not a directory")
+            fs.makedirs(root, exist_ok=True)
+            probe = posixpath.join(root, f".tmp-probe-{uuid.uuid4().hex}")
+            with fs.open(probe, "wb") as fh:
+                fh.write(b"")
+            fs.rm(probe)
+        except StoreError:
+            raise
+        except Exception as exc:  # PermissionError, read-only fs, ...
+            raise StoreError(f"dataset root {self.url} is not writable: {exc}") from None
+
+    # -- layout -----------------------------------------------------------------------------
+    @staticmethod
+    def table_dir(table: str) -> str:
+        try:
+            return TABLE_DIRS[table]
+        except KeyError:
+            raise StoreError(f"unknown table {table!r} (tables: {', '.join(TABLE_DIRS)})") from None
+
+    @staticmethod
+    def asset_mesh_path(asset_id: str) -> str:
+        return f"{ADMESH_MESHES}/{asset_id}.glb"
+
+    @staticmethod
+    def scene_mesh_path(stuff_asset_id: str) -> str:
+        """Stuff meshes of a town, keyed ``<town>/<name>``."""
+        return f"{SCENE_MESHES}/{stuff_asset_id}.glb"
+
+    @staticmethod
+    def occupancy_group(sequence_id: str, res_key: str) -> str:
+        return f"{sequence_id}/{res_key}"

@@ -1,0 +1,1 @@
+"""Orchestration: stage registry, Dask execution, incremental re-runs, the CLI."""

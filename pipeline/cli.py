@@ -1,0 +1,288 @@
+"""The ``carlaocc`` command line.
+
+Exit codes: 0 ok, 1 a task failed (named with its partition), 2 a usage or input error (one line
+naming the culprit; nothing in the dataset root is touched).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from pydantic import ValidationError
+
+from catalog.store import Store, StoreError
+from schemas.configs import DatasetConfig, parse_resolutions
+
+app = typer.Typer(
+    name="carlaocc",
+    help="Build instance-centric panoptic occupancy datasets from 3D meshes.\n\n"
+    "Stages: ingest -> scenes -> voxelize -> metrics. Every stage is Dask tasks over partitions; "
+    "unchanged work is skipped (lineage in <root>/catalog/runs).",
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
+                          rich_markup_mode=None)
+app.add_typer(catalog_app, name="catalog")
+
+RootOpt = Annotated[str, typer.Option("--root", help="dataset root: a directory or an fsspec URL (memory://...)")]
+ResOpt = Annotated[str, typer.Option("--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05")]
+ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="YAML or JSON dataset config (see `carlaocc config`)")]
+
+
+def fail(message: str, code: int = 2) -> None:
+    """Print a one-line error and exit."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def _validation_message(source: str, exc: ValidationError) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
+    if err["type"] == "extra_forbidden":
+        return f"{source}: unknown key {loc!r}"
+    return f"{source}: {loc}: {err['msg']}"
+
+
+def load_config(path: Path | None) -> DatasetConfig:
+    """The dataset config from a YAML/JSON file, or the embedded default."""
+    if path is None:
+        return DatasetConfig()
+    if not path.is_file():
+        fail(f"config file {path} does not exist")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            import yaml
+
+            data = yaml.safe_load(text)
+    except Exception as exc:
+        fail(f"config file {path} cannot be parsed: {str(exc).splitlines()[0]}")
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        fail(f"config file {path}: expected a mapping of stage names to settings")
+    try:
+        return DatasetConfig.model_validate(data)
+    except ValidationError as exc:
+        fail(_validation_message(f"config file {path}", exc))
+
+
+def _resolutions(res: str, config: DatasetConfig) -> tuple[float, ...]:
+    try:
+        values = parse_resolutions(res)
+        for v in values:
+            config.voxelize.grid(v)  # the region must hold at least one voxel at every resolution
+    except ValidationError as exc:
+        fail(f"--res {res}: {exc.errors()[0]['msg'].removeprefix('Value error, ')}")
+    except ValueError as exc:
+        fail(f"--res {res}: {exc}")
+    return values
+
+
+def _store(root: str, writable: bool) -> Store:
+    store = Store(root)
+    if writable:
+        try:
+            store.check_writable()
+        except StoreError as exc:
+            fail(str(exc))
+    return store
+
+
+class _RichProgress:
+    """A progress bar per stage: tasks done / total and elapsed time."""
+
+    def __init__(self) -> None:
+        from rich.console import Console
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                   TimeElapsedColumn)
+
+        self._progress = Progress(
+            TextColumn("{task.description:<9}"), BarColumn(), MofNCompleteColumn(),
+            TextColumn("tasks"), TimeElapsedColumn(), console=Console(stderr=True),
+        )
+        self._tasks: dict[str, int] = {}
+
+    def start(self, stage: str, total: int) -> None:
+        if not self._tasks:
+            self._progress.start()
+        self._tasks[stage] = self._progress.add_task(stage, total=total)
+
+    def advance(self, stage: str) -> None:
+        self._progress.advance(self._tasks[stage])
+
+    def stop(self, stage: str) -> None:
+        self._progress.refresh()
+
+    def close(self) -> None:
+        if self._tasks:
+            self._progress.stop()
+
+
+@app.command()
+def run(
+    res: ResOpt = "0.2",
+    root: RootOpt = "data",
+    stages: Annotated[Optional[str], typer.Option("--stages", help="comma-separated stages to run alone (default: all)")] = None,
+    config: ConfigOpt = None,
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous' for debugging (default: $DASK_SCHEDULER_ADDRESS, else a LocalCluster)")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="re-run the selected stages even when up to date")] = False,
+) -> None:
+    """Build the dataset (or the selected stages) on the embedded default or a --config file."""
+    from pipeline.runner import PlanError, run as run_pipeline, stage_order
+
+    cfg = load_config(config)
+    resolutions = _resolutions(res, cfg)
+    names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    try:
+        stage_order(names)
+    except PlanError as exc:
+        fail(str(exc))
+    store = _store(root, writable=True)
+    progress = _RichProgress()
+    t0 = time.perf_counter()
+    try:
+        outcomes = run_pipeline(store, cfg, resolutions, names, scheduler, force, progress, workers,
+                                log=lambda s: typer.echo(s, err=True))
+    except PlanError as exc:
+        progress.close()
+        fail(str(exc))
+    except (StoreError, OSError) as exc:
+        progress.close()
+        fail(str(exc))
+    progress.close()
+    failed = [f for o in outcomes for f in o.failed]
+    if failed:
+        for f in failed[:10]:
+            typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
+        if len(failed) > 10:
+            typer.echo(f"... and {len(failed) - 10} more failed tasks (see the runs table)", err=True)
+        raise typer.Exit(1)
+    ran = sum(o.ran for o in outcomes)
+    total = sum(o.total for o in outcomes)
+    if ran == 0:
+        typer.echo(f"nothing to do: all {total} tasks up to date in {store.url} (use --force to re-run)")
+    else:
+        typer.echo(f"done: ran {ran} of {total} tasks in {time.perf_counter() - t0:.1f} s; dataset at {store.url}")
+
+
+@app.command()
+def status(
+    res: ResOpt = "0.2",
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="list every stale partition")] = False,
+) -> None:
+    """List what is stale and why (runs nothing, writes nothing)."""
+    from pipeline.runner import status as plan_status
+
+    cfg = load_config(config)
+    resolutions = _resolutions(res, cfg)
+    store = _store(root, writable=False)
+    for plan in plan_status(store, cfg, resolutions):
+        name = plan.stage.name
+        if plan.blocked:
+            typer.echo(f"{name:<9} waiting: {plan.blocked}")
+            continue
+        stale = plan.to_run
+        total = len(plan.partitions)
+        if not stale:
+            typer.echo(f"{name:<9} up to date ({total} partitions)")
+            continue
+        reasons: dict[str, int] = {}
+        for pp in stale:
+            reasons[pp.reason] = reasons.get(pp.reason, 0) + 1
+        summary = "; ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+        typer.echo(f"{name:<9} stale {len(stale)}/{total}: {summary}")
+        if verbose:
+            for pp in stale:
+                typer.echo(f"    {pp.partition.key}: {pp.reason}")
+
+
+@app.command("stages")
+def list_stages() -> None:
+    """List the registered stages, what they read and write."""
+    from pipeline.stages import STAGES
+
+    for s in STAGES.values():
+        typer.echo(f"{s.name}: {s.description}")
+        typer.echo(f"    after: {', '.join(s.upstream) or '-'}")
+        typer.echo(f"    writes: {', '.join(s.writes)}")
+
+
+@app.command("config")
+def show_config(config: ConfigOpt = None) -> None:
+    """Print the effective dataset config as YAML (a starting point for --config files)."""
+    import yaml
+
+    typer.echo(yaml.safe_dump(load_config(config).model_dump(mode="json"), sort_keys=False))
+
+
+def _format_value(v) -> str:
+    if isinstance(v, float):
+        return "NaN" if math.isnan(v) else f"{v:.6g}"
+    return "NULL" if v is None else str(v)
+
+
+@catalog_app.command("query")
+def catalog_query(
+    sql: Annotated[str, typer.Argument(help="a read-only SQL query over the catalog views")],
+    root: RootOpt = "data",
+    fmt: Annotated[str, typer.Option("--format", help="table, csv or json")] = "table",
+) -> None:
+    """Run read-only SQL. Views: assets, parts, quarantine, placements, sequences, frames, actors,
+    runs, quality, quality_classes, classes."""
+    from catalog.sql import QueryError, QueryRefused, query
+
+    if fmt not in ("table", "csv", "json"):
+        fail(f"--format {fmt!r}: choose table, csv or json")
+    store = Store(root)
+    try:
+        cols, rows = query(store, sql)
+    except QueryRefused as exc:
+        fail(str(exc))
+    except QueryError as exc:
+        fail(f"SQL: {exc}")
+    except StoreError as exc:
+        fail(str(exc))
+    if fmt == "json":
+        typer.echo(json.dumps([dict(zip(cols, r)) for r in rows], default=str, indent=1))
+    elif fmt == "csv":
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(cols)
+        w.writerows(rows)
+        typer.echo(buf.getvalue().rstrip("\n"))
+    else:
+        cells = [[_format_value(v) for v in r] for r in rows]
+        widths = [max([len(c)] + [min(len(r[i]), 60) for r in cells]) for i, c in enumerate(cols)]
+        typer.echo("  ".join(c.ljust(w) for c, w in zip(cols, widths)))
+        typer.echo("  ".join("-" * w for w in widths))
+        for r in cells:
+            typer.echo("  ".join(v[:60].ljust(w) for v, w in zip(r, widths)))
+        typer.echo(f"({len(rows)} rows)")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,347 @@
+"""Run stages as Dask tasks with incremental re-runs and lineage.
+
+Stages run in dependency order; each stage's partitions are submitted as one batch of Dask tasks
+(so a stage's cache keys can include the fingerprints of what its upstream tasks just wrote).
+A partition is skipped when its latest lineage record is completed, has the same cache key
+(stage, code version, config hash, partition, input fingerprints) and its outputs are intact.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import socket
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Callable
+
+import zarr
+
+from catalog.lineage import LineageLog
+from catalog.store import OCCUPANCY_ZARR, Store
+from catalog.occupancy import zarr_store
+from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
+from pipeline.stages import STAGES
+from schemas.configs import DatasetConfig, StageConfig
+from schemas.records import RunRecord
+
+SYNCHRONOUS = "synchronous"
+_LINEAGE_FLUSH_SECONDS = 20.0
+
+
+class PlanError(Exception):
+    """The requested run cannot be planned (unknown stage, upstream never run...): exit code 2."""
+
+
+# -- one task -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TaskResult:
+    stage: str
+    partition: str
+    status: str
+    outputs: dict[str, str]
+    error: str
+    started_at: datetime
+    ended_at: datetime
+    host: str
+
+
+def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partition) -> TaskResult:
+    """Run one partition of a stage; never raises (a failure is a result with its error)."""
+    started = datetime.now(timezone.utc)
+    try:
+        outputs = STAGES[stage].task(Store(store_url), cfg, partition)
+        status, error = "completed", ""
+    except Exception as exc:  # recorded in lineage and reported with its partition
+        outputs, status = {}, "failed"
+        tb = traceback.extract_tb(exc.__traceback__)[-1]
+        error = f"{type(exc).__name__}: {exc} (at {os.path.basename(tb.filename)}:{tb.lineno})"
+    return TaskResult(stage, partition.key, status, outputs, error, started,
+                      datetime.now(timezone.utc), socket.gethostname())
+
+
+# -- executors ------------------------------------------------------------------------------------
+class Executor:
+    """Runs a batch of tasks, calling ``on_done`` as each finishes."""
+
+    def map(self, stage: str, store_url: str, cfg: StageConfig, partitions: list[Partition],
+            on_done: Callable[[TaskResult], None]) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class SynchronousExecutor(Executor):
+    """In-process, one task after another (debugging)."""
+
+    def map(self, stage, store_url, cfg, partitions, on_done):
+        for p in partitions:
+            on_done(execute_task(stage, store_url, cfg, p))
+
+
+class DaskExecutor(Executor):
+    """A distributed client: an existing scheduler's address, or a LocalCluster made on first use
+    (processes for local stores; threads for ``memory://`` stores, which live in this process)."""
+
+    def __init__(self, address: str | None, processes: bool, workers: int | None = None):
+        self.address, self.processes, self.workers = address, processes, workers
+        self._client = None
+        self._cluster = None
+
+    def _get_client(self):
+        if self._client is None:
+            from distributed import Client, LocalCluster
+
+            if self.address:
+                self._client = Client(self.address, timeout="30s")
+            else:
+                n = self.workers or os.cpu_count() or 1
+                self._cluster = LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=self.processes,
+                    dashboard_address=None, silence_logs=logging.ERROR,
+                )
+                self._client = Client(self._cluster)
+        return self._client
+
+    def map(self, stage, store_url, cfg, partitions, on_done):
+        from distributed import as_completed
+
+        client = self._get_client()
+        futures = {
+            client.submit(execute_task, stage, store_url, cfg, p, pure=False,
+                          key=f"{stage}-{p.key}-{uuid.uuid4().hex[:8]}"): p
+            for p in partitions
+        }
+        for fut in as_completed(futures):
+            p = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as exc:  # the worker died (e.g. out of memory)
+                now = datetime.now(timezone.utc)
+                result = TaskResult(stage, p.key, "failed", {}, f"{type(exc).__name__}: {exc}",
+                                    now, now, "?")
+            on_done(result)
+
+    def close(self):
+        if self._client is not None:
+            self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def make_executor(scheduler: str | None, store: Store, workers: int | None = None) -> Executor:
+    scheduler = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if scheduler == SYNCHRONOUS:
+        return SynchronousExecutor()
+    return DaskExecutor(scheduler, processes=store.is_local, workers=workers)
+
+
+# -- planning -------------------------------------------------------------------------------------
+@dataclass
+class PartitionPlan:
+    partition: Partition
+    cache_key: str
+    input_fingerprints: dict[str, str]
+    reason: str | None  # None: up to date
+
+
+@dataclass
+class StagePlan:
+    stage: StageSpec
+    partitions: list[PartitionPlan] = field(default_factory=list)
+    blocked: str | None = None  # why it cannot be planned yet
+
+    @property
+    def to_run(self) -> list[PartitionPlan]:
+        return [p for p in self.partitions if p.reason is not None]
+
+
+def _digest(outputs: str) -> str:
+    import hashlib
+
+    return hashlib.sha256(outputs.encode()).hexdigest()[:24]
+
+
+def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
+    """Files still have their recorded fingerprints; Zarr frames' arrays still exist."""
+    arrays: dict[str, int | None] = {}
+    for key, fp in outputs.items():
+        if key.startswith(OCCUPANCY_ZARR + "/") and key.endswith("]"):
+            path, frame = key[len(OCCUPANCY_ZARR) + 1 : -1].split("[")
+            if path not in arrays:
+                try:
+                    arr = zarr.open_group(store=zarr_store(store, OCCUPANCY_ZARR), mode="r")[path]
+                    arrays[path] = arr.shape[0]
+                except Exception:
+                    arrays[path] = None
+            if arrays[path] is None or int(frame) >= arrays[path]:
+                return False
+        elif store.fingerprint(key) != fp:
+            return False
+    return True
+
+
+def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
+               stale_upstream: dict[str, set[str]]) -> StagePlan:
+    """Cache keys and staleness reasons of every partition of a stage."""
+    plan = StagePlan(spec)
+    try:
+        partitions = spec.partitions(ctx)
+    except UpstreamMissing as exc:
+        plan.blocked = str(exc)
+        return plan
+    code, chash = spec.code_version(), spec.config_hash(ctx.config)
+    latest = lineage.latest(spec.name)
+    upstream_latest = {s: lineage.latest(s) for s in spec.upstream}
+    for p in partitions:
+        inputs, waiting = {}, None
+        for up_stage, up_key in p.needs:
+            rec = upstream_latest.get(up_stage, {}).get(up_key)
+            if up_key in stale_upstream.get(up_stage, set()):
+                waiting = f"upstream {up_stage}/{up_key} is stale"
+            if rec is None or rec.status != "completed":
+                waiting = waiting or f"upstream {up_stage}/{up_key} has not completed"
+                continue
+            inputs[f"{up_stage}/{up_key}"] = _digest(rec.output_fingerprints)
+        key = cache_key(spec.name, code, chash, p, inputs)
+        rec = latest.get(p.key)
+        if waiting:
+            reason = waiting
+        elif force:
+            reason = "forced"
+        elif rec is None:
+            reason = "never run"
+        elif rec.status != "completed":
+            reason = f"last run failed: {rec.error}"
+        elif rec.cache_key == key:
+            reason = None if outputs_intact(ctx.store, json.loads(rec.output_fingerprints)) else "outputs missing or modified"
+        elif rec.code_version != code:
+            reason = "code changed"
+        elif rec.config_hash != chash:
+            reason = "config changed"
+        else:
+            reason = "inputs changed"
+        plan.partitions.append(PartitionPlan(p, key, inputs, reason))
+    return plan
+
+
+def stage_order(names: list[str] | None) -> list[StageSpec]:
+    """Registered stages in dependency order, optionally restricted to ``names`` (validated)."""
+    if names:
+        unknown = [n for n in names if n not in STAGES]
+        if unknown:
+            raise PlanError(f"unknown stage {unknown[0]!r} (stages: {', '.join(STAGES)})")
+    return [s for s in STAGES.values() if not names or s.name in names]
+
+
+def status(store: Store, config: DatasetConfig, resolutions: tuple[float, ...]) -> list[StagePlan]:
+    """Plan every stage without running anything (what is stale and why)."""
+    ctx, lineage = Context(store, config, resolutions), LineageLog(store)
+    plans, stale = [], {}
+    for spec in stage_order(None):
+        plan = plan_stage(spec, ctx, lineage, False, stale)
+        stale[spec.name] = {pp.partition.key for pp in plan.to_run}
+        plans.append(plan)
+    return plans
+
+
+# -- running --------------------------------------------------------------------------------------
+@dataclass
+class StageOutcome:
+    stage: str
+    total: int
+    ran: int = 0
+    skipped: int = 0
+    failed: list[TaskResult] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class Progress:
+    """Progress callbacks; the CLI renders them as a bar, tests pass a silent one."""
+
+    def start(self, stage: str, total: int) -> None: ...
+    def advance(self, stage: str) -> None: ...
+    def stop(self, stage: str) -> None: ...
+
+
+def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
+        stages: list[str] | None = None, scheduler: str | None = None, force: bool = False,
+        progress: Progress | None = None, workers: int | None = None,
+        log: Callable[[str], None] = lambda s: None) -> list[StageOutcome]:
+    """Run the selected stages (all by default) in order; stops after a stage with failures."""
+    progress = progress or Progress()
+    selected = stage_order(stages)
+    ctx, lineage = Context(store, config, resolutions), LineageLog(store)
+    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S") + "-" + uuid.uuid4().hex[:6]
+    executor: Executor | None = None
+    outcomes: list[StageOutcome] = []
+    try:
+        for spec in selected:
+            plan = plan_stage(spec, ctx, lineage, force, {})
+            if plan.blocked:
+                raise PlanError(f"cannot run {spec.name}: {plan.blocked} "
+                                f"(run the upstream stages first: {', '.join(spec.upstream)})")
+            waiting = [pp for pp in plan.partitions if pp.reason and pp.reason.startswith("upstream")]
+            if waiting:
+                raise PlanError(f"cannot run {spec.name}/{waiting[0].partition.key}: {waiting[0].reason}")
+            todo = plan.to_run
+            outcome = StageOutcome(spec.name, len(plan.partitions), skipped=len(plan.partitions) - len(todo))
+            outcomes.append(outcome)
+            if not todo:
+                log(f"{spec.name}: {outcome.total} up to date, nothing to do")
+                continue
+            t0 = time.perf_counter()
+            if spec.prepare is not None:
+                spec.prepare(ctx, [pp.partition for pp in todo])
+            by_key = {pp.partition.key: pp for pp in todo}
+            code, chash = spec.code_version(), spec.config_hash(config)
+            pending: list[RunRecord] = []
+            last_flush = [time.monotonic(), 0]
+
+            def flush() -> None:
+                if pending:
+                    lineage.append(spec.name, f"{run_id}-{last_flush[1]:04d}", list(pending))
+                    pending.clear()
+                    last_flush[1] += 1
+                last_flush[0] = time.monotonic()
+
+            def on_done(res: TaskResult) -> None:
+                pp = by_key[res.partition]
+                pending.append(RunRecord(
+                    run_id=run_id, stage=spec.name, partition=res.partition, code_version=code,
+                    config_hash=chash, cache_key=pp.cache_key,
+                    input_fingerprints=json.dumps(pp.input_fingerprints, sort_keys=True),
+                    output_fingerprints=json.dumps(res.outputs, sort_keys=True),
+                    status=res.status, started_at=res.started_at, ended_at=res.ended_at,
+                    host=res.host, error=res.error,
+                ))
+                if res.status == "completed":
+                    outcome.ran += 1
+                else:
+                    outcome.failed.append(res)
+                progress.advance(spec.name)
+                if time.monotonic() - last_flush[0] > _LINEAGE_FLUSH_SECONDS:
+                    flush()
+
+            if executor is None:
+                executor = make_executor(scheduler, store, workers)
+            progress.start(spec.name, len(todo))
+            try:
+                executor.map(spec.name, store.url, spec.config(config), [pp.partition for pp in todo], on_done)
+            finally:
+                flush()
+                progress.stop(spec.name)
+            outcome.seconds = time.perf_counter() - t0
+            log(f"{spec.name}: ran {outcome.ran}, skipped {outcome.skipped} up to date, "
+                f"failed {len(outcome.failed)} ({outcome.seconds:.1f} s)")
+            if outcome.failed:
+                break
+    finally:
+        if executor is not None:
+            executor.close()
+    return outcomes

@@ -1,0 +1,125 @@
+"""The registered stages and their partitions: ingest -> scenes -> voxelize -> metrics."""
+
+from __future__ import annotations
+
+from catalog.occupancy import OccupancyStore
+from catalog.parquet import ParquetTable
+from pipeline import tasks
+from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
+from schemas.records import SequenceRecord
+
+INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
+
+
+def _ingest_partitions(ctx: Context) -> list[Partition]:
+    return [Partition(INGEST_PARTITION, {"source": INGEST_PARTITION})]
+
+
+def _town_key(i: int) -> str:
+    return f"town{i:02d}"
+
+
+def _scenes_partitions(ctx: Context) -> list[Partition]:
+    return [
+        Partition(_town_key(i), {"town_index": i}, needs=(("ingest", INGEST_PARTITION),))
+        for i in range(ctx.config.scenes.towns)
+    ]
+
+
+def _sequences(ctx: Context) -> list[SequenceRecord]:
+    towns = {_town_key(i) for i in range(ctx.config.scenes.towns)}
+    seqs = [s for s in ParquetTable(ctx.store, SequenceRecord).load() if s.town in towns]
+    if not seqs:
+        raise UpstreamMissing("no sequences yet: the scenes stage has not run")
+    return sorted(seqs, key=lambda s: s.sequence_id)
+
+
+def _voxelize_partitions(ctx: Context) -> list[Partition]:
+    out = []
+    for seq in _sequences(ctx):
+        for res in ctx.resolutions:
+            key = ctx.config.voxelize.grid(res).key
+            for t in range(seq.frame_count):
+                out.append(Partition(
+                    f"{seq.sequence_id}/{key}/{t:04d}",
+                    {"sequence_id": seq.sequence_id, "resolution": res, "frame_index": t},
+                    needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town)),
+                ))
+    return out
+
+
+def _voxelize_prepare(ctx: Context, partitions: list[Partition]) -> None:
+    """Create the Zarr arrays of every (sequence, resolution) about to be written."""
+    frames = {s.sequence_id: s.frame_count for s in _sequences(ctx)}
+    occ = OccupancyStore(ctx.store)
+    done = set()
+    for p in partitions:
+        seq, res = p.params["sequence_id"], p.params["resolution"]
+        if (seq, res) in done:
+            continue
+        done.add((seq, res))
+        occ.create(seq, ctx.config.voxelize.grid(res), frames[seq], ctx.config.voxelize.chunk_edge)
+
+
+def _metrics_partitions(ctx: Context) -> list[Partition]:
+    out = []
+    vcfg = ctx.config.voxelize
+    for seq in _sequences(ctx):
+        for res in ctx.resolutions:
+            key = vcfg.grid(res).key
+            needs = tuple(("voxelize", f"{seq.sequence_id}/{key}/{t:04d}") for t in range(seq.frame_count))
+            out.append(Partition(
+                f"{seq.sequence_id}/{key}",
+                {"sequence_id": seq.sequence_id, "resolution": res,
+                 "region_min": list(vcfg.region_min), "region_max": list(vcfg.region_max)},
+                needs=needs,
+            ))
+    return out
+
+
+STAGES: dict[str, StageSpec] = {
+    s.name: s
+    for s in (
+        StageSpec(
+            name="ingest",
+            description="procedural ADMesh library: closed metric meshes of every thing class",
+            upstream=(),
+            code_modules=("stages.ingest", "stages.geometry"),
+            reads=(),
+            writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/"),
+            partitions=_ingest_partitions,
+            task=tasks.ingest_task,
+        ),
+        StageSpec(
+            name="scenes",
+            description="procedural towns, traffic and ego sequences (poses, boxes, velocities)",
+            upstream=("ingest",),
+            code_modules=("stages.scenes", "stages.geometry"),
+            reads=("admesh/assets/",),
+            writes=("scenes/meshes/", "scenes/placements/", "scenes/sequences/", "scenes/frames/", "scenes/actors/"),
+            partitions=_scenes_partitions,
+            task=tasks.scenes_task,
+        ),
+        StageSpec(
+            name="voxelize",
+            description="panoptic voxelization of every frame's scene mesh (exact triangle-box overlap)",
+            upstream=("ingest", "scenes"),
+            code_modules=("stages.voxelize", "stages.scenes", "stages.geometry"),
+            reads=("admesh/", "scenes/"),
+            writes=("occupancy.zarr/<seq>/<res>/{semantic,instance}",),
+            partitions=_voxelize_partitions,
+            task=tasks.voxelize_task,
+            prepare=_voxelize_prepare,
+        ),
+        StageSpec(
+            name="metrics",
+            description="spatial continuity score per frame, per sequence and per class",
+            upstream=("voxelize",),
+            code_modules=("stages.metrics",),
+            reads=("occupancy.zarr/",),
+            writes=("metrics/quality/", "metrics/quality_classes/"),
+            partitions=_metrics_partitions,
+            task=tasks.metrics_task,
+        ),
+    )
+}

@@ -1,0 +1,200 @@
+"""Task bodies: for one partition, read inputs through the catalog, call the pure compute of
+``stages``, write outputs through the catalog, and return the outputs' fingerprints.
+
+These are the only functions that know both where data lives and what computes it. They run
+inside Dask workers, so they take a store (a URL) and a frozen config, never open objects.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+
+import numpy as np
+
+from catalog.meshes import MeshStore, load_glb_arrays
+from catalog.occupancy import OccupancyStore
+from catalog.parquet import ParquetTable
+from catalog.store import Store, StoreError
+from pipeline.registry import Partition
+from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, VoxelizeConfig
+from schemas.records import (
+    ActorStateRecord,
+    AssetRecord,
+    ClassQualityRecord,
+    FrameRecord,
+    PartRecord,
+    PlacementRecord,
+    QualityRecord,
+    SequenceRecord,
+)
+from stages.geometry import AssetGeometry, MeshPart, is_watertight
+
+PROCEDURAL_SOURCE = "procedural"
+
+
+# -- ingest ---------------------------------------------------------------------------------------
+def ingest_task(store: Store, cfg: IngestConfig, part: Partition) -> dict[str, str]:
+    """Generate the procedural ADMesh library; write meshes, assets and parts."""
+    from stages.ingest import ingest_procedural
+
+    result = ingest_procedural(cfg)
+    meshes = MeshStore(store)
+    outputs: dict[str, str] = {}
+    assets = []
+    for rec in result.assets:
+        rel = store.asset_mesh_path(rec.asset_id)
+        outputs[rel] = meshes.save(rel, result.geometry[rec.asset_id].parts)
+        assets.append(rec.model_copy(update={"mesh_path": rel}))
+    t_assets = ParquetTable(store, AssetRecord)
+    t_parts = ParquetTable(store, PartRecord)
+    key = f"source={PROCEDURAL_SOURCE}/{PROCEDURAL_SOURCE}"
+    outputs[t_assets.path(key)] = t_assets.save(key, assets)
+    outputs[t_parts.path(key)] = t_parts.save(key, result.parts)
+    return outputs
+
+
+# -- scenes ---------------------------------------------------------------------------------------
+def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
+    """Build one town and its sequences; write stuff meshes, placements, sequences, frames, actors."""
+    from stages.scenes import build_town, simulate_sequences
+
+    assets = ParquetTable(store, AssetRecord).load()
+    if not assets:
+        raise StoreError(f"no ADMesh assets in {store.url}: run the ingest stage first")
+    town = build_town(cfg, part.params["town_index"], assets)
+    outputs: dict[str, str] = {}
+    meshes = MeshStore(store)
+    mesh_paths = {a.asset_id: a.mesh_path for a in assets}
+    for stuff_id, geom in sorted(town.stuff.items()):
+        rel = store.scene_mesh_path(stuff_id)
+        outputs[rel] = meshes.save(rel, geom.parts)
+        mesh_paths[stuff_id] = rel
+    placements = [p.model_copy(update={"mesh_path": mesh_paths[p.asset_id]}) for p in town.placements]
+    t_place = ParquetTable(store, PlacementRecord)
+    outputs[t_place.path(f"town={town.name}")] = t_place.save(f"town={town.name}", placements)
+
+    tables = {
+        "sequence": ParquetTable(store, SequenceRecord),
+        "frames": ParquetTable(store, FrameRecord),
+        "actors": ParquetTable(store, ActorStateRecord),
+    }
+    written = set()
+    for seq in simulate_sequences(cfg, town, assets):
+        key = seq.sequence.sequence_id
+        written.add(key)
+        for name, rows in (("sequence", [seq.sequence]), ("frames", seq.frames), ("actors", seq.actors)):
+            outputs[tables[name].path(key)] = tables[name].save(key, rows)
+    # sequences this town no longer has (a smaller sequences_per_town) are removed, not left stale
+    for table in tables.values():
+        for rel in table.paths():
+            key = rel[len(table.dir) + 1 : -len(".parquet")]
+            if key.startswith(f"{town.name}_") and key not in written:
+                store.remove(rel)
+    return outputs
+
+
+# -- geometry loading (cached per worker by content) ----------------------------------------------
+_GEOMETRY_CACHE: OrderedDict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = OrderedDict()
+_GEOMETRY_CACHE_SIZE = 1024
+
+
+def _mesh_arrays(store: Store, rel: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    data = store.read_bytes(rel)
+    key = (rel, hashlib.sha256(data).hexdigest())
+    if key in _GEOMETRY_CACHE:
+        _GEOMETRY_CACHE.move_to_end(key)
+        return _GEOMETRY_CACHE[key]
+    arrays = load_glb_arrays(data)
+    _GEOMETRY_CACHE[key] = arrays
+    if len(_GEOMETRY_CACHE) > _GEOMETRY_CACHE_SIZE:
+        _GEOMETRY_CACHE.popitem(last=False)
+    return arrays
+
+
+def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementRecord]) -> dict[str, AssetGeometry]:
+    """AssetGeometry of the given ADMesh assets (parts table for classes and closedness) and of
+    the town stuff meshes referenced by ``placements`` (one class per stuff placement)."""
+    assets = {a.asset_id: a for a in ParquetTable(store, AssetRecord).load()}
+    parts: dict[str, list[PartRecord]] = {}
+    for p in ParquetTable(store, PartRecord).load():
+        parts.setdefault(p.asset_id, []).append(p)
+    out: dict[str, AssetGeometry] = {}
+    for aid in sorted(asset_ids):
+        if aid not in assets:
+            raise StoreError(f"asset {aid} is referenced by the scene but missing from admesh/assets")
+        recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
+        arrays = _mesh_arrays(store, assets[aid].mesh_path)
+        if len(arrays) != len(recs):
+            raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
+        out[aid] = AssetGeometry(
+            asset_id=aid,
+            parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
+                        for r, (v, f) in zip(recs, arrays)),
+            part_closed=tuple(r.watertight for r in recs),
+        )
+    for pl in placements:
+        if pl.asset_id in out or pl.asset_id in assets:
+            continue
+        arrays = _mesh_arrays(store, pl.mesh_path)
+        out[pl.asset_id] = AssetGeometry(
+            asset_id=pl.asset_id,
+            parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
+            part_closed=tuple(is_watertight(f) for _, f in arrays),
+        )
+    return out
+
+
+# -- voxelize -------------------------------------------------------------------------------------
+def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
+    """Voxelize one frame of one sequence at one resolution into occupancy.zarr."""
+    from stages.scenes import compose_frame_scene
+    from stages.voxelize import voxelize_scene
+
+    seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
+    grid = cfg.grid(part.params["resolution"])
+    (sequence,) = ParquetTable(store, SequenceRecord).load([seq_id])
+    frame = next(f for f in ParquetTable(store, FrameRecord).load([seq_id]) if f.frame_index == frame_index)
+    actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
+    placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
+    asset_ids = {p.asset_id for p in placements} | {a.asset_id for a in actors}
+    stuff_ids = {p.asset_id for p in placements if p.instance_id == 0}
+    geometry = load_geometry(store, {a for a in asset_ids if a not in stuff_ids and "/" not in a}, placements)
+    scene = compose_frame_scene(frame, actors, placements, geometry, grid, sequence.ego_asset_id)
+    if not cfg.fill_closed:
+        scene = [type(m)(m.vertices, m.faces, m.semantic_id, m.instance_id, m.is_stuff, False, m.name) for m in scene]
+    semantic, instance = voxelize_scene(scene, grid)
+    return OccupancyStore(store).write_frame(seq_id, grid, frame_index,
+                                             {"semantic": semantic, "instance": instance})
+
+
+# -- metrics --------------------------------------------------------------------------------------
+def metrics_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, str]:
+    """Spatial continuity per frame and per sequence, per class counts, into metrics/."""
+    from stages.metrics import sequence_continuity, spatial_continuity_counts
+
+    seq_id, res = part.params["sequence_id"], part.params["resolution"]
+    grid = VoxelizeConfig(region_min=part.params["region_min"], region_max=part.params["region_max"]).grid(res)
+    occ = OccupancyStore(store)
+    arr = occ.open(seq_id, grid, "semantic")
+    per_frame = []
+    quality, classes = [], []
+    for t in range(arr.shape[0]):
+        counts = spatial_continuity_counts(arr[t])
+        per_frame.append(counts)
+        quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=t,
+                                     metric="spatial_continuity", value=counts.score,
+                                     occupied=int(counts.occupied[1:].sum()),
+                                     isolated=int(counts.isolated[1:].sum())))
+        for c in np.flatnonzero(counts.occupied):
+            classes.append(ClassQualityRecord(sequence_id=seq_id, resolution=res, frame_index=t,
+                                              semantic_id=int(c), occupied=int(counts.occupied[c]),
+                                              isolated=int(counts.isolated[c])))
+    total = sequence_continuity(per_frame)
+    quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=None,
+                                 metric="spatial_continuity", value=total.score,
+                                 occupied=int(total.occupied[1:].sum()),
+                                 isolated=int(total.isolated[1:].sum())))
+    key = f"{seq_id}/{grid.key}"
+    t_q, t_c = ParquetTable(store, QualityRecord), ParquetTable(store, ClassQualityRecord)
+    return {t_q.path(key): t_q.save(key, quality), t_c.path(key): t_c.save(key, classes)}

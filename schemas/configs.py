@@ -1,0 +1,113 @@
+"""Frozen stage configurations and the dataset config file that holds them.
+
+A stage's config hash is part of its cache key: change a field and that stage (and what depends on
+it) re-runs. Unknown keys are refused everywhere (``extra="forbid"``) so a typo in a config file is
+an error naming the key, not a silently ignored setting. Angles are degrees only here, in
+user-facing config; the code converts them to radians.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec
+
+
+class StageConfig(BaseModel):
+    """Base of every stage config: frozen, no unknown keys."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class IngestConfig(StageConfig):
+    """ADMesh ingestion from the built-in procedural source."""
+
+    seed: int = 7
+    variants_per_subclass: int = Field(2, ge=1, le=50, description="procedural variants per sub-class")
+
+
+class ScenesConfig(StageConfig):
+    """Procedural towns and ego sequences driven through them."""
+
+    seed: int = 11
+    towns: int = Field(1, ge=1, le=16)
+    blocks: int = Field(3, ge=1, le=12, description="city blocks per side of the road grid")
+    block_size: float = Field(60.0, gt=10.0, le=500.0, description="block edge, m, kerb to kerb")
+    road_width: float = Field(10.0, gt=3.0, le=40.0, description="carriageway width, m")
+    sidewalk_width: float = Field(3.0, gt=0.5, le=10.0, description="sidewalk width, m")
+    curb_height: float = Field(0.15, ge=0.0, le=0.5, description="kerb height above the road, m")
+    sequences_per_town: int = Field(1, ge=1, le=64)
+    frame_count: int = Field(20, ge=2, le=10_000)
+    rate_hz: float = Field(20.0, gt=0.0, le=100.0)
+    traffic_level: Literal["none", "low", "medium", "high"] = "medium"
+    ego_speed: float = Field(8.0, ge=0.0, le=40.0, description="ego target speed, m/s")
+
+
+class VoxelizeConfig(StageConfig):
+    """Panoptic voxelization of every frame's scene mesh."""
+
+    region_min: tuple[float, float, float] = DEFAULT_REGION_MIN
+    region_max: tuple[float, float, float] = DEFAULT_REGION_MAX
+    fill_closed: bool = True
+    chunk_edge: int = Field(128, ge=16, le=1024, description="x/y chunk edge of the Zarr arrays, voxels")
+
+    def grid(self, voxel_size: float) -> GridSpec:
+        """The grid spec of this region at one resolution (validates the resolution)."""
+        return GridSpec(region_min=self.region_min, region_max=self.region_max, voxel_size=voxel_size)
+
+
+class MetricsConfig(StageConfig):
+    """Dataset-quality metrics."""
+
+    neighbourhood: Literal[6] = 6
+
+
+class DatasetConfig(StageConfig):
+    """Everything a dataset build is configured by; the optional ``--config`` YAML/JSON file."""
+
+    ingest: IngestConfig = IngestConfig()
+    scenes: ScenesConfig = ScenesConfig()
+    voxelize: VoxelizeConfig = VoxelizeConfig()
+    metrics: MetricsConfig = MetricsConfig()
+
+    @model_validator(mode="after")
+    def _region_is_valid(self) -> DatasetConfig:
+        # the region must hold at least one voxel of the coarsest sensible size; per-resolution
+        # checks happen when a resolution is requested (GridSpec validation)
+        for lo, hi in zip(self.voxelize.region_min, self.voxelize.region_max):
+            if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+                raise ValueError(f"voxelize region must have max > min on every axis, got {lo} .. {hi}")
+        return self
+
+
+def parse_resolutions(text: str) -> tuple[float, ...]:
+    """Parse ``"0.2"`` or ``"0.2,0.05"`` into voxel sizes (m); each must be positive and finite."""
+    out: list[float] = []
+    for item in str(text).split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            v = float(item)
+        except ValueError:
+            raise ValueError(f"resolution {item!r} is not a number of metres") from None
+        if not math.isfinite(v) or v <= 0:
+            raise ValueError(f"resolution {item!r} must be a positive finite number of metres")
+        out.append(v)
+    if not out:
+        raise ValueError("no resolution given (e.g. --res 0.2 or --res 0.2,0.05)")
+    return tuple(dict.fromkeys(out))
+
+
+__all__ = [
+    "DatasetConfig",
+    "IngestConfig",
+    "MetricsConfig",
+    "ScenesConfig",
+    "StageConfig",
+    "VoxelizeConfig",
+    "parse_resolutions",
+]

@@ -1,0 +1,220 @@
+"""Persisted records: one pydantic model per Parquet table of the store.
+
+Field types are kept to what maps one-to-one onto Arrow (str, int, float, bool, list[float],
+list[int], optional scalars, datetime) so that ``catalog.parquet`` converts every model generically
+and every model round-trips. Poses are 4x4 float64 matrices flattened row-major into 16 floats
+("sensor-to-world" or "object-to-world"); lengths in metres, times in seconds, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime
+from typing import ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict, field_validator
+
+
+class Record(BaseModel):
+    """Base of every persisted row: frozen, no unknown fields. ``TABLE`` names its store table."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    TABLE: ClassVar[str] = ""
+
+
+def _check_pose(v: list[float]) -> list[float]:
+    if len(v) != 16:
+        raise ValueError(f"a pose is 16 floats (4x4 row-major), got {len(v)}")
+    if not all(math.isfinite(x) for x in v):
+        raise ValueError("a pose must be finite")
+    return v
+
+
+def _check_vec3(v: list[float]) -> list[float]:
+    if len(v) != 3:
+        raise ValueError(f"expected 3 components, got {len(v)}")
+    if not all(math.isfinite(x) for x in v):
+        raise ValueError("vector must be finite")
+    return v
+
+
+class AssetRecord(Record):
+    """One ADMesh asset: a standardized mesh in the asset frame (+X forward, Z up, metres, origin
+    at the bottom centre of its bounding box)."""
+
+    TABLE: ClassVar[str] = "assets"
+    asset_id: str
+    source: str
+    source_path: str
+    licence: str
+    category_id: int
+    category: str
+    subclass: str
+    extent: list[float]  # bounding-box size x, y, z (m)
+    triangle_count: int
+    watertight: bool
+    scale_applied: float = 1.0
+    scale_rule: str = ""
+    mesh_path: str  # store-relative path of the standardized GLB
+
+    @field_validator("extent")
+    @classmethod
+    def _extent_vec3(cls, v: list[float]) -> list[float]:
+        return _check_vec3(v)
+
+
+class PartRecord(Record):
+    """A sub-mesh of an asset, with its own material and semantic class."""
+
+    TABLE: ClassVar[str] = "parts"
+    asset_id: str
+    part_index: int
+    name: str
+    material: str
+    transparent: bool
+    semantic_id: int
+    triangle_count: int
+    watertight: bool
+
+
+class QuarantineRecord(Record):
+    """An input rejected by a batch stage, with the reason and a hint to fix it."""
+
+    TABLE: ClassVar[str] = "quarantine"
+    stage: str
+    source: str
+    source_path: str
+    reason: str
+    hint: str
+
+
+class PlacementRecord(Record):
+    """A static object of a town placed in the world frame (town's frame, metres)."""
+
+    TABLE: ClassVar[str] = "placements"
+    town: str
+    placement_id: int
+    name: str  # e.g. "road", "building_012"
+    asset_id: str  # ADMesh asset id; town stuff meshes (road, sidewalk, ...) use "<town>/<name>"
+    mesh_path: str  # store-relative GLB holding the geometry
+    semantic_id: int
+    instance_id: int  # 0 for stuff
+    pose: list[float]  # object-to-world, 4x4 row-major
+
+    @field_validator("pose")
+    @classmethod
+    def _pose_4x4(cls, v: list[float]) -> list[float]:
+        return _check_pose(v)
+
+
+class SequenceRecord(Record):
+    """One driving sequence of a town."""
+
+    TABLE: ClassVar[str] = "sequences"
+    sequence_id: str
+    town: str
+    seed: int
+    frame_count: int
+    rate_hz: float
+    traffic_level: Literal["none", "low", "medium", "high"]
+    ego_asset_id: str
+
+
+class FrameRecord(Record):
+    """One frame of a sequence: the ego and LiDAR poses at its timestamp."""
+
+    TABLE: ClassVar[str] = "frames"
+    sequence_id: str
+    frame_index: int
+    timestamp: float  # s since the sequence start
+    ego_pose: list[float]  # ego-to-world
+    lidar_pose: list[float]  # lidar-to-world
+
+    @field_validator("ego_pose", "lidar_pose")
+    @classmethod
+    def _poses_4x4(cls, v: list[float]) -> list[float]:
+        return _check_pose(v)
+
+
+class ActorStateRecord(Record):
+    """A dynamic actor's state in one frame: pose, 3D box and velocity in the world frame."""
+
+    TABLE: ClassVar[str] = "actors"
+    sequence_id: str
+    frame_index: int
+    instance_id: int
+    asset_id: str
+    semantic_id: int
+    pose: list[float]  # actor-to-world (asset frame to world)
+    box_center: list[float]  # world frame, m
+    box_size: list[float]  # length, width, height, m
+    yaw: float  # rad, about world z
+    velocity: list[float]  # world frame, m/s
+    gait_phase: float | None = None  # walkers only, [0, 1)
+
+    @field_validator("pose")
+    @classmethod
+    def _pose_4x4(cls, v: list[float]) -> list[float]:
+        return _check_pose(v)
+    @field_validator("box_center", "box_size", "velocity")
+    @classmethod
+    def _vecs_3(cls, v: list[float]) -> list[float]:
+        return _check_vec3(v)
+
+
+class QualityRecord(Record):
+    """A dataset-quality score over one frame (frame_index set) or one sequence (frame_index None)."""
+
+    TABLE: ClassVar[str] = "quality"
+    sequence_id: str
+    resolution: float
+    frame_index: int | None
+    metric: str
+    value: float
+    occupied: int
+    isolated: int
+
+
+class ClassQualityRecord(Record):
+    """Per-class occupied and isolated voxel counts behind the spatial continuity score."""
+
+    TABLE: ClassVar[str] = "quality_classes"
+    sequence_id: str
+    resolution: float
+    frame_index: int
+    semantic_id: int
+    occupied: int
+    isolated: int
+
+
+class RunRecord(Record):
+    """Lineage of one (stage, partition) task of one run."""
+
+    TABLE: ClassVar[str] = "runs"
+    run_id: str
+    stage: str
+    partition: str
+    code_version: str
+    config_hash: str
+    cache_key: str
+    input_fingerprints: str  # JSON object: store path -> fingerprint
+    output_fingerprints: str  # JSON object: store path -> fingerprint
+    status: Literal["completed", "failed"]
+    started_at: datetime
+    ended_at: datetime
+    host: str
+    error: str = ""
+
+
+PERSISTED: tuple[type[Record], ...] = (
+    AssetRecord,
+    PartRecord,
+    QuarantineRecord,
+    PlacementRecord,
+    SequenceRecord,
+    FrameRecord,
+    ActorStateRecord,
+    QualityRecord,
+    ClassQualityRecord,
+    RunRecord,
+)

@@ -1,0 +1,124 @@
+"""Geometry shared by the stages: mesh parts, scene meshes and rigid transforms.
+
+Small pure numpy functions in the trimesh style. Units are metres; poses are 4x4 float64
+homogeneous matrices mapping a source frame into a target frame (``p_target = T @ p_source``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MeshPart:
+    """A sub-mesh of an asset in the asset frame (+X forward, Z up, metres, origin at the bottom
+    centre of the asset's bounding box), with its material and semantic class."""
+
+    name: str
+    vertices: np.ndarray  # (N, 3) float64
+    faces: np.ndarray  # (M, 3) int64
+    semantic_id: int
+    material: str = "default"
+    transparent: bool = False
+    color: tuple[int, int, int, int] = (200, 200, 200, 255)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
+        object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
+
+
+@dataclass(frozen=True)
+class SceneMesh:
+    """A mesh of one frame's panoptic scene, in the grid's frame (LiDAR frame, metres).
+
+    ``closed`` meshes are watertight things whose interior is filled by voxelization; stuff and
+    open meshes are surfaces. ``instance_id`` is 0 for stuff.
+    """
+
+    vertices: np.ndarray  # (N, 3) float64
+    faces: np.ndarray  # (M, 3) int64
+    semantic_id: int
+    instance_id: int
+    is_stuff: bool
+    closed: bool
+    name: str = field(default="")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
+        object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 homogeneous transform to (N, 3) points; returns (N, 3) float64."""
+    # rotate-scale by the upper 3x3, then translate
+    pts = np.asarray(points, dtype=np.float64)
+    return pts @ np.asarray(T, dtype=np.float64)[:3, :3].T + np.asarray(T, dtype=np.float64)[:3, 3]
+
+
+def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    """4x4 pose of a frame at (x, y, z) m rotated by ``yaw`` rad about +Z (right-handed)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def invert_pose(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform (rotation transposed, translation rotated back)."""
+    T = np.asarray(T, dtype=np.float64)
+    R, t = T[:3, :3], T[:3, 3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ t
+    return out
+
+
+def pose_to_list(T: np.ndarray) -> list[float]:
+    """Flatten a 4x4 pose row-major into 16 Python floats (the records' pose layout)."""
+    return [float(v) for v in np.asarray(T, dtype=np.float64).reshape(16)]
+
+
+def pose_from_list(values) -> np.ndarray:
+    """Inverse of :func:`pose_to_list`."""
+    return np.asarray(values, dtype=np.float64).reshape(4, 4)
+
+
+def is_watertight(faces: np.ndarray) -> bool:
+    """True when every undirected edge is shared by exactly two faces with opposite directions
+    (a closed, consistently wound 2-manifold surface)."""
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return False
+    # directed edges of every face
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    # each directed edge must occur once, and its reverse once
+    directed = np.unique(e, axis=0, return_counts=True)
+    if np.any(directed[1] != 1):
+        return False
+    fwd = {(int(a), int(b)) for a, b in directed[0]}
+    return all((b, a) in fwd for a, b in fwd)
+
+
+def concatenate(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate (vertices, faces) pairs into one mesh, offsetting face indices."""
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    verts, faces, offset = [], [], 0
+    for v, f in parts:
+        verts.append(np.asarray(v, dtype=np.float64))
+        faces.append(np.asarray(f, dtype=np.int64) + offset)
+        offset += len(v)
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+@dataclass(frozen=True)
+class AssetGeometry:
+    """The geometry of one asset (or town stuff mesh) as the scene composer consumes it:
+    its parts in the asset frame and, per part, whether it is closed (watertight)."""
+
+    asset_id: str
+    parts: tuple[MeshPart, ...]
+    part_closed: tuple[bool, ...]

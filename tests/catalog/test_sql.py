@@ -1,0 +1,63 @@
+import pytest
+
+from catalog.parquet import ParquetTable
+from catalog.sql import QueryError, QueryRefused, check_read_only, query
+from schemas.records import SequenceRecord
+
+
+def _seed(store):
+    ParquetTable(store, SequenceRecord).save("s1", [SequenceRecord(
+        sequence_id="town00_seq000", town="town00", seed=1, frame_count=20, rate_hz=20.0,
+        traffic_level="low", ego_asset_id="e")])
+
+
+def test_select_over_views(store):
+    _seed(store)
+    cols, rows = query(store, "SELECT sequence_id, frame_count FROM sequences")
+    assert cols == ["sequence_id", "frame_count"] and rows == [("town00_seq000", 20)]
+    # every table is a view even when empty, plus the taxonomy
+    _, rows = query(store, "SELECT count(*) FROM assets")
+    assert rows == [(0,)]
+    _, rows = query(store, "SELECT name FROM classes WHERE id = 14")
+    assert rows == [("Car",)]
+
+
+@pytest.mark.parametrize("sql", [
+    "INSERT INTO sequences VALUES (1)",
+    "UPDATE sequences SET seed = 2",
+    "DELETE FROM sequences",
+    "COPY sequences TO '/tmp/x.csv'",
+    "CREATE TABLE t AS SELECT 1",
+    "DROP VIEW sequences",
+    "ATTACH '/tmp/x.db'",
+    "INSTALL httpfs",
+    "LOAD httpfs",
+    "PRAGMA enable_profiling",
+    "SET threads = 1",
+    "SELECT 1; DELETE FROM sequences",
+])
+def test_writes_and_escapes_refused(sql):
+    with pytest.raises(QueryRefused, match="read-only"):
+        check_read_only(sql)
+
+
+def test_reading_files_outside_the_catalog_is_blocked(store, tmp_path):
+    _seed(store)
+    secret = tmp_path / "secret.csv"
+    secret.write_text("a\n1\n")
+    with pytest.raises(QueryError):
+        query(store, f"SELECT * FROM read_csv('{secret}')")
+
+
+def test_syntax_error_is_a_query_error():
+    with pytest.raises(QueryError) as err:
+        check_read_only("SELEC * FROM assets")
+    assert not isinstance(err.value, QueryRefused)
+    assert "syntax" in str(err.value).lower()
+
+
+def test_read_pragma_allowed(store):
+    _seed(store)
+    check_read_only("PRAGMA table_info('sequences')")
+    cols, rows = query(store, "PRAGMA table_info('sequences')")
+    assert any("sequence_id" in r for r in rows)

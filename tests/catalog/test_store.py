@@ -1,0 +1,111 @@
+import os
+
+import numpy as np
+import pytest
+
+from catalog.meshes import MeshStore
+from catalog.parquet import ParquetTable
+from catalog.store import Store, StoreError
+from schemas.records import QuarantineRecord
+from stages.geometry import MeshPart
+
+
+def _q(reason: str) -> QuarantineRecord:
+    return QuarantineRecord(stage="ingest", source="folder", source_path="x.obj", reason=reason, hint="h")
+
+
+def test_write_is_atomic_on_failure(store, monkeypatch):
+    table = ParquetTable(store, QuarantineRecord)
+    table.save("k", [_q("first")])
+    before = store.read_bytes(table.path("k"))
+
+    # a crash in the middle of writing the new bytes
+    real_open = type(store.fs).open
+
+    def crashing_open(self, path, mode="rb", *a, **kw):
+        fh = real_open(self, path, mode, *a, **kw)
+        if "w" in mode:
+            def boom(data):
+                raise OSError("disk full")
+            fh.write = boom
+        return fh
+
+    monkeypatch.setattr(type(store.fs), "open", crashing_open)
+    with pytest.raises(OSError, match="disk full"):
+        table.save("k", [_q("second")])
+    monkeypatch.undo()
+    # the old file is intact and no temporary file is left behind
+    assert store.read_bytes(table.path("k")) == before
+    assert table.load()[0].reason == "first"
+    leftovers = [p for p in store.fs.find(store.root) if ".tmp-" in p]
+    assert leftovers == []
+
+
+def test_glob_never_lists_temporary_files(store):
+    store.write_bytes("t/a.parquet", b"x")
+    store.fs.pipe(store.path("t/.tmp-123-b.parquet.partial"), b"y")
+    assert store.glob("t", ".parquet") == ["t/a.parquet"]
+
+
+def test_fingerprint_changes_with_content(store):
+    a = store.write_bytes("f.bin", b"one")
+    assert store.fingerprint("f.bin") == a
+    b = store.write_bytes("f.bin", b"two")
+    assert a != b and store.fingerprint("f.bin") == b
+    assert store.fingerprint("missing.bin") is None
+
+
+def test_missing_file_error_names_it(store):
+    with pytest.raises(StoreError, match="nope/x.parquet"):
+        store.read_bytes("nope/x.parquet")
+
+
+def test_unwritable_root(tmp_path):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    with pytest.raises(StoreError, match="is a file"):
+        Store(str(f)).check_writable()
+    with pytest.raises(StoreError, match="not writable"):
+        Store(str(f / "below-a-file")).check_writable()
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    os.chmod(ro, 0o500)
+    try:
+        if os.access(ro, os.W_OK):  # running as root: permissions are not enforced
+            pytest.skip("root ignores directory permissions")
+        with pytest.raises(StoreError, match="not writable"):
+            Store(str(ro / "sub")).check_writable()
+    finally:
+        os.chmod(ro, 0o700)
+
+
+def test_check_writable_leaves_nothing(store):
+    store.check_writable()
+    assert store.fs.find(store.root) == []
+
+
+def test_mesh_round_trip(store):
+    import trimesh
+
+    box = trimesh.creation.box((4.0, 2.0, 1.5))
+    cyl = trimesh.creation.cylinder(0.3, 0.2)
+    parts = [MeshPart("body", box.vertices, box.faces, 14), MeshPart("wheel", cyl.vertices, cyl.faces, 14)]
+    meshes = MeshStore(store)
+    fp = meshes.save("admesh/meshes/x.glb", parts)
+    assert fp == meshes.save("admesh/meshes/x.glb", parts)  # deterministic bytes
+    back = meshes.load("admesh/meshes/x.glb")
+    assert len(back) == 2
+    for p, (v, f) in zip(parts, back):
+        np.testing.assert_allclose(v, p.vertices, atol=1e-6)  # float32 in glTF
+        np.testing.assert_array_equal(f, p.faces)
+    # stored Y-up as glTF requires: the box's 1.5 m height is along glTF's y
+    import io
+
+    scene = trimesh.load(io.BytesIO(store.read_bytes("admesh/meshes/x.glb")), file_type="glb", force="scene")
+    assert scene.geometry["p000"].extents[1] == pytest.approx(1.5)
+
+
+def test_mesh_load_error_names_path(store):
+    store.write_bytes("admesh/meshes/bad.glb", b"not a glb")
+    with pytest.raises(StoreError, match="bad.glb"):
+        MeshStore(store).load("admesh/meshes/bad.glb")

@@ -1,0 +1,38 @@
+import pytest
+from pydantic import ValidationError
+
+from schemas.configs import DatasetConfig, parse_resolutions
+
+
+def test_unknown_key_refused_at_every_level():
+    with pytest.raises(ValidationError, match="extra"):
+        DatasetConfig.model_validate({"scenes": {"frame_cont": 3}})
+    with pytest.raises(ValidationError, match="extra"):
+        DatasetConfig.model_validate({"voxelise": {}})
+
+
+def test_configs_are_frozen():
+    cfg = DatasetConfig()
+    with pytest.raises(ValidationError):
+        cfg.scenes.frame_count = 3
+
+
+def test_default_sequence_is_20_frames_at_20hz():
+    cfg = DatasetConfig()
+    assert cfg.scenes.frame_count >= 20 and cfg.scenes.rate_hz == 20.0
+
+
+@pytest.mark.parametrize("text, expected", [("0.2", (0.2,)), ("0.2,0.05", (0.2, 0.05)), (" 0.1 , 0.1", (0.1,))])
+def test_parse_resolutions(text, expected):
+    assert parse_resolutions(text) == expected
+
+
+@pytest.mark.parametrize("text", ["", "abc", "0", "-0.1", "inf", "nan", "0.2,x"])
+def test_parse_resolutions_rejects(text):
+    with pytest.raises(ValueError):
+        parse_resolutions(text)
+
+
+def test_region_must_be_ordered():
+    with pytest.raises(ValidationError, match="max > min"):
+        DatasetConfig.model_validate({"voxelize": {"region_min": [0, 0, 0], "region_max": [1, -1, 1]}})

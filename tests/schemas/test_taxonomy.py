@@ -1,0 +1,271 @@
+"""Tests of the CarlaOcc taxonomy table (schemas/taxonomy.py)."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import pydantic
+import pytest
+
+from schemas import taxonomy as tx
+
+SEMANTIC_KITTI_YAML = Path("/work/shared/testdata/occupancy/semantic-kitti/semantic-kitti.yaml")
+
+ROAD_USERS = ("Pedestrian", "Rider", "Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle")
+
+CARLA_NAMES = (
+    "None", "Road", "Sidewalk", "Building", "Wall", "Fence", "Pole", "TrafficLight",
+    "TrafficSign", "Vegetation", "Terrain", "Sky", "Pedestrian", "Rider", "Car", "Truck", "Bus",
+    "Train", "Motorcycle", "Bicycle", "Static", "Dynamic", "Other", "Water", "RoadLine",
+    "Ground", "Bridge", "RailTrack", "GuardRail", "Rock",
+)  # fmt: skip
+
+# CarlaOcc class -> SemanticKITTI raw label name, where the counterpart is unambiguous.
+SEMANTICKITTI_COUNTERPARTS = {
+    "Car": "car",
+    "Bicycle": "bicycle",
+    "Motorcycle": "motorcycle",
+    "Truck": "truck",
+    "Bus": "bus",
+    "Train": "on-rails",
+    "Pedestrian": "person",
+    "Road": "road",
+    "RoadLine": "lane-marking",
+    "Sidewalk": "sidewalk",
+    "Building": "building",
+    "Fence": "fence",
+    "Vegetation": "vegetation",
+    "Terrain": "terrain",
+    "Pole": "pole",
+    "TrafficSign": "traffic-sign",
+}
+
+
+def _target_name(target: str, class_name: str) -> str:
+    """Name (lower case) of the target class that ``class_name`` maps to."""
+    tid = tx.mapping(target)[tx.by_name(class_name).id]
+    return tx.TARGETS[target][tid].lower()
+
+
+# --- the table -------------------------------------------------------------------------------
+
+
+def test_thirty_rows_in_id_order_with_carla_names() -> None:
+    assert len(tx.CLASSES) == 30
+    assert [c.id for c in tx.CLASSES] == list(range(30))
+    assert tuple(c.name for c in tx.CLASSES) == CARLA_NAMES
+
+
+def test_names_and_colors_unique() -> None:
+    assert len({c.name.lower() for c in tx.CLASSES}) == 30
+    assert len({c.color for c in tx.CLASSES}) == 30
+    for c in tx.CLASSES:
+        assert len(c.color) == 3 and all(0 <= v <= 255 for v in c.color), c.name
+
+
+def test_carla_palette_spot_checks() -> None:
+    assert tx.by_name("Road").color == (128, 64, 128)
+    assert tx.by_name("Car").color == (0, 0, 142)
+    assert tx.by_name("Pedestrian").color == (220, 20, 60)
+    assert tx.by_name("Vegetation").color == (107, 142, 35)
+    assert tx.by_name("None").color == (0, 0, 0)
+    assert tx.palette() == tuple(c.color for c in tx.CLASSES)
+
+
+def test_subclasses_are_unique_snake_case() -> None:
+    for c in tx.CLASSES:
+        assert len(set(c.subclasses)) == len(c.subclasses), c.name
+        for s in c.subclasses:
+            assert s == s.lower() and " " not in s and s, (c.name, s)
+    assert {"sedan", "suv", "van", "pickup"} <= set(tx.by_name("Car").subclasses)
+    assert {"residential", "office"} <= set(tx.by_name("Building").subclasses)
+    assert {"adult", "child"} <= set(tx.by_name("Pedestrian").subclasses)
+
+
+def test_version_is_a_nonempty_string() -> None:
+    assert isinstance(tx.TAXONOMY_VERSION, str) and tx.TAXONOMY_VERSION
+
+
+# --- kinds and motion --------------------------------------------------------------------------
+
+
+def test_road_users_are_things_and_dynamic() -> None:
+    ids = {tx.by_name(n).id for n in ROAD_USERS}
+    assert ids <= set(tx.thing_ids())
+    assert ids <= set(tx.dynamic_ids())
+    for n in ROAD_USERS:
+        c = tx.by_name(n)
+        assert c.kind == "thing" and c.motion == "dynamic", n
+
+
+def test_things_and_stuff_partition_the_table() -> None:
+    things, stuff = set(tx.thing_ids()), set(tx.stuff_ids())
+    assert things.isdisjoint(stuff)
+    assert things | stuff == set(range(30))
+    assert tx.thing_ids() == tuple(sorted(things))
+    for name in ("None", "Sky", "Road", "Vegetation", "Terrain"):
+        assert tx.by_name(name).id in stuff, name
+        assert tx.by_name(name).motion == "static", name
+    # buildings are annotated instances (paper), but never move
+    building = tx.by_name("Building")
+    assert building.kind == "thing" and building.motion == "static"
+
+
+# --- mappings ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("target", list(tx.TARGETS))
+def test_every_mapping_in_range(target: str) -> None:
+    table = tx.mapping(target)
+    names = tx.TARGETS[target]
+    assert len(table) == 30
+    for cid, tid in enumerate(table):
+        if target == "benchmark15" and tid == tx.IGNORE:
+            continue
+        assert 0 <= tid < len(names), (target, tx.by_id(cid).name, tid)
+    assert table == tuple(getattr(c, target) for c in tx.CLASSES)
+
+
+def test_target_name_tables_have_the_right_sizes() -> None:
+    assert len(tx.OCC3D_NUSCENES_NAMES) == 18 and tx.OCC3D_NUSCENES_NAMES[17] == "free"
+    assert len(tx.SSCBENCH_KITTI360_NAMES) == 19
+    assert len(tx.SEMANTICKITTI_NAMES) == 20
+    assert len(tx.BENCHMARK15_NAMES) == 15
+    expected = {"occ3d_nuscenes", "sscbench_kitti360", "semantickitti", "benchmark15"}
+    assert set(tx.TARGETS) == expected
+    for names in tx.TARGETS.values():
+        assert len(set(names)) == len(names)
+
+
+@pytest.mark.parametrize("target", list(tx.TARGETS))
+def test_car_maps_to_car(target: str) -> None:
+    assert _target_name(target, "Car") == "car"
+
+
+@pytest.mark.parametrize("target", list(tx.TARGETS))
+def test_pedestrian_maps_to_person(target: str) -> None:
+    assert _target_name(target, "Pedestrian") in {"person", "pedestrian"}
+
+
+@pytest.mark.parametrize("target", list(tx.TARGETS))
+def test_road_maps_to_road(target: str) -> None:
+    assert _target_name(target, "Road") in {"road", "driveable_surface"}
+    assert _target_name(target, "RoadLine") == _target_name(target, "Road")
+
+
+@pytest.mark.parametrize("name", ["None", "Sky"])
+def test_empty_classes_map_to_free(name: str) -> None:
+    assert _target_name("occ3d_nuscenes", name) == "free"
+    assert _target_name("sscbench_kitti360", name) == "unlabeled"
+    assert _target_name("semantickitti", name) == "unlabeled"
+    assert tx.mapping("benchmark15")[tx.by_name(name).id] == tx.IGNORE
+
+
+def test_occupied_classes_never_map_to_free_in_occ3d() -> None:
+    free = tx.OCC3D_NUSCENES_NAMES.index("free")
+    for c in tx.CLASSES:
+        if c.name not in ("None", "Sky"):
+            assert c.occ3d_nuscenes != free, c.name
+            assert c.benchmark15 != tx.IGNORE, c.name
+
+
+def test_benchmark15_uses_every_group() -> None:
+    used = set(tx.mapping("benchmark15")) - {tx.IGNORE}
+    assert used == set(range(15))
+
+
+def test_unknown_target_raises_value_error_naming_targets() -> None:
+    with pytest.raises(ValueError) as err:
+        tx.mapping("cityscapes")
+    for t in tx.TARGETS:
+        assert t in str(err.value)
+
+
+def test_semantickitti_agrees_with_yaml_learning_map() -> None:
+    if not SEMANTIC_KITTI_YAML.exists():
+        pytest.skip(f"{SEMANTIC_KITTI_YAML} not present")
+    yaml = pytest.importorskip("yaml")
+    cfg = yaml.safe_load(SEMANTIC_KITTI_YAML.read_text())
+    raw_by_name = {v: int(k) for k, v in cfg["labels"].items()}
+    learning_map = {int(k): int(v) for k, v in cfg["learning_map"].items()}
+    # our names table is the yaml's learning classes, in learning-id order
+    inv = {int(k): int(v) for k, v in cfg["learning_map_inv"].items()}
+    assert tx.SEMANTICKITTI_NAMES == tuple(cfg["labels"][inv[i]] for i in range(len(inv)))
+    table = tx.mapping("semantickitti")
+    for ours, theirs in SEMANTICKITTI_COUNTERPARTS.items():
+        expected = learning_map[raw_by_name[theirs]]
+        assert table[tx.by_name(ours).id] == expected, (ours, theirs)
+
+
+# --- lookups -----------------------------------------------------------------------------------
+
+
+def test_by_id_and_by_name_round_trip() -> None:
+    for c in tx.CLASSES:
+        assert tx.by_id(c.id) is c
+        assert tx.by_name(c.name) is c
+    with pytest.raises(KeyError):
+        tx.by_id(30)
+    with pytest.raises(KeyError):
+        tx.by_id(-1)
+
+
+def test_by_name_case_insensitive() -> None:
+    assert tx.by_name("car").id == 14
+    assert tx.by_name("CAR").id == 14
+    assert tx.by_name("trafficlight").id == 7
+    assert tx.by_name("TRAFFICSIGN").id == 8
+
+
+def test_by_name_unknown_raises_key_error_listing_names() -> None:
+    with pytest.raises(KeyError) as err:
+        tx.by_name("Spaceship")
+    msg = str(err.value)
+    assert "Spaceship" in msg
+    for name in ("Car", "Pedestrian", "Rock"):
+        assert name in msg
+
+
+# --- model behaviour ---------------------------------------------------------------------------
+
+
+def test_models_are_frozen() -> None:
+    car = tx.by_name("Car")
+    with pytest.raises(pydantic.ValidationError):
+        car.name = "Lorry"  # type: ignore[misc]
+    with pytest.raises(pydantic.ValidationError):
+        car.occ3d_nuscenes = 0  # type: ignore[misc]
+    assert tx.by_name("Car").name == "Car"
+    assert tx.by_name("Car").occ3d_nuscenes == tx.OCC3D_NUSCENES_NAMES.index("car")
+
+
+def test_models_reject_unknown_fields() -> None:
+    row = tx.table_rows()[14]
+    with pytest.raises(pydantic.ValidationError):
+        tx.SemanticClass(**row, instance_capable=True)
+
+
+def test_table_rows_are_plain_and_round_trip() -> None:
+    rows = tx.table_rows()
+    assert len(rows) == 30
+    for row, c in zip(rows, tx.CLASSES, strict=True):
+        assert isinstance(row, dict)
+        assert isinstance(row["color"], list) and isinstance(row["subclasses"], list)
+        assert tx.SemanticClass(**row) == c
+
+
+# --- purity ------------------------------------------------------------------------------------
+
+
+def test_module_imports_only_stdlib_and_pydantic() -> None:
+    source = Path(tx.__file__).read_text()
+    allowed = set(sys.stdlib_module_names) | {"pydantic", "__future__"}
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                assert alias.name.split(".")[0] in allowed, alias.name
+        elif isinstance(node, ast.ImportFrom):
+            assert node.level == 0, "no relative imports"
+            assert node.module is not None and node.module.split(".")[0] in allowed, node.module
