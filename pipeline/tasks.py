@@ -113,35 +113,38 @@ def _mesh_arrays(store: Store, rel: str) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementRecord]) -> dict[str, AssetGeometry]:
-    """AssetGeometry of the given ADMesh assets (parts table for classes and closedness) and of
-    the town stuff meshes referenced by ``placements`` (one class per stuff placement)."""
+    """AssetGeometry of every id in ``asset_ids``: ADMesh assets (the parts table gives each part's
+    class and closedness) or, for ids not in the library, the town stuff mesh of the placement that
+    references it (one class per stuff placement; closedness measured)."""
     assets = {a.asset_id: a for a in ParquetTable(store, AssetRecord).load()}
     parts: dict[str, list[PartRecord]] = {}
     for p in ParquetTable(store, PartRecord).load():
         parts.setdefault(p.asset_id, []).append(p)
+    stuff = {pl.asset_id: pl for pl in placements if pl.asset_id not in assets}
     out: dict[str, AssetGeometry] = {}
     for aid in sorted(asset_ids):
-        if aid not in assets:
-            raise StoreError(f"asset {aid} is referenced by the scene but missing from admesh/assets")
-        recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
-        arrays = _mesh_arrays(store, assets[aid].mesh_path)
-        if len(arrays) != len(recs):
-            raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
-        out[aid] = AssetGeometry(
-            asset_id=aid,
-            parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
-                        for r, (v, f) in zip(recs, arrays)),
-            part_closed=tuple(r.watertight for r in recs),
-        )
-    for pl in placements:
-        if pl.asset_id in out or pl.asset_id in assets:
-            continue
-        arrays = _mesh_arrays(store, pl.mesh_path)
-        out[pl.asset_id] = AssetGeometry(
-            asset_id=pl.asset_id,
-            parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
-            part_closed=tuple(is_watertight(f) for _, f in arrays),
-        )
+        if aid in assets:
+            recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
+            arrays = _mesh_arrays(store, assets[aid].mesh_path)
+            if len(arrays) != len(recs):
+                raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
+            out[aid] = AssetGeometry(
+                asset_id=aid,
+                parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
+                            for r, (v, f) in zip(recs, arrays)),
+                part_closed=tuple(r.watertight for r in recs),
+            )
+        elif aid in stuff:
+            pl = stuff[aid]
+            arrays = _mesh_arrays(store, pl.mesh_path)
+            out[aid] = AssetGeometry(
+                asset_id=aid,
+                parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
+                part_closed=tuple(is_watertight(f) for _, f in arrays),
+            )
+        else:
+            raise StoreError(f"asset {aid} is referenced by the scene but is neither in admesh/assets "
+                             f"nor a town mesh")
     return out
 
 
@@ -157,9 +160,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     frame = next(f for f in ParquetTable(store, FrameRecord).load([seq_id]) if f.frame_index == frame_index)
     actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
     placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
-    asset_ids = {p.asset_id for p in placements} | {a.asset_id for a in actors}
-    stuff_ids = {p.asset_id for p in placements if p.instance_id == 0}
-    geometry = load_geometry(store, {a for a in asset_ids if a not in stuff_ids and "/" not in a}, placements)
+    geometry = load_geometry(store, {p.asset_id for p in placements} | {a.asset_id for a in actors}, placements)
     scene = compose_frame_scene(frame, actors, placements, geometry, grid, sequence.ego_asset_id)
     if not cfg.fill_closed:
         scene = [type(m)(m.vertices, m.faces, m.semantic_id, m.instance_id, m.is_stuff, False, m.name) for m in scene]

@@ -92,14 +92,18 @@ def is_watertight(faces: np.ndarray) -> bool:
     f = np.asarray(faces, dtype=np.int64)
     if len(f) == 0:
         return False
-    # directed edges of every face
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    # each directed edge must occur once, and its reverse once
-    directed = np.unique(e, axis=0, return_counts=True)
-    if np.any(directed[1] != 1):
+    # directed edges of every face, encoded as one int64 key each
+    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    n = int(f.max()) + 1
+    keys = np.sort(a * n + b)
+    # each directed edge must occur once ...
+    if keys.size > 1 and np.any(keys[1:] == keys[:-1]):
         return False
-    fwd = {(int(a), int(b)) for a, b in directed[0]}
-    return all((b, a) in fwd for a, b in fwd)
+    # ... and its reverse once
+    rev = b * n + a
+    pos = np.minimum(np.searchsorted(keys, rev), keys.size - 1)
+    return bool(np.all(keys[pos] == rev))
 
 
 def concatenate(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:

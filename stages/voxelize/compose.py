@@ -7,9 +7,9 @@ a. **Fuse stuff.** All stuff meshes of one semantic class become one mesh (verti
    faces offset); it is a surface (never filled) with instance 0.
 b. **Cull** to the grid region (the closed box ``[origin, effective_max]``, LiDAR frame, metres).
    Open meshes and fused stuff keep only the triangles whose bounding box touches the region;
-   a closed thing mesh is kept whole (its fill needs every crossing) or dropped whole when its
-   bounding box misses the region.
-c. **Order** by the elevation key, ascending: (min z of the kept mesh's vertices, max z,
+   a closed thing mesh is kept whole (its fill needs every crossing) or dropped whole when the
+   bounding box of its vertices misses the region.
+c. **Order** by the elevation key, ascending: (min z of the kept triangles' vertices, max z,
    semantic id, instance id, position of the first input mesh) -- z in the grid frame (z up).
 d. **Write** each mesh in turn -- its surface voxels (exact triangle/closed-box overlap), plus the
    voxels whose centre is inside it when it is a closed thing -- so a later (higher) mesh
@@ -76,23 +76,24 @@ def _fuse(meshes: Sequence[SceneMesh]) -> list[tuple[np.ndarray, np.ndarray, int
     return out
 
 
-def _cull(V: np.ndarray, F: np.ndarray, whole: bool, lo: np.ndarray, hi: np.ndarray):
-    """Step b: faces whose bounding box touches [lo, hi] (all or none when ``whole``)."""
+def _cull(V: np.ndarray, F: np.ndarray, whole: bool, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Step b: the faces whose bounding box touches the box [lo, hi] (all or none when ``whole``)."""
     if len(F) == 0:
         return F
-    corners = V[F]  # (M, 3, 3)
-    tmin = corners.min(axis=1)
-    tmax = corners.max(axis=1)
-    with np.errstate(invalid="ignore"):
-        touch = np.all((tmin <= hi) & (tmax >= lo), axis=1)
     if whole:
-        finite = np.isfinite(corners).all(axis=(1, 2))
-        bmin = tmin[finite].min(axis=0) if finite.any() else None
-        if bmin is None:
+        # the bounding box of the mesh's (finite) vertices against the region
+        fin = V if np.isfinite(V).all() else V[np.isfinite(V).all(axis=1)]
+        if len(fin) == 0:
             return F[:0]
-        bmax = tmax[finite].max(axis=0)
-        return F if np.all((bmin <= hi) & (bmax >= lo)) else F[:0]
-    return F[touch]
+        return F if np.all((fin.min(axis=0) <= hi) & (fin.max(axis=0) >= lo)) else F[:0]
+    # per-triangle bounding boxes, one axis at a time (cheaper than reducing (M, 3, 3) arrays)
+    keep = np.ones(len(F), dtype=bool)
+    for axis in range(3):
+        c = V[:, axis][F]  # (M, 3)
+        tmin = np.minimum(np.minimum(c[:, 0], c[:, 1]), c[:, 2])
+        tmax = np.maximum(np.maximum(c[:, 0], c[:, 1]), c[:, 2])
+        keep &= (tmin <= hi[axis]) & (tmax >= lo[axis])  # NaN compares False: dropped
+    return F[keep]
 
 
 def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None) -> list[PlannedMesh]:
@@ -114,7 +115,8 @@ def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None) 
             F = _cull(V, F, fill, lo, hi)
         if len(F) == 0:
             continue
-        z = V[np.unique(F), 2]
+        # heights of the kept triangles' corners (a closed mesh is kept whole: all its vertices)
+        z = V[:, 2] if fill else V[:, 2][F.reshape(-1)]
         z = z[np.isfinite(z)]
         if len(z) == 0:
             continue

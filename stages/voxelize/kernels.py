@@ -10,8 +10,19 @@ C-order linear index ``(i * ny + j) * nz + k`` (z fastest).
 
 Every kernel first maps the vertices to *voxel units*, ``p = (v - origin) / voxel_size``, in which
 voxel ``(i, j, k)`` is the unit box ``[i, i+1] x [j, j+1] x [k, k+1]`` and its centre is
-``(i, j, k) + 0.5``. All tests below are exact in that frame up to float64 rounding of the products
-they form (and exactly exact when the coordinates are dyadic, as in the tests).
+``(i, j, k) + 0.5``. The tests below are exact in that frame up to the float64 rounding of the
+products they form (no rounding at all for dyadic coordinates, which the tests exploit).
+
+Surface algorithm
+-----------------
+Per triangle: clip its voxel bounding range to the grid (cull when empty); pick the sweep frame
+(u, v, w) whose w is the dominant axis of the normal; for each (u, v) column of the range, reject
+the column by the five axes that ignore w, then test only the few voxels along w that the
+triangle's plane reaches over the column's cross-section (|slope| <= 1 per axis, so 1-4 of them)
+with the remaining eight axes. The per-column halves of the projections are hoisted without
+changing any rounding, so the result is bit-identical to the plain per-voxel test
+:func:`tri_box_overlap`. Work is proportional to the triangle's area in voxels, not to its
+bounding box.
 
 Conventions (each is tested)
 ----------------------------
@@ -31,15 +42,19 @@ Conventions (each is tested)
 
 Parallelism
 -----------
-The per-triangle loops run with ``prange`` (dynamic chunks, so a few huge triangles do not stall a
-thread). Concurrent writes from two threads to one voxel always store the same value, so the
-race is benign. All kernels release the GIL (``nogil``).
+Only the surface sweep (meshes of ``PARALLEL_MIN_TRIANGLES`` triangles or more) and the mask
+extraction of big grids use numba's threads (``prange``; ``numba.set_num_threads`` per calling
+thread, e.g. 1 inside Dask workers that already fill the cores). The triangles are dealt out in
+interleaved stripes of small chunks, so each thread samples the whole mesh whatever the threading
+layer's schedule. Concurrent writes of two threads to one voxel store the same value, so the race
+is benign. Everything else runs in the calling thread; all kernels release the GIL (``nogil``).
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -54,8 +69,14 @@ __all__ = [
 # Slack (voxel units) added to the per-column plane range of a triangle before the exact test, so
 # float rounding of the range can only add candidates, never lose one.
 _RANGE_SLACK = 1e-6
-# Triangles per dynamically scheduled chunk of the parallel loops.
+# Triangles per chunk, and interleaved stripes of chunks, of the parallel surface loop.
 _CHUNK = 64
+_STRIPES = 64
+# uint64 words per block of the mask extraction (64 KiB).
+_BLOCK_WORDS = 8192
+# Below these sizes the kernels run in the calling thread (see _use_threads).
+PARALLEL_MIN_TRIANGLES = 20_000
+PARALLEL_MIN_VOXELS = 16_000_000
 
 
 # ----------------------------------------------------------------------------------------------
@@ -86,75 +107,117 @@ def _touch_range(lo, hi, n):
     Returns (k0, k1), empty when k0 > k1. Clamps in float first so huge or infinite bounds do not
     overflow the integer conversion.
     """
-    # [k, k+1] touches [lo, hi]  <=>  k >= lo - 1 and k <= hi
-    lo = min(max(lo, -2.0), n + 2.0)
-    hi = min(max(hi, -2.0), n + 2.0)
+    # [k, k+1] touches [lo, hi]  <=>  k >= lo - 1 and k <= hi; widened by the slack so the range
+    # is a superset of what the exact test (which rounds centre-relative coordinates) accepts
+    lo = min(max(lo - _RANGE_SLACK, -2.0), n + 2.0)
+    hi = min(max(hi + _RANGE_SLACK, -2.0), n + 2.0)
     k0 = max(int(math.ceil(lo)) - 1, 0)
     k1 = min(int(math.floor(hi)), n - 1)
     return k0, k1
+
+
+# --- the separating-axis test in a triangle's sweep frame ------------------------------------
+# Every triangle is tested in the cyclic axis order (u, v, w) whose last axis w is the dominant
+# axis of its normal (x wins ties, then y): (y, z, x), (z, x, y) or (x, y, z). Cyclic relabelling
+# keeps every cross product, so this is the plain 13-axis test; fixing the frame (and the order
+# of every sum in it) is what lets the sweep below hoist the per-column parts of each projection
+# and still produce bit-for-bit the result of the per-voxel test (and of the numpy reference).
+
+
+@njit(cache=True, nogil=True)
+def _sweep_axis(nx, ny, nz):
+    """Dominant axis of the normal: 0 (x), 1 (y) or 2 (z); x wins ties, then y."""
+    ax_, ay_, az_ = abs(nx), abs(ny), abs(nz)
+    if ax_ >= ay_ and ax_ >= az_:
+        return 0
+    if ay_ >= az_:
+        return 1
+    return 2
+
+
+@njit(cache=True, nogil=True)
+def _to_uvw(d, x, y, z):
+    """(x, y, z) -> (u, v, w), w along axis d, cyclic order."""
+    if d == 0:
+        return y, z, x
+    if d == 1:
+        return z, x, y
+    return x, y, z
+
+
+@njit(cache=True, nogil=True)
+def _from_uvw(d, u, v, w):
+    """(u, v, w) -> (x, y, z), inverse of :func:`_to_uvw`."""
+    if d == 0:
+        return w, u, v
+    if d == 1:
+        return v, w, u
+    return u, v, w
 
 
 @njit(cache=True, nogil=True)
 def tri_box_overlap(ax, ay, az, bx, by, bz, cx, cy, cz, i, j, k):
     """Closed-box/triangle separating-axis test (Akenine-Moeller 2001), voxel units.
 
-    Triangle (a, b, c) against the unit box of voxel (i, j, k), i.e. centre (i, j, k) + 0.5 and
-    half-extent 0.5. Returns True when no axis separates them (touching counts as overlap).
+    Triangle (a, b, c) against the unit box of voxel (i, j, k): centre (i, j, k) + 0.5,
+    half-extent 0.5. True when no axis separates them (touching counts as overlap). 13 axes: the 3
+    box face normals, the triangle normal, the 9 cross products edge x box axis.
+
+    Robustness: edges and normal come from the absolute vertices (the same for every voxel,
+    hence translation-consistent), and every vertex is projected on every axis: disjoint
+    projections on *any* axis prove separation, so a noisy normal (a near-collinear sliver) can
+    never reject a box the triangle touches; a zero-area triangle (zero normal) reduces to the
+    exact segment/point-box test.
     """
-    h = 0.5
-    # move the box centre to the origin
-    ox = i + 0.5
-    oy = j + 0.5
-    oz = k + 0.5
-    v0x = ax - ox
-    v0y = ay - oy
-    v0z = az - oz
-    v1x = bx - ox
-    v1y = by - oy
-    v1z = bz - oz
-    v2x = cx - ox
-    v2y = cy - oy
-    v2z = cz - oz
-    # axes 1-3: the box face normals (the triangle's AABB against the box)
-    if _separated(v0x, v1x, v2x, h) or _separated(v0y, v1y, v2y, h) or _separated(v0z, v1z, v2z, h):
+    # edges and normal from the absolute vertices; the sweep frame
+    nx = (by - ay) * (cz - bz) - (bz - az) * (cy - by)
+    ny = (bz - az) * (cx - bx) - (bx - ax) * (cz - bz)
+    nz = (bx - ax) * (cy - by) - (by - ay) * (cx - bx)
+    d = _sweep_axis(nx, ny, nz)
+    au, av, aw = _to_uvw(d, ax, ay, az)
+    bu, bv, bw = _to_uvw(d, bx, by, bz)
+    cu, cv, cw = _to_uvw(d, cx, cy, cz)
+    iu, iv, iw = _to_uvw(d, i, j, k)
+    return _sat_uvw(au, av, aw, bu, bv, bw, cu, cv, cw, iu, iv, iw)
+
+
+@njit(cache=True, nogil=True)
+def _sat_uvw(au, av, aw, bu, bv, bw, cu, cv, cw, iu, iv, iw):
+    """The 13-axis test in the sweep frame (same arithmetic as the hoisted sweep)."""
+    # edges e0 = b - a, e1 = c - b, e2 = a - c and the normal e0 x e1
+    eu0, ev0, ew0 = bu - au, bv - av, bw - aw
+    eu1, ev1, ew1 = cu - bu, cv - bv, cw - bw
+    eu2, ev2, ew2 = au - cu, av - cv, aw - cw
+    nu = ev0 * ew1 - ew0 * ev1
+    nv = ew0 * eu1 - eu0 * ew1
+    nw = eu0 * ev1 - ev0 * eu1
+    # vertices relative to the box centre
+    ou, ov, ow = iu + 0.5, iv + 0.5, iw + 0.5
+    u0, v0, w0 = au - ou, av - ov, aw - ow
+    u1, v1, w1 = bu - ou, bv - ov, bw - ow
+    u2, v2, w2 = cu - ou, cv - ov, cw - ow
+    # box axes
+    if _separated(u0, u1, u2, 0.5) or _separated(v0, v1, v2, 0.5) or _separated(w0, w1, w2, 0.5):
         return False
-    # triangle edges
-    e0x = v1x - v0x
-    e0y = v1y - v0y
-    e0z = v1z - v0z
-    e1x = v2x - v1x
-    e1y = v2y - v1y
-    e1z = v2z - v1z
-    e2x = v0x - v2x
-    e2y = v0y - v2y
-    e2z = v0z - v2z
-    # axis 4: the triangle normal (plane/box test); a zero normal (degenerate) never separates
-    nx = e0y * e1z - e0z * e1y
-    ny = e0z * e1x - e0x * e1z
-    nz = e0x * e1y - e0y * e1x
-    d = nx * v0x + ny * v0y + nz * v0z
-    r = h * (abs(nx) + abs(ny) + abs(nz))
-    if d > r or d < -r:
+    # triangle normal
+    if _separated(nu * u0 + nv * v0 + nw * w0, nu * u1 + nv * v1 + nw * w1, nu * u2 + nv * v2 + nw * w2,
+                  0.5 * (abs(nu) + abs(nv) + abs(nw))):
         return False
-    # axes 5-13: edge x box axis, for the three edges
     for m in range(3):
         if m == 0:
-            ex, ey, ez = e0x, e0y, e0z
+            eu, ev, ew = eu0, ev0, ew0
         elif m == 1:
-            ex, ey, ez = e1x, e1y, e1z
+            eu, ev, ew = eu1, ev1, ew1
         else:
-            ex, ey, ez = e2x, e2y, e2z
-        # X x e = (0, -ez, ey)
-        r = h * (abs(ez) + abs(ey))
-        if _separated(-ez * v0y + ey * v0z, -ez * v1y + ey * v1z, -ez * v2y + ey * v2z, r):
+            eu, ev, ew = eu2, ev2, ew2
+        # W x e = (-ev, eu, 0)
+        if _separated(-ev * u0 + eu * v0, -ev * u1 + eu * v1, -ev * u2 + eu * v2, 0.5 * (abs(ev) + abs(eu))):
             return False
-        # Y x e = (ez, 0, -ex)
-        r = h * (abs(ez) + abs(ex))
-        if _separated(ez * v0x - ex * v0z, ez * v1x - ex * v1z, ez * v2x - ex * v2z, r):
+        # U x e = (0, -ew, ev)
+        if _separated(-ew * v0 + ev * w0, -ew * v1 + ev * w1, -ew * v2 + ev * w2, 0.5 * (abs(ew) + abs(ev))):
             return False
-        # Z x e = (-ey, ex, 0)
-        r = h * (abs(ey) + abs(ex))
-        if False and _separated(-ey * v0x + ex * v0y, -ey * v1x + ex * v1y, -ey * v2x + ex * v2y, r):
+        # V x e = (ew, 0, -eu)
+        if _separated(ew * u0 - eu * w0, ew * u1 - eu * w1, ew * u2 - eu * w2, 0.5 * (abs(ew) + abs(eu))):
             return False
     return True
 
@@ -174,8 +237,7 @@ def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write
     bx, by, bz = P[b, 0], P[b, 1], P[b, 2]
     cx, cy, cz = P[c, 0], P[c, 1], P[c, 2]
     # drop triangles with a NaN/inf coordinate
-    s = ax + ay + az + bx + by + bz + cx + cy + cz
-    if not math.isfinite(s):
+    if not math.isfinite(ax + ay + az + bx + by + bz + cx + cy + cz):
         return
     # clipped voxel bounding range of the triangle; culled when it misses the grid
     i0, i1 = _touch_range(_min3(ax, bx, cx), _max3(ax, bx, cx), nx)
@@ -183,112 +245,203 @@ def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write
     k0, k1 = _touch_range(_min3(az, bz, cz), _max3(az, bz, cz), nz)
     if i0 > i1 or j0 > j1 or k0 > k1:
         return
-    # triangle normal (same edge order as the exact test)
-    e0x, e0y, e0z = bx - ax, by - ay, bz - az
-    e1x, e1y, e1z = cx - bx, cy - by, cz - bz
-    nrx = e0y * e1z - e0z * e1y
-    nry = e0z * e1x - e0x * e1z
-    nrz = e0x * e1y - e0y * e1x
-    anx, any_, anz = abs(nrx), abs(nry), abs(nrz)
-    if anx == 0.0 and any_ == 0.0 and anz == 0.0:
-        # degenerate (segment or point): test every voxel of its (thin) bounding range
-        for i in range(i0, i1 + 1):
-            for j in range(j0, j1 + 1):
-                for k in range(k0, k1 + 1):
-                    if tri_box_overlap(ax, ay, az, bx, by, bz, cx, cy, cz, i, j, k):
-                        lin = (i * ny + j) * nz + k
-                        out_a[lin] = val_a
-                        if write_b:
-                            out_b[lin] = val_b
-        return
-    # dominant normal axis d; sweep the columns of the two other axes (u, v) and, in each column,
-    # only the voxels along d that the triangle's plane can reach over the column's cross-section
-    # (|slope| <= 1 per axis, so at most ~4 candidates per column instead of the whole range)
-    if anx >= any_ and anx >= anz:
-        d = 0
-        nd, nu, nv = nrx, nry, nrz
-        u0, u1, v0, v1, w0, w1 = j0, j1, k0, k1, i0, i1
-        au, av, ad = ay, az, ax
-    elif any_ >= anz:
-        d = 1
-        nd, nu, nv = nry, nrz, nrx
-        u0, u1, v0, v1, w0, w1 = k0, k1, i0, i1, j0, j1
-        au, av, ad = az, ax, ay
-    else:
-        d = 2
-        nd, nu, nv = nrz, nrx, nry
-        u0, u1, v0, v1, w0, w1 = i0, i1, j0, j1, k0, k1
-        au, av, ad = ax, ay, az
-    # plane: x_d = ad + g * (x_u - au) + q * (x_v - av)
-    g = -nu / nd
-    q = -nv / nd
-    g_lo = min(g, 0.0)
-    g_hi = max(g, 0.0)
-    q_lo = min(q, 0.0)
-    q_hi = max(q, 0.0)
-    for iu in range(u0, u1 + 1):
-        for iv in range(v0, v1 + 1):
-            # extreme plane heights over the column cross-section [iu, iu+1] x [iv, iv+1]
-            base = ad + g * (iu - au) + q * (iv - av)
-            lo = base + g_lo + q_lo - _RANGE_SLACK
-            hi = base + g_hi + q_hi + _RANGE_SLACK
-            kd0, kd1 = _touch_range(lo, hi, 1 << 40)
-            kd0 = max(kd0, w0)
-            kd1 = min(kd1, w1)
-            for kd in range(kd0, kd1 + 1):
-                # back from (u, v, d) to (i, j, k)
-                if d == 0:
-                    i, j, k = kd, iu, iv
-                elif d == 1:
-                    i, j, k = iv, kd, iu
-                else:
-                    i, j, k = iu, iv, kd
-                # exact test of the candidate
-                if tri_box_overlap(ax, ay, az, bx, by, bz, cx, cy, cz, i, j, k):
-                    lin = (i * ny + j) * nz + k
-                    out_a[lin] = val_a
-                    if write_b:
-                        out_b[lin] = val_b
+    # sweep frame (u, v, w): w along the dominant normal axis (see tri_box_overlap)
+    nrx = (by - ay) * (cz - bz) - (bz - az) * (cy - by)
+    nry = (bz - az) * (cx - bx) - (bx - ax) * (cz - bz)
+    nrz = (bx - ax) * (cy - by) - (by - ay) * (cx - bx)
+    d = _sweep_axis(nrx, nry, nrz)
+    au, av, aw = _to_uvw(d, ax, ay, az)
+    bu, bv, bw = _to_uvw(d, bx, by, bz)
+    cu, cv, cw = _to_uvw(d, cx, cy, cz)
+    ru0, rv0, rw0 = _to_uvw(d, i0, j0, k0)
+    ru1, rv1, rw1 = _to_uvw(d, i1, j1, k1)
+    # per-triangle constants of the test: edges, normal, radii
+    eu0, ev0, ew0 = bu - au, bv - av, bw - aw
+    eu1, ev1, ew1 = cu - bu, cv - bv, cw - bw
+    eu2, ev2, ew2 = au - cu, av - cv, aw - cw
+    nu = ev0 * ew1 - ew0 * ev1
+    nv = ew0 * eu1 - eu0 * ew1
+    nw = eu0 * ev1 - ev0 * eu1
+    rn = 0.5 * (abs(nu) + abs(nv) + abs(nw))
+    rw0_, rw1_, rw2_ = 0.5 * (abs(ev0) + abs(eu0)), 0.5 * (abs(ev1) + abs(eu1)), 0.5 * (abs(ev2) + abs(eu2))
+    ru0_, ru1_, ru2_ = 0.5 * (abs(ew0) + abs(ev0)), 0.5 * (abs(ew1) + abs(ev1)), 0.5 * (abs(ew2) + abs(ev2))
+    rv0_, rv1_, rv2_ = 0.5 * (abs(ew0) + abs(eu0)), 0.5 * (abs(ew1) + abs(eu1)), 0.5 * (abs(ew2) + abs(eu2))
+    degenerate = nu == 0.0 and nv == 0.0 and nw == 0.0
+    if not degenerate:
+        # plane through a: w = aw + g (u - au) + q (v - av). The test accepts boxes meeting the slab
+        # between the planes through the lowest and highest vertex projections on n (one plane
+        # up to rounding, except for slivers), so widen by that slab: [t_lo, t_hi]
+        g = -nu / nw
+        q = -nv / nw
+        g_lo, g_hi = min(g, 0.0), max(g, 0.0)
+        q_lo, q_hi = min(q, 0.0), max(q, 0.0)
+        sa = nu * au + nv * av + nw * aw
+        sb = nu * bu + nv * bv + nw * bw
+        sc = nu * cu + nv * cv + nw * cw
+        t_lo = (_min3(sa, sb, sc) - sa) / nw
+        t_hi = (_max3(sa, sb, sc) - sa) / nw
+        if t_lo > t_hi:
+            t_lo, t_hi = t_hi, t_lo
+    for iu in range(ru0, ru1 + 1):
+        ou = iu + 0.5
+        u0, u1, u2 = au - ou, bu - ou, cu - ou
+        # 1. box axis u
+        if _separated(u0, u1, u2, 0.5):
+            continue
+        for iv in range(rv0, rv1 + 1):
+            ov = iv + 0.5
+            v0, v1, v2 = av - ov, bv - ov, cv - ov
+            # 2. the column's axes: box axis v and the three W x e (they ignore w)
+            if _separated(v0, v1, v2, 0.5):
+                continue
+            if _separated(-ev0 * u0 + eu0 * v0, -ev0 * u1 + eu0 * v1, -ev0 * u2 + eu0 * v2, rw0_):
+                continue
+            if _separated(-ev1 * u0 + eu1 * v0, -ev1 * u1 + eu1 * v1, -ev1 * u2 + eu1 * v2, rw1_):
+                continue
+            if _separated(-ev2 * u0 + eu2 * v0, -ev2 * u1 + eu2 * v1, -ev2 * u2 + eu2 * v2, rw2_):
+                continue
+            # 3. the voxels along w the plane reaches over the column's cross-section
+            if degenerate:
+                kw0, kw1 = rw0, rw1
+            else:
+                base = aw + g * (iu - au) + q * (iv - av)
+                kw0, kw1 = _touch_range(base + g_lo + q_lo + t_lo, base + g_hi + q_hi + t_hi, 1 << 40)
+                kw0 = max(kw0, rw0)
+                kw1 = min(kw1, rw1)
+            if kw0 > kw1:
+                continue
+            # the w-independent halves of the remaining projections (same operation order as
+            # the full test: hoisting a term does not change any rounding)
+            pn0, pn1, pn2 = nu * u0 + nv * v0, nu * u1 + nv * v1, nu * u2 + nv * v2
+            pu00, pu01, pu02 = -ew0 * v0, -ew0 * v1, -ew0 * v2
+            pu10, pu11, pu12 = -ew1 * v0, -ew1 * v1, -ew1 * v2
+            pu20, pu21, pu22 = -ew2 * v0, -ew2 * v1, -ew2 * v2
+            pv00, pv01, pv02 = ew0 * u0, ew0 * u1, ew0 * u2
+            pv10, pv11, pv12 = ew1 * u0, ew1 * u1, ew1 * u2
+            pv20, pv21, pv22 = ew2 * u0, ew2 * u1, ew2 * u2
+            for iw in range(kw0, kw1 + 1):
+                ow = iw + 0.5
+                w0, w1, w2 = aw - ow, bw - ow, cw - ow
+                # 4. box axis w, the normal, U x e and V x e for this voxel
+                if _separated(w0, w1, w2, 0.5):
+                    continue
+                if _separated(pn0 + nw * w0, pn1 + nw * w1, pn2 + nw * w2, rn):
+                    continue
+                if _separated(pu00 + ev0 * w0, pu01 + ev0 * w1, pu02 + ev0 * w2, ru0_):
+                    continue
+                if _separated(pu10 + ev1 * w0, pu11 + ev1 * w1, pu12 + ev1 * w2, ru1_):
+                    continue
+                if _separated(pu20 + ev2 * w0, pu21 + ev2 * w1, pu22 + ev2 * w2, ru2_):
+                    continue
+                if _separated(pv00 - eu0 * w0, pv01 - eu0 * w1, pv02 - eu0 * w2, rv0_):
+                    continue
+                if _separated(pv10 - eu1 * w0, pv11 - eu1 * w1, pv12 - eu1 * w2, rv1_):
+                    continue
+                if _separated(pv20 - eu2 * w0, pv21 - eu2 * w1, pv22 - eu2 * w2, rv2_):
+                    continue
+                i, j, k = _from_uvw(d, iu, iv, iw)
+                lin = (i * ny + j) * nz + k
+                out_a[lin] = val_a
+                if write_b:
+                    out_b[lin] = val_b
+
+
+@njit(cache=True, nogil=True)
+def _surface_paint_serial(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
+    """Paint every surface voxel of every triangle, in the calling thread."""
+    for t in range(faces.shape[0]):
+        _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b)
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _surface_paint_kernel(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
-    """Paint every surface voxel of every triangle, triangles spread over the threads."""
+def _surface_paint_parallel(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
+    """Paint every surface voxel of every triangle, triangles spread over numba's threads."""
     nt = faces.shape[0]
     nchunks = (nt + _CHUNK - 1) // _CHUNK
-    # dynamic-ish balance: chunks of _CHUNK triangles, many more chunks than threads
-    for ch in prange(nchunks):
-        t1 = min((ch + 1) * _CHUNK, nt)
-        for t in range(ch * _CHUNK, t1):
-            _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b)
+    # load balance whatever the threading layer's schedule: the parallel loop runs over _STRIPES
+    # stripes, stripe s taking the chunks s, s + _STRIPES, ... of _CHUNK consecutive triangles,
+    # so every thread's share samples the whole mesh (big and small triangles alike)
+    for s in prange(_STRIPES):
+        for ch in range(s, nchunks, _STRIPES):
+            for t in range(ch * _CHUNK, min((ch + 1) * _CHUNK, nt)):
+                _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b)
+
+
+@njit(cache=True, nogil=True)
+def _touched_blocks(P, faces, nx, slab_len, block_bytes):
+    """Flags of the mask blocks (block_bytes each) that some triangle's clipped x range reaches."""
+    nt = faces.shape[0]
+    nblocks = (nx * slab_len + block_bytes - 1) // block_bytes
+    flags = np.zeros(nblocks, dtype=np.uint8)
+    for t in range(nt):
+        a = faces[t, 0]
+        b = faces[t, 1]
+        c = faces[t, 2]
+        xa, xb, xc = P[a, 0], P[b, 0], P[c, 0]
+        if not math.isfinite(xa + xb + xc):
+            continue
+        i0, i1 = _touch_range(_min3(xa, xb, xc), _max3(xa, xb, xc), nx)
+        if i0 > i1:
+            continue
+        # x slabs [i0, i1] are bytes [i0 * slab_len, (i1 + 1) * slab_len)
+        for blk in range((i0 * slab_len) // block_bytes, ((i1 + 1) * slab_len - 1) // block_bytes + 1):
+            flags[blk] = 1
+    return flags
+
+
+@njit(cache=True, nogil=True)
+def _block_count(words, blk, block_words):
+    """Non-zero bytes of mask block blk (bytes are 0/1, so a word's byte sum is its count)."""
+    c = 0
+    for w in range(blk * block_words, min((blk + 1) * block_words, words.shape[0])):
+        x = words[w]
+        if x != 0:
+            c += np.int64((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
+    return c
+
+
+@njit(cache=True, nogil=True)
+def _block_write(mask, words, blk, block_words, out, o):
+    """Write the byte indices of the non-zero bytes of block blk into out[o:], ascending."""
+    for w in range(blk * block_words, min((blk + 1) * block_words, words.shape[0])):
+        if words[w] != 0:
+            for byte in range(8 * w, 8 * w + 8):
+                if mask[byte] != 0:
+                    out[o] = byte
+                    o += 1
+
+
+@njit(cache=True, nogil=True)
+def _mask_to_indices_serial(mask, words, flags, block_words):
+    """Sorted linear indices of the non-zero bytes of ``mask`` (0/1 bytes), scanning 8 bytes at a
+    time (``words`` is the uint64 view of the zero-padded mask) and only the flagged blocks."""
+    nb = flags.shape[0]
+    # pass 1: count per block, prefix sum -> output offsets
+    counts = np.zeros(nb + 1, dtype=np.int64)
+    for blk in range(nb):
+        counts[blk + 1] = counts[blk] + (_block_count(words, blk, block_words) if flags[blk] else 0)
+    out = np.empty(counts[nb], dtype=np.int64)
+    # pass 2: each block's indices at its offset (blocks ascend -> sorted output)
+    for blk in range(nb):
+        if flags[blk]:
+            _block_write(mask, words, blk, block_words, out, counts[blk])
+    return out
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _mask_to_indices(mask, slabs, slab_len):
-    """Sorted linear indices of the non-zero bytes of ``mask``, scanning only the listed slabs
-    (slab s = mask[s * slab_len:(s + 1) * slab_len])."""
-    ns = slabs.shape[0]
-    # pass 1: count per slab
-    counts = np.zeros(ns + 1, dtype=np.int64)
-    for m in prange(ns):
-        base = slabs[m] * slab_len
-        c = 0
-        for x in range(base, base + slab_len):
-            if mask[x] != 0:
-                c += 1
-        counts[m + 1] = c
-    # prefix sum -> output offsets
-    for m in range(ns):
-        counts[m + 1] += counts[m]
-    out = np.empty(counts[ns], dtype=np.int64)
-    # pass 2: write the indices of each slab at its offset (slabs are ascending -> sorted output)
-    for m in prange(ns):
-        base = slabs[m] * slab_len
-        w = counts[m]
-        for x in range(base, base + slab_len):
-            if mask[x] != 0:
-                out[w] = x
-                w += 1
+def _mask_to_indices_parallel(mask, words, flags, block_words):
+    """:func:`_mask_to_indices_serial` with the blocks spread over numba's threads."""
+    nb = flags.shape[0]
+    counts = np.zeros(nb + 1, dtype=np.int64)
+    for blk in prange(nb):
+        if flags[blk]:
+            counts[blk + 1] = _block_count(words, blk, block_words)
+    for blk in range(nb):
+        counts[blk + 1] += counts[blk]
+    out = np.empty(counts[nb], dtype=np.int64)
+    for blk in prange(nb):
+        if flags[blk]:
+            _block_write(mask, words, blk, block_words, out, counts[blk])
     return out
 
 
@@ -346,79 +499,90 @@ def _column_crossing(ax, ay, az, bx, by, bz, cx, cy, cz, x, y):
 
 @njit(cache=True, nogil=True)
 def _centre_range(lo, hi, n):
-    """Column/voxel indices c in [0, n) with centre c + 0.5 in [lo, hi] (voxel units)."""
-    lo = min(max(lo, -2.0), n + 2.0)
-    hi = min(max(hi, -2.0), n + 2.0)
+    """Column indices c in [0, n) with centre c + 0.5 in [lo, hi] (voxel units), widened by the
+    slack: a superset, the edge functions decide (so both triangles of an edge see the column)."""
+    lo = min(max(lo - _RANGE_SLACK, -2.0), n + 2.0)
+    hi = min(max(hi + _RANGE_SLACK, -2.0), n + 2.0)
     c0 = max(int(math.ceil(lo - 0.5)), 0)
     c1 = min(int(math.floor(hi - 0.5)), n - 1)
     return c0, c1
 
 
 @njit(cache=True, nogil=True)
-def _triangle_crossings(P, faces, t, i0, i1, j0, j1, nj, col, zs, w, write):
-    """Count (and if ``write``, store from offset w) the crossings of triangle t with the column
-    centres of the window [i0, i1] x [j0, j1]; returns the count."""
+def _triangle_columns(P, faces, t, i0, i1, j0, j1):
+    """Window columns [ci0, ci1] x [cj0, cj1] whose centres the xy bounding box of triangle t
+    may contain (a superset; empty when ci0 > ci1 or cj0 > cj1, or for a non-finite triangle)."""
+    a = faces[t, 0]
+    b = faces[t, 1]
+    c = faces[t, 2]
+    ax, ay = P[a, 0], P[a, 1]
+    bx, by = P[b, 0], P[b, 1]
+    cx, cy = P[c, 0], P[c, 1]
+    if not math.isfinite(ax + ay + bx + by + cx + cy + P[a, 2] + P[b, 2] + P[c, 2]):
+        return 0, -1, 0, -1
+    ci0, ci1 = _centre_range(_min3(ax, bx, cx), _max3(ax, bx, cx), i1 + 1)
+    cj0, cj1 = _centre_range(_min3(ay, by, cy), _max3(ay, by, cy), j1 + 1)
+    return max(ci0, i0), ci1, max(cj0, j0), cj1
+
+
+@njit(cache=True, nogil=True)
+def _triangle_crossings(P, faces, t, i0, j0, nj, ci0, ci1, cj0, cj1, col, zs, w):
+    """Store from offset w, one slot per column of [ci0, ci1] x [cj0, cj1], the crossing of
+    triangle t with that column's centre line: (window column index, z), or column -1 (none)."""
     a = faces[t, 0]
     b = faces[t, 1]
     c = faces[t, 2]
     ax, ay, az = P[a, 0], P[a, 1], P[a, 2]
     bx, by, bz = P[b, 0], P[b, 1], P[b, 2]
     cx, cy, cz = P[c, 0], P[c, 1], P[c, 2]
-    if not math.isfinite(ax + ay + az + bx + by + bz + cx + cy + cz):
-        return 0
-    # column centres inside the triangle's xy bounding box, clipped to the window
-    ci0, ci1 = _centre_range(_min3(ax, bx, cx), _max3(ax, bx, cx), i1 + 1)
-    cj0, cj1 = _centre_range(_min3(ay, by, cy), _max3(ay, by, cy), j1 + 1)
-    ci0 = max(ci0, i0)
-    cj0 = max(cj0, j0)
-    n = 0
+    n = w
     for i in range(ci0, ci1 + 1):
         for j in range(cj0, cj1 + 1):
             hit, z = _column_crossing(ax, ay, az, bx, by, bz, cx, cy, cz, i + 0.5, j + 0.5)
-            if hit:
-                if write:
-                    col[w + n] = (i - i0) * nj + (j - j0)
-                    zs[w + n] = z
-                n += 1
-    return n
+            col[n] = (i - i0) * nj + (j - j0) if hit else -1
+            zs[n] = z
+            n += 1
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _column_crossings(P, faces, i0, i1, j0, j1):
     """Crossings of every column of the window [i0, i1] x [j0, j1], grouped by column and sorted
     in z: returns (ptr, z) with column m = (i - i0) * nj + (j - j0) owning z[ptr[m]:ptr[m+1]]."""
     nt = faces.shape[0]
-    ni = i1 - i0 + 1
     nj = j1 - j0 + 1
-    ncol = ni * nj
-    dummy_i = np.empty(0, dtype=np.int64)
-    dummy_z = np.empty(0, dtype=np.float64)
-    # pass 1: crossings per triangle
+    ncol = (i1 - i0 + 1) * nj
+    # pass 1: slots per triangle = the columns of its clipped xy bounding box (cheap bound)
     cnt = np.zeros(nt + 1, dtype=np.int64)
-    for t in prange(nt):
-        cnt[t + 1] = _triangle_crossings(P, faces, t, i0, i1, j0, j1, nj, dummy_i, dummy_z, 0, False)
+    for t in range(nt):
+        ci0, ci1, cj0, cj1 = _triangle_columns(P, faces, t, i0, i1, j0, j1)
+        if ci0 <= ci1 and cj0 <= cj1:
+            cnt[t + 1] = (ci1 - ci0 + 1) * (cj1 - cj0 + 1)
     for t in range(nt):
         cnt[t + 1] += cnt[t]
     total = cnt[nt]
-    # pass 2: (column, z) of every crossing, triangle-major
+    # pass 2: the crossing (window column, z) of every slot, -1 where the column misses
     col = np.empty(total, dtype=np.int64)
     zt = np.empty(total, dtype=np.float64)
-    for t in prange(nt):
-        _triangle_crossings(P, faces, t, i0, i1, j0, j1, nj, col, zt, cnt[t], True)
+    for t in range(nt):
+        ci0, ci1, cj0, cj1 = _triangle_columns(P, faces, t, i0, i1, j0, j1)
+        if ci0 <= ci1 and cj0 <= cj1:
+            _triangle_crossings(P, faces, t, i0, j0, nj, ci0, ci1, cj0, cj1, col, zt, cnt[t])
     # counting sort of the crossings by column
     ptr = np.zeros(ncol + 1, dtype=np.int64)
     for m in range(total):
-        ptr[col[m] + 1] += 1
+        if col[m] >= 0:
+            ptr[col[m] + 1] += 1
     for m in range(ncol):
         ptr[m + 1] += ptr[m]
     cur = ptr[:-1].copy()
-    zs = np.empty(total, dtype=np.float64)
+    zs = np.empty(ptr[ncol], dtype=np.float64)
     for m in range(total):
         cm = col[m]
-        zs[cur[cm]] = zt[m]
-        cur[cm] += 1
+        if cm >= 0:
+            zs[cur[cm]] = zt[m]
+            cur[cm] += 1
     # sort each column's crossings in z (few per column: insertion sort)
-    for m in prange(ncol):
+    for m in range(ncol):
         for x in range(ptr[m] + 1, ptr[m + 1]):
             v = zs[x]
             y = x - 1
@@ -439,13 +603,13 @@ def _column_span(zs, p, nz):
     return k0, k1
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _interior_indices(ptr, zs, i0, j0, nj, ny, nz):
     """Sorted linear indices of the voxel centres between crossing pairs of every column."""
     ncol = ptr.shape[0] - 1
     # pass 1: inside voxels per column
     cnt = np.zeros(ncol + 1, dtype=np.int64)
-    for m in prange(ncol):
+    for m in range(ncol):
         c = 0
         for p in range(ptr[m], ptr[m + 1] - 1, 2):
             k0, k1 = _column_span(zs, p, nz)
@@ -456,7 +620,7 @@ def _interior_indices(ptr, zs, i0, j0, nj, ny, nz):
         cnt[m + 1] += cnt[m]
     out = np.empty(cnt[ncol], dtype=np.int64)
     # pass 2: write them; window columns are in (i, j) order, pairs ascend -> sorted, unique
-    for m in prange(ncol):
+    for m in range(ncol):
         i = i0 + m // nj
         j = j0 + m % nj
         base = (i * ny + j) * nz
@@ -469,11 +633,11 @@ def _interior_indices(ptr, zs, i0, j0, nj, ny, nz):
     return out
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _interior_paint(ptr, zs, i0, j0, nj, ny, nz, out_a, out_b, val_a, val_b):
     """Write (val_a, val_b) into the voxels whose centres lie between crossing pairs."""
     ncol = ptr.shape[0] - 1
-    for m in prange(ncol):
+    for m in range(ncol):
         i = i0 + m // nj
         j = j0 + m % nj
         base = (i * ny + j) * nz
@@ -512,23 +676,19 @@ def to_voxel_units(vertices: np.ndarray, origin, voxel_size: float) -> np.ndarra
     return np.ascontiguousarray((V - np.asarray(origin, dtype=np.float64)) / float(voxel_size))
 
 
-def _touched_slabs(P: np.ndarray, F: np.ndarray, nx: int) -> np.ndarray:
-    """Ascending x slabs (voxel index i) that the triangles' clipped bounding ranges cover."""
-    if len(F) == 0:
-        return np.zeros(0, dtype=np.int64)
-    x = P[:, 0][F]  # (M, 3) x of each corner, voxel units
-    with np.errstate(invalid="ignore"):
-        lo = np.clip(np.ceil(np.clip(x.min(axis=1), -2, nx + 2)) - 1, 0, None).astype(np.int64)
-        hi = np.minimum(np.floor(np.clip(x.max(axis=1), -2, nx + 2)), nx - 1).astype(np.int64)
-    keep = (lo <= hi) & np.isfinite(x).all(axis=1)
-    # difference array of the ranges -> covered slabs
-    diff = np.bincount(lo[keep], minlength=nx + 1) - np.bincount(hi[keep] + 1, minlength=nx + 1)
-    return np.flatnonzero(np.cumsum(diff[:nx]) > 0).astype(np.int64)
+def _use_threads(work: int, threshold: int) -> bool:
+    """Parallel kernels only pay off for big inputs (a thread-pool launch costs ~0.1 ms idle and
+    milliseconds when the cores are busy with other work, e.g. other Dask tasks)."""
+    return work >= threshold and numba.get_num_threads() > 1
 
 
 def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
     """Write ``val_a`` into flat ``out_a`` (and ``val_b`` into flat ``out_b`` unless it is None)
-    at every surface voxel of the mesh given in voxel units ``P`` (see :func:`to_voxel_units`)."""
+    at every surface voxel of the mesh given in voxel units ``P`` (see :func:`to_voxel_units`).
+
+    Meshes of at least ``PARALLEL_MIN_TRIANGLES`` triangles use numba's threads
+    (``numba.set_num_threads``, per calling thread); smaller ones run in the calling thread.
+    """
     nx, ny, nz = _shape3(shape)
     P, F = _check_mesh(P, faces)
     if len(F) == 0:
@@ -536,9 +696,8 @@ def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
     write_b = out_b is not None
     if out_b is None:
         out_b = np.zeros(1, dtype=np.uint32)
-    _surface_paint_kernel(
-        P, F, nx, ny, nz, out_a, out_b, out_a.dtype.type(val_a), out_b.dtype.type(val_b), write_b
-    )
+    kernel = _surface_paint_parallel if _use_threads(len(F), PARALLEL_MIN_TRIANGLES) else _surface_paint_serial
+    kernel(P, F, nx, ny, nz, out_a, out_b, out_a.dtype.type(val_a), out_b.dtype.type(val_b), write_b)
 
 
 def surface_voxels(vertices, faces, origin, voxel_size: float, shape) -> np.ndarray:
@@ -547,36 +706,41 @@ def surface_voxels(vertices, faces, origin, voxel_size: float, shape) -> np.ndar
     ``vertices`` (N, 3) metres in the grid frame, ``faces`` (M, 3) vertex indices, ``origin``
     the grid's minimum corner (metres), ``voxel_size`` metres, ``shape`` (nx, ny, nz). Triangles
     outside the grid are culled, those crossing its border are clipped; zero-area triangles mark
-    the voxels their segment/point touches. Uses one uint8 scratch mask of the grid's size
-    (409 MB at 0.05 m on the default region; pages never touched are never allocated).
+    the voxels their segment/point touches; triangles with a non-finite coordinate are dropped.
+    Uses one uint8 scratch mask of the grid's size (409 MB at 0.05 m on the default region; pages
+    never touched are never allocated).
     """
     nx, ny, nz = _shape3(shape)
     V, F = _check_mesh(vertices, faces)
     if len(F) == 0:
         return np.zeros(0, dtype=np.int64)
     P = to_voxel_units(V, origin, voxel_size)
-    # 1. mark every surface voxel in a byte mask (same-value writes: race-free in effect)
-    mask = np.zeros(nx * ny * nz, dtype=np.uint8)
-    dummy = np.zeros(1, dtype=np.uint32)
-    _surface_paint_kernel(P, F, nx, ny, nz, mask, dummy, np.uint8(1), np.uint32(0), False)
-    # 2. extract the marked indices, scanning only the x slabs some triangle reaches
-    slabs = _touched_slabs(P, F, nx)
-    return _mask_to_indices(mask, slabs, ny * nz)
+    # 1. mark every surface voxel in a byte mask (same-value writes: race-free in effect), padded
+    #    to whole 8-byte words for the extraction
+    n = nx * ny * nz
+    words = np.zeros((n + 7) // 8, dtype=np.uint64)
+    mask = words.view(np.uint8)
+    paint_surface(P, F, (nx, ny, nz), mask, None, 1, 0)
+    # 2. extract the marked indices, 8 bytes at a time, only in the blocks some triangle reaches
+    flags = _touched_blocks(P, F, nx, ny * nz, 8 * _BLOCK_WORDS)
+    if _use_threads(n, PARALLEL_MIN_VOXELS):
+        return _mask_to_indices_parallel(mask, words, flags, _BLOCK_WORDS)
+    return _mask_to_indices_serial(mask, words, flags, _BLOCK_WORDS)
 
 
 def _fill_window(P: np.ndarray, F: np.ndarray, nx: int, ny: int):
-    """Column window [i0, i1] x [j0, j1] of the mesh's xy bounding box, clipped to the grid
-    (None when it misses the grid)."""
-    used = P[F.reshape(-1)]
-    used = used[np.isfinite(used).all(axis=1)]
-    if len(used) == 0:
+    """Column window [i0, i1] x [j0, j1] of the mesh's xy bounding box (finite vertices), with
+    one column of margin, clipped to the grid (None when it misses the grid)."""
+    fin = P if np.isfinite(P).all() else P[np.isfinite(P).all(axis=1)]
+    if len(fin) == 0:
         return None
-    lo = used.min(axis=0)
-    hi = used.max(axis=0)
-    i0 = max(int(math.ceil(min(max(lo[0], -2.0), nx + 2.0) - 0.5)), 0)
-    i1 = min(int(math.floor(min(max(hi[0], -2.0), nx + 2.0) - 0.5)), nx - 1)
-    j0 = max(int(math.ceil(min(max(lo[1], -2.0), ny + 2.0) - 0.5)), 0)
-    j1 = min(int(math.floor(min(max(hi[1], -2.0), ny + 2.0) - 0.5)), ny - 1)
+    lo = fin.min(axis=0)
+    hi = fin.max(axis=0)
+    # a superset: the edge functions decide
+    i0 = max(int(math.ceil(min(max(lo[0], -2.0), nx + 2.0) - 0.5)) - 1, 0)
+    i1 = min(int(math.floor(min(max(hi[0], -2.0), nx + 2.0) - 0.5)) + 1, nx - 1)
+    j0 = max(int(math.ceil(min(max(lo[1], -2.0), ny + 2.0) - 0.5)) - 1, 0)
+    j1 = min(int(math.floor(min(max(hi[1], -2.0), ny + 2.0) - 0.5)) + 1, ny - 1)
     if i0 > i1 or j0 > j1:
         return None
     return i0, i1, j0, j1
@@ -625,14 +789,21 @@ def paint_interior(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
 
 
 def warmup() -> None:
-    """Compile (or load from the cache) every kernel on a one-triangle/one-tetrahedron mesh."""
+    """Compile (or load from numba's on-disk cache) every kernel, serial and parallel, on a
+    tetrahedron, so that no later call pays for the JIT."""
     tet_v = np.array([[0.1, 0.1, 0.1], [1.9, 0.2, 0.1], [0.2, 1.8, 0.3], [0.4, 0.5, 1.7]])
-    tet_f = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
-    surface_voxels(tet_v, tet_f, (0.0, 0.0, 0.0), 0.5, (4, 4, 4))
-    fill_interior(tet_v, tet_f, (0.0, 0.0, 0.0), 0.5, (4, 4, 4))
-    sem = np.zeros(64, dtype=np.uint8)
-    inst = np.zeros(64, dtype=np.uint32)
+    tet_f = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], dtype=np.int64)
+    shape = (4, 4, 4)
+    surface_voxels(tet_v, tet_f, (0.0, 0.0, 0.0), 0.5, shape)
+    fill_interior(tet_v, tet_f, (0.0, 0.0, 0.0), 0.5, shape)
     P = to_voxel_units(tet_v, (0.0, 0.0, 0.0), 0.5)
-    paint_surface(P, tet_f, (4, 4, 4), sem, inst, 1, 1)
-    paint_interior(P, tet_f, (4, 4, 4), sem, inst, 1, 1)
-
+    for dtype_b in (np.uint32,):
+        sem = np.zeros(64, dtype=np.uint8)
+        inst = np.zeros(64, dtype=dtype_b)
+        paint_surface(P, tet_f, shape, sem, inst, 1, 1)
+        paint_interior(P, tet_f, shape, sem, inst, 1, 1)
+        _surface_paint_parallel(P, tet_f, 4, 4, 4, sem, inst, np.uint8(1), dtype_b(1), True)
+    words = np.zeros(8, dtype=np.uint64)
+    mask = words.view(np.uint8)
+    _surface_paint_parallel(P, tet_f, 4, 4, 4, mask, np.zeros(1, np.uint32), np.uint8(1), np.uint32(0), False)
+    _mask_to_indices_parallel(mask, words, np.ones(1, dtype=np.uint8), _BLOCK_WORDS)

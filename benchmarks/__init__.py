@@ -1,0 +1,1 @@
+"""Speed benchmarks against the libraries a user would otherwise use (not timed tests)."""

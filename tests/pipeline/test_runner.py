@@ -1,0 +1,131 @@
+"""The runner's contract, on two tiny stand-in stages (fast, no heavy compute):
+cache keys, skip-when-unchanged, re-run of exactly what changed, failures and lineage."""
+
+from __future__ import annotations
+
+import pytest
+
+from catalog.lineage import LineageLog
+from catalog.parquet import ParquetTable
+from pipeline import runner
+from pipeline.registry import Partition, StageSpec
+from schemas.configs import DatasetConfig
+from schemas.records import QuarantineRecord
+
+
+def _rec(reason: str) -> QuarantineRecord:
+    return QuarantineRecord(stage="t", source="t", source_path="t", reason=reason, hint="")
+
+
+def task_a(store, cfg, part):
+    t = ParquetTable(store, QuarantineRecord)
+    key = f"a/{part.key}"
+    return {t.path(key): t.save(key, [_rec(f"seed={cfg.seed}")])}
+
+
+def task_b(store, cfg, part):
+    t = ParquetTable(store, QuarantineRecord)
+    if cfg.frame_count == 13 and part.key == "p1":
+        raise ValueError("unlucky frame count")
+    upstream = t.load([f"a/{part.params['up']}"])[0].reason
+    key = f"b/{part.key}"
+    return {t.path(key): t.save(key, [_rec(f"{upstream};frames={cfg.frame_count}")])}
+
+
+STAGES = {
+    "ingest": StageSpec("ingest", "a", (), ("stages.geometry",), (), (),
+                        lambda ctx: [Partition("x"), Partition("y")], task_a),
+    "scenes": StageSpec("scenes", "b", ("ingest",), ("stages.geometry",), (), (),
+                        lambda ctx: [Partition(f"p{i}", {"up": "xy"[i]}, (("ingest", "xy"[i]),)) for i in range(2)],
+                        task_b),
+}
+
+
+@pytest.fixture(autouse=True)
+def fake_stages(monkeypatch):
+    monkeypatch.setattr(runner, "STAGES", STAGES)
+
+
+def _run(store, cfg=None, **kw):
+    return {o.stage: o for o in runner.run(store, cfg or DatasetConfig(), (0.2,), scheduler="synchronous", **kw)}
+
+
+def _snapshot(store):
+    fs = store.fs
+    return {p: (fs.info(p).get("size"), fs.info(p).get("mtime", fs.info(p).get("created")), fs.cat_file(p))
+            for p in fs.find(store.root)}
+
+
+def test_first_run_runs_everything_then_nothing(store):
+    out = _run(store)
+    assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+    before = _snapshot(store)
+    out = _run(store)
+    assert (out["ingest"].ran, out["scenes"].ran) == (0, 0)
+    assert (out["ingest"].skipped, out["scenes"].skipped) == (2, 2)
+    assert _snapshot(store) == before  # a re-run with nothing changed writes nothing
+
+
+def test_changed_config_reruns_that_stage_and_downstream_only(store):
+    _run(store)
+    cfg = DatasetConfig.model_validate({"scenes": {"frame_count": 30}})
+    out = _run(store, cfg)
+    assert (out["ingest"].ran, out["scenes"].ran) == (0, 2)
+    assert runner.status(store, cfg, (0.2,))[1].to_run == []
+    cfg2 = DatasetConfig.model_validate({"scenes": {"frame_count": 30}, "ingest": {"seed": 99}})
+    plans = runner.status(store, cfg2, (0.2,))
+    assert [pp.reason for pp in plans[0].to_run] == ["config changed"] * 2
+    assert all("stale" in pp.reason for pp in plans[1].to_run)
+    out = _run(store, cfg2)
+    assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+    assert ParquetTable(store, QuarantineRecord).load(["b/p0"])[0].reason == "seed=99;frames=30"
+
+
+def test_failed_task_is_named_recorded_and_rerun(store):
+    cfg = DatasetConfig.model_validate({"scenes": {"frame_count": 13}})
+    out = _run(store, cfg)
+    assert [f.partition for f in out["scenes"].failed] == ["p1"]
+    assert "unlucky frame count" in out["scenes"].failed[0].error
+    latest = LineageLog(store).latest("scenes")
+    assert latest["p1"].status == "failed" and latest["p0"].status == "completed"
+    plans = runner.status(store, cfg, (0.2,))
+    assert [(pp.partition.key, pp.reason.split(":")[0]) for pp in plans[1].to_run] == [("p1", "last run failed")]
+    out = _run(store)  # fixed config: p0 (changed config) and p1 both run
+    assert out["scenes"].ran == 2 and not out["scenes"].failed
+
+
+def test_missing_outputs_are_rebuilt(store):
+    _run(store)
+    store.remove("admesh/quarantine/b/p0.parquet")
+    plans = runner.status(store, DatasetConfig(), (0.2,))
+    assert [(pp.partition.key, pp.reason) for pp in plans[1].to_run] == [("p0", "outputs missing or modified")]
+    out = _run(store)
+    assert out["scenes"].ran == 1
+
+
+def test_force_and_single_stage(store):
+    _run(store)
+    out = _run(store, stages=["scenes"], force=True)
+    assert list(out) == ["scenes"] and out["scenes"].ran == 2
+
+
+def test_single_stage_without_upstream_is_a_plan_error(store):
+    with pytest.raises(runner.PlanError, match="has not completed"):
+        _run(store, stages=["scenes"])
+    assert store.fs.find(store.root) == [] if store.fs.exists(store.root) else True
+
+
+def test_unknown_stage(store):
+    with pytest.raises(runner.PlanError, match="unknown stage 'voxelise'"):
+        _run(store, stages=["voxelise"])
+
+
+def test_lineage_records_inputs_and_outputs(store):
+    _run(store)
+    recs = LineageLog(store).load("scenes")
+    assert len(recs) == 2 and {r.status for r in recs} == {"completed"}
+    import json
+
+    r = next(r for r in recs if r.partition == "p0")
+    assert list(json.loads(r.input_fingerprints)) == ["ingest/x"]
+    assert list(json.loads(r.output_fingerprints)) == ["admesh/quarantine/b/p0.parquet"]
