@@ -50,8 +50,17 @@ class TaskResult:
     host: str
 
 
-def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partition) -> TaskResult:
-    """Run one partition of a stage; never raises (a failure is a result with its error)."""
+def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partition,
+                 kernel_threads: int | None = None) -> TaskResult:
+    """Run one partition of a stage; never raises (a failure is a result with its error).
+
+    ``kernel_threads`` caps numba's threads in this process: a LocalCluster already runs one
+    worker process per core, so its kernels run single-threaded instead of oversubscribing.
+    """
+    if kernel_threads:
+        import numba
+
+        numba.set_num_threads(min(kernel_threads, numba.config.NUMBA_NUM_THREADS))
     started = datetime.now(timezone.utc)
     try:
         outputs = STAGES[stage].task(Store(store_url), cfg, partition)
@@ -92,6 +101,8 @@ class DaskExecutor(Executor):
         self.address, self.processes, self.workers = address, processes, workers
         self._client = None
         self._cluster = None
+        # own LocalCluster of single-threaded worker processes: one kernel thread each
+        self.kernel_threads = 1 if (address is None and processes) else None
 
     def _get_client(self):
         if self._client is None:
@@ -103,7 +114,8 @@ class DaskExecutor(Executor):
                 n = self.workers or os.cpu_count() or 1
                 self._cluster = LocalCluster(
                     n_workers=n, threads_per_worker=1, processes=self.processes,
-                    dashboard_address=None, silence_logs=logging.ERROR,
+                    dashboard_address=None, scheduler_kwargs={"dashboard": False},
+                    silence_logs=logging.ERROR,
                 )
                 self._client = Client(self._cluster)
         return self._client
@@ -113,7 +125,7 @@ class DaskExecutor(Executor):
 
         client = self._get_client()
         futures = {
-            client.submit(execute_task, stage, store_url, cfg, p, pure=False,
+            client.submit(execute_task, stage, store_url, cfg, p, self.kernel_threads, pure=False,
                           key=f"{stage}-{p.key}-{uuid.uuid4().hex[:8]}"): p
             for p in partitions
         }

@@ -31,7 +31,8 @@ Conventions (each is tested)
   exactly on a voxel face therefore marks the voxels on both sides of it.
 * Degenerate triangles are **kept**: a zero-area triangle (a segment or a point) marks exactly the
   voxels its segment / point touches (the same 13 axes contain the segment/box separating axes).
-* Triangles with a non-finite coordinate are dropped.
+* Triangles with a non-finite coordinate are dropped (so are those beyond ~1e150 voxels, whose
+  cross products overflow).
 * Fill: a voxel is inside when its **centre** is inside the closed mesh, decided by the parity of
   the crossings of the vertical line through the centre. A centre exactly on an xy edge of a
   triangle's projection is resolved by symbolic perturbation of the column to
@@ -60,14 +61,16 @@ from numba import njit, prange
 
 __all__ = [
     "surface_voxels",
+    "tri_box_overlap",
     "fill_interior",
     "to_voxel_units",
     "paint_surface",
     "paint_interior",
 ]
 
-# Slack (voxel units) added to the per-column plane range of a triangle before the exact test, so
-# float rounding of the range can only add candidates, never lose one.
+# Slack (voxel units) widening every candidate range (bounding ranges, per-column plane ranges,
+# column-centre ranges) before the exact tests, so float rounding of a range can only add
+# candidates, never lose one.
 _RANGE_SLACK = 1e-6
 # Triangles per chunk, and interleaved stripes of chunks, of the parallel surface loop.
 _CHUNK = 64
@@ -249,6 +252,8 @@ def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write
     nrx = (by - ay) * (cz - bz) - (bz - az) * (cy - by)
     nry = (bz - az) * (cx - bx) - (bx - ax) * (cz - bz)
     nrz = (bx - ax) * (cy - by) - (by - ay) * (cx - bx)
+    if not math.isfinite(nrx + nry + nrz):
+        return  # products overflow: coordinates beyond ~1e150 voxels are not supported
     d = _sweep_axis(nrx, nry, nrz)
     au, av, aw = _to_uvw(d, ax, ay, az)
     bu, bv, bw = _to_uvw(d, bx, by, bz)

@@ -277,8 +277,9 @@ def test_fill_icosphere_close_to_volume_and_exact_away_from_surface(rot, centre)
     V = m.vertices @ R.T + np.asarray(centre)
     shape = (40, 40, 40)
     got = fill_interior(V, m.faces, (0, 0, 0), vs, shape)
-    # volume: the voxel count approximates the mesh's volume
+    # volume: the voxel count approximates the mesh's volume, and the sphere's 4/3 pi r^3
     assert abs(len(got) * vs**3 - m.volume) / m.volume < 0.02
+    assert abs(len(got) * vs**3 - 4 / 3 * math.pi * r**3) / (4 / 3 * math.pi * r**3) < 0.03
     # exact away from the surface: icosphere lies between radius r*cos(max facet angle) and r
     ijk = np.array(np.unravel_index(np.arange(np.prod(shape)), shape)).T
     dist = np.linalg.norm((ijk + 0.5) * vs - np.asarray(centre), axis=1)
@@ -436,3 +437,19 @@ def test_culling_keeps_stuff_inside_region_only_and_sets_its_elevation():
     road = _stuff(V, F, ROAD)
     (p,) = composition_plan([road], grid)
     assert p.key[0] > -1.0 and len(p.faces) < len(F)
+
+
+def test_parallel_and_serial_kernels_agree(monkeypatch):
+    import stages.voxelize.kernels as K
+
+    m = trimesh.creation.icosphere(subdivisions=4, radius=1.7)
+    V = m.vertices + np.array([2.1, 2.0, 1.9])
+    shape = (40, 41, 42)
+    monkeypatch.setattr(K, "PARALLEL_MIN_TRIANGLES", 10**9)
+    monkeypatch.setattr(K, "PARALLEL_MIN_VOXELS", 10**12)
+    serial = surface_voxels(V, m.faces, (0, 0, 0), 0.1, shape)
+    monkeypatch.setattr(K, "PARALLEL_MIN_TRIANGLES", 0)
+    monkeypatch.setattr(K, "PARALLEL_MIN_VOXELS", 0)
+    parallel = surface_voxels(V, m.faces, (0, 0, 0), 0.1, shape)
+    np.testing.assert_array_equal(serial, parallel)
+    assert len(serial) > 1000
