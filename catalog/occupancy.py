@@ -26,9 +26,9 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str]] = {
 
 
 def array_fingerprint(data: np.ndarray) -> str:
-    """Content fingerprint of an array: dtype, shape and bytes."""
+    """Content fingerprint of an array: dtype, shape and bytes (hashed in place, no copy)."""
     h = hashlib.sha256(f"{data.dtype.str}{data.shape}".encode())
-    h.update(np.ascontiguousarray(data).tobytes())
+    h.update(memoryview(np.ascontiguousarray(data)).cast("B"))
     return "sha256:" + h.hexdigest()[:24]
 
 
