@@ -1,0 +1,32 @@
+"""The default dataset at 0.05 m (about 2.5 minutes on 2 cores): marked slow, run by `make test-all`.
+The default `make test` exercises every stage end to end at 0.4 m (tests/test_end_to_end.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from catalog.occupancy import OccupancyStore
+from catalog.sql import query
+from catalog.store import Store
+from pipeline.cli import app
+from schemas import taxonomy
+from schemas.grid import GridSpec
+
+pytestmark = pytest.mark.slow
+
+
+def test_default_dataset_at_5cm(tmp_path):
+    root = tmp_path / "data"
+    r = CliRunner().invoke(app, ["run", "--res", "0.05", "--root", str(root)])
+    assert r.exit_code == 0, r.output
+    store, grid = Store(str(root)), GridSpec(voxel_size=0.05)
+    (seq,) = [row[0] for row in query(store, "SELECT sequence_id FROM sequences")[1]]
+    sem = OccupancyStore(store).open(seq, grid, "semantic")
+    assert sem.shape[1:] == (1536, 1024, 260)
+    frame = sem[10]
+    present = {taxonomy.by_id(int(c)).name for c in np.unique(frame) if c}
+    assert {"Road", "Sidewalk", "Building", "Car", "Vegetation"} <= present
+    _, rows = query(store, "SELECT value FROM quality WHERE frame_index IS NULL")
+    assert 0.95 < rows[0][0] <= 1.0
