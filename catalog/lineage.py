@@ -31,16 +31,9 @@ class LineageLog:
         return self.table.load(keys)
 
     def latest(self, stage: str) -> dict[str, RunRecord]:
-        """The most recent record of every partition of a stage (completed or failed)."""
+        """The most recent record of every partition of a stage (completed or failed), ordered by
+        run id (the driver's clock), never by the workers' timestamps."""
         out: dict[str, RunRecord] = {}
-        for rec in sorted(self.load(stage), key=lambda r: (r.ended_at, r.run_id)):
+        for rec in sorted(self.load(stage), key=lambda r: r.run_id):
             out[rec.partition] = rec
-        return out
-
-    def latest_completed(self, stage: str) -> dict[str, RunRecord]:
-        """The most recent completed record of every partition of a stage."""
-        out: dict[str, RunRecord] = {}
-        for rec in sorted(self.load(stage), key=lambda r: (r.ended_at, r.run_id)):
-            if rec.status == "completed":
-                out[rec.partition] = rec
         return out

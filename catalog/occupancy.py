@@ -26,10 +26,18 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str]] = {
 
 
 def array_fingerprint(data: np.ndarray) -> str:
-    """Content fingerprint of an array: dtype, shape and bytes (hashed in place, no copy)."""
+    """Content fingerprint of an in-memory array: dtype, shape and bytes (hashed in place)."""
     h = hashlib.sha256(f"{data.dtype.str}{data.shape}".encode())
     h.update(memoryview(np.ascontiguousarray(data)).cast("B"))
     return "sha256:" + h.hexdigest()[:24]
+
+
+def parse_output_key(key: str) -> tuple[str, int] | None:
+    """``occupancy.zarr/<seq>/<res>/<name>[<frame>]`` -> (array path, frame); None otherwise."""
+    if not (key.startswith(OCCUPANCY_ZARR + "/") and key.endswith("]") and "[" in key):
+        return None
+    path, frame = key[len(OCCUPANCY_ZARR) + 1 : -1].rsplit("[", 1)
+    return path, int(frame)
 
 
 def zarr_store(store: Store, name: str):
@@ -57,12 +65,14 @@ class OccupancyStore:
         return f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}[{frame}]"
 
     def create(self, sequence_id: str, grid: GridSpec, frame_count: int, chunk_edge: int,
-               extra_attrs: dict | None = None) -> None:
+               extra_attrs: dict | None = None) -> bool:
         """Create (or keep, when identical) the arrays of one sequence at one resolution.
 
-        An existing array with the same shape, dtype, chunks and grid is kept with its data; one
-        that differs (another region, another frame count) is replaced.
+        An existing array with the same shape, dtype, chunks and attributes is kept with its
+        data; one that differs (another region, frame count, taxonomy...) is replaced, and then
+        every frame of it must be written again: returns True when an existing array was replaced.
         """
+        replaced = False
         root = self._root("a")
         X, Y, Z = grid.shape
         shape = (frame_count, X, Y, Z)
@@ -82,8 +92,10 @@ class OccupancyStore:
                 if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
                         and str(arr.dtype) == dtype and dict(arr.attrs) == want):
                     continue
+                replaced = True
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
                               overwrite=True, attributes=want)
+        return replaced
 
     def exists(self, sequence_id: str, grid: GridSpec, name: str, frame: int | None = None) -> bool:
         try:
@@ -98,15 +110,35 @@ class OccupancyStore:
 
     def write_frame(self, sequence_id: str, grid: GridSpec, frame: int,
                     arrays: dict[str, np.ndarray]) -> dict[str, str]:
-        """Write one frame of each array (whole chunks); returns lineage key -> fingerprint."""
+        """Write one frame of each array (whole chunks); returns lineage key -> fingerprint of
+        the frame's encoded chunks (see :meth:`frame_fingerprint`)."""
         out = {}
         for name, data in arrays.items():
             arr = self.open(sequence_id, grid, name, mode="r+")
             if data.shape != arr.shape[1:]:
                 raise ValueError(f"{name}: frame shape {data.shape} != array {arr.shape[1:]}")
             arr[frame] = data.astype(arr.dtype, copy=False)
-            out[self.output_key(sequence_id, grid, name, frame)] = array_fingerprint(data)
+            path = self.array_path(sequence_id, grid, name)
+            out[f"{OCCUPANCY_ZARR}/{path}[{frame}]"] = self.frame_fingerprint(path, frame)
         return out
+
+    def frame_fingerprint(self, array_path: str, frame: int) -> str | None:
+        """Fingerprint of one frame as stored: the names and encoded bytes of its chunk files
+        (``<array>/c/<frame>/...``; all-empty chunks are not stored), plus the array metadata.
+        Cheap (compressed bytes) and sensitive to a deleted, truncated or rewritten chunk;
+        None when the array does not exist."""
+        fs, base = self.store.fs, self.store.path(f"{OCCUPANCY_ZARR}/{array_path}")
+        try:
+            meta = fs.cat_file(f"{base}/zarr.json")
+        except FileNotFoundError:
+            return None
+        h = hashlib.sha256(meta)
+        prefix = f"{base}/c/{frame}"
+        files = sorted(fs.find(prefix)) if fs.exists(prefix) else []
+        for f in files:
+            h.update(f[len(prefix):].encode())
+            h.update(fs.cat_file(f))
+        return "sha256:" + h.hexdigest()[:24]
 
     def read_frame(self, sequence_id: str, grid: GridSpec, frame: int,
                    names: tuple[str, ...] = ("semantic", "instance")) -> dict[str, np.ndarray]:

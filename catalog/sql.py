@@ -73,6 +73,10 @@ def connect(store: Store) -> duckdb.DuckDBPyConnection:
     con = duckdb.connect(":memory:")
     for name, table in catalog_tables(store).items():
         con.register(name, table)
+    # bounded resources, no spilling to disk, nothing outside the registered views
+    con.execute("SET memory_limit = '4GB'")
+    con.execute("SET threads = 2")
+    con.execute("SET max_temp_directory_size = '0B'")
     con.execute("SET enable_external_access = false")
     con.execute("SET lock_configuration = true")
     return con
@@ -83,10 +87,16 @@ def query(store: Store, sql: str) -> tuple[list[str], list[tuple]]:
     check_read_only(sql)
     con = connect(store)
     try:
-        rel = con.execute(sql)
-        cols = [d[0] for d in rel.description] if rel.description else []
-        return cols, rel.fetchall()
+        # through Arrow: timestamps with time zones need no pytz
+        rel = con.sql(sql)
+        if rel is None:
+            return [], []
+        table = rel.to_arrow_table()
+        cols = table.column_names
+        return cols, [tuple(r.values()) for r in table.to_pylist()]
     except duckdb.Error as exc:
         raise QueryError(str(exc).strip()) from None
+    except Exception as exc:  # a result Arrow cannot turn into Python values
+        raise QueryError(f"{type(exc).__name__}: {exc}") from None
     finally:
         con.close()

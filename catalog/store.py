@@ -32,7 +32,6 @@ TABLE_DIRS: dict[str, str] = {
 OCCUPANCY_ZARR = "occupancy.zarr"
 ADMESH_MESHES = "admesh/meshes"
 SCENE_MESHES = "scenes/meshes"
-METRICS_DIR = "metrics"
 
 
 class StoreError(Exception):
@@ -123,7 +122,7 @@ class Store:
         for p in self.fs.find(base):
             name = posixpath.basename(p)
             if name.endswith(suffix) and not name.startswith(".tmp-"):
-                out.append(posixpath.relpath(p if p.startswith("/") or not base.startswith("/") else p, self.root))
+                out.append(posixpath.relpath(p, self.root))
         return sorted(out)
 
     def remove(self, rel: str) -> None:
@@ -131,16 +130,26 @@ class Store:
             self.fs.rm(self.path(rel), recursive=True)
 
     def check_writable(self) -> None:
-        """Raise :class:`StoreError` naming the root when it cannot be written (touches nothing
-        that already exists: creates the root if missing and a probe file it deletes)."""
+        """Raise :class:`StoreError` naming the root when it cannot be written. Creates nothing:
+        a local root that does not exist yet must have a writable nearest existing ancestor."""
+        if self.is_local:
+            path = self.root
+            if os.path.exists(path) and not os.path.isdir(path):
+                raise StoreError(f"dataset root {self.url} is a file, not a directory")
+            probe = path
+            while not os.path.exists(probe):
+                probe = os.path.dirname(probe)
+            if not os.path.isdir(probe):
+                raise StoreError(f"dataset root {self.url} is not writable: {probe} is a file")
+            if not os.access(probe, os.W_OK | os.X_OK):
+                raise StoreError(f"dataset root {self.url} is not writable: no write permission on {probe}")
+            return
         fs, root = self.fs, self.root
         try:
             if fs.exists(root) and not fs.isdir(root):
                 raise StoreError(f"dataset root {self.url} is a file, not a directory")
-            fs.makedirs(root, exist_ok=True)
             probe = posixpath.join(root, f".tmp-probe-{uuid.uuid4().hex}")
-            with fs.open(probe, "wb") as fh:
-                fh.write(b"")
+            fs.pipe_file(probe, b"")
             fs.rm(probe)
         except StoreError:
             raise

@@ -81,11 +81,20 @@ def load_config(path: Path | None) -> DatasetConfig:
         fail(_validation_message(f"config file {path}", exc))
 
 
+# a frame is held densely in memory (uint8 semantic + uint32 instance = 5 bytes a voxel)
+MAX_FRAME_VOXELS = 1_000_000_000
+
+
 def _resolutions(res: str, config: DatasetConfig) -> tuple[float, ...]:
     try:
         values = parse_resolutions(res)
         for v in values:
-            config.voxelize.grid(v)  # the region must hold at least one voxel at every resolution
+            grid = config.voxelize.grid(v)  # the region must hold at least one voxel
+            n = grid.shape[0] * grid.shape[1] * grid.shape[2]
+            if n > MAX_FRAME_VOXELS:
+                raise ValueError(f"{n:.3g} voxels a frame ({' x '.join(map(str, grid.shape))}) exceeds "
+                                 f"the {MAX_FRAME_VOXELS:.0e} a worker holds in memory; use a larger "
+                                 f"voxel or a smaller region")
     except ValidationError as exc:
         fail(f"--res {res}: {exc.errors()[0]['msg'].removeprefix('Value error, ')}")
     except ValueError as exc:
@@ -144,13 +153,14 @@ def run(
     force: Annotated[bool, typer.Option("--force", help="re-run the selected stages even when up to date")] = False,
 ) -> None:
     """Build the dataset (or the selected stages) on the embedded default or a --config file."""
-    from pipeline.runner import PlanError, run as run_pipeline, stage_order
+    from pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
     cfg = load_config(config)
     resolutions = _resolutions(res, cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
         stage_order(names)
+        resolve_scheduler(scheduler)
     except PlanError as exc:
         fail(str(exc))
     store = _store(root, writable=True)
@@ -261,7 +271,8 @@ def catalog_query(
     except StoreError as exc:
         fail(str(exc))
     if fmt == "json":
-        typer.echo(json.dumps([dict(zip(cols, r)) for r in rows], default=str, indent=1))
+        clean = lambda v: None if isinstance(v, float) and not math.isfinite(v) else v  # JSON has no NaN
+        typer.echo(json.dumps([{c: clean(v) for c, v in zip(cols, r)} for r in rows], default=str, indent=1))
     elif fmt == "csv":
         buf = io.StringIO()
         w = csv.writer(buf)

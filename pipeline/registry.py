@@ -53,7 +53,9 @@ class StageSpec:
     writes: tuple[str, ...]
     partitions: Callable[[Context], list[Partition]]
     task: Callable[[Store, StageConfig, Partition], dict[str, str]]
-    prepare: Callable[[Context, list[Partition]], None] | None = None
+    # creates outputs before tasks run (e.g. Zarr arrays); given the partitions to run and all
+    # partitions, returns the keys of partitions its creation invalidated (to run as well)
+    prepare: Callable[[Context, list[Partition], list[Partition]], set[str]] | None = None
 
     def config(self, config: DatasetConfig) -> StageConfig:
         return getattr(config, self.name)

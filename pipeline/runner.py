@@ -19,11 +19,9 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
 
-import zarr
-
 from catalog.lineage import LineageLog
-from catalog.store import OCCUPANCY_ZARR, Store
-from catalog.occupancy import zarr_store
+from catalog.occupancy import OccupancyStore, parse_output_key
+from catalog.store import Store
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
 from pipeline.stages import STAGES
 from schemas.configs import DatasetConfig, StageConfig
@@ -109,7 +107,10 @@ class DaskExecutor(Executor):
             from distributed import Client, LocalCluster
 
             if self.address:
-                self._client = Client(self.address, timeout="30s")
+                try:
+                    self._client = Client(self.address, timeout="30s")
+                except (OSError, TimeoutError) as exc:
+                    raise PlanError(f"cannot reach the Dask scheduler at {self.address}: {exc}") from None
             else:
                 n = self.workers or os.cpu_count() or 1
                 self._cluster = LocalCluster(
@@ -146,8 +147,34 @@ class DaskExecutor(Executor):
             self._cluster.close()
 
 
-def make_executor(scheduler: str | None, store: Store, workers: int | None = None) -> Executor:
+def resolve_scheduler(scheduler: str | None) -> str | None:
+    """``--scheduler``, else ``$DASK_SCHEDULER_ADDRESS``, validated: 'synchronous', a Dask
+    address (tcp://host:port, ...) or None for a LocalCluster. Raises PlanError when malformed."""
+    from_env = not scheduler
     scheduler = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if scheduler is None or scheduler == SYNCHRONOUS:
+        return scheduler
+    from distributed.comm.addressing import parse_address
+
+    source = "DASK_SCHEDULER_ADDRESS" if from_env else "--scheduler"
+    try:
+        scheme, loc = parse_address(scheduler, strict=True)
+    except ValueError as exc:
+        raise PlanError(f"{source} {scheduler!r} is not a Dask scheduler address "
+                        f"(e.g. tcp://127.0.0.1:8786) nor 'synchronous': {exc}") from None
+    if not loc:
+        raise PlanError(f"{source} {scheduler!r} has no host:port")
+    from distributed.comm.registry import get_backend
+
+    try:
+        get_backend(scheme)
+    except ValueError:
+        raise PlanError(f"{source} {scheduler!r}: unknown protocol {scheme!r} (e.g. tcp://)") from None
+    return scheduler
+
+
+def make_executor(scheduler: str | None, store: Store, workers: int | None = None) -> Executor:
+    scheduler = resolve_scheduler(scheduler)
     if scheduler == SYNCHRONOUS:
         return SynchronousExecutor()
     return DaskExecutor(scheduler, processes=store.is_local, workers=workers)
@@ -180,20 +207,13 @@ def _digest(outputs: str) -> str:
 
 
 def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
-    """Files still have their recorded fingerprints; Zarr frames' arrays still exist."""
-    arrays: dict[str, int | None] = {}
+    """Every recorded output still has its recorded fingerprint (files by their bytes, Zarr
+    frames by their encoded chunks)."""
+    occ = OccupancyStore(store)
     for key, fp in outputs.items():
-        if key.startswith(OCCUPANCY_ZARR + "/") and key.endswith("]"):
-            path, frame = key[len(OCCUPANCY_ZARR) + 1 : -1].split("[")
-            if path not in arrays:
-                try:
-                    arr = zarr.open_group(store=zarr_store(store, OCCUPANCY_ZARR), mode="r")[path]
-                    arrays[path] = arr.shape[0]
-                except Exception:
-                    arrays[path] = None
-            if arrays[path] is None or int(frame) >= arrays[path]:
-                return False
-        elif store.fingerprint(key) != fp:
+        frame = parse_output_key(key)
+        current = store.fingerprint(key) if frame is None else occ.frame_fingerprint(*frame)
+        if current != fp:
             return False
     return True
 
@@ -214,11 +234,11 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
         inputs, waiting = {}, None
         for up_stage, up_key in p.needs:
             rec = upstream_latest.get(up_stage, {}).get(up_key)
-            if up_key in stale_upstream.get(up_stage, set()):
-                waiting = f"upstream {up_stage}/{up_key} is stale"
             if rec is None or rec.status != "completed":
                 waiting = waiting or f"upstream {up_stage}/{up_key} has not completed"
                 continue
+            if up_key in stale_upstream.get(up_stage, set()):
+                waiting = waiting or f"upstream {up_stage}/{up_key} is stale"
             inputs[f"{up_stage}/{up_key}"] = _digest(rec.output_fingerprints)
         key = cache_key(spec.name, code, chash, p, inputs)
         rec = latest.get(p.key)
@@ -289,18 +309,30 @@ def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
     progress = progress or Progress()
     selected = stage_order(stages)
     ctx, lineage = Context(store, config, resolutions), LineageLog(store)
-    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S") + "-" + uuid.uuid4().hex[:6]
+    scheduler = resolve_scheduler(scheduler)
+    # stages not selected but upstream of a selected one: what of theirs is stale blocks the run
+    stale: dict[str, set[str]] = {}
+    names = {s.name for s in selected}
+    for spec in stage_order(None):
+        if spec.name in names:
+            break
+        upstream_plan = plan_stage(spec, ctx, lineage, False, stale)
+        stale[spec.name] = {pp.partition.key for pp in upstream_plan.to_run}
+    # sortable by the driver's clock: lineage's "latest" is ordered by run id, not worker clocks
+    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ") + "-" + uuid.uuid4().hex[:6]
     executor: Executor | None = None
     outcomes: list[StageOutcome] = []
     try:
         for spec in selected:
-            plan = plan_stage(spec, ctx, lineage, force, {})
+            plan = plan_stage(spec, ctx, lineage, force, stale)
             if plan.blocked:
                 raise PlanError(f"cannot run {spec.name}: {plan.blocked} "
                                 f"(run the upstream stages first: {', '.join(spec.upstream)})")
             waiting = [pp for pp in plan.partitions if pp.reason and pp.reason.startswith("upstream")]
             if waiting:
-                raise PlanError(f"cannot run {spec.name}/{waiting[0].partition.key}: {waiting[0].reason}")
+                raise PlanError(f"cannot run {spec.name}/{waiting[0].partition.key}: {waiting[0].reason} "
+                                f"(run it first, or add it to --stages)")
+            stale[spec.name] = set()  # it runs now: downstream stages see it fresh
             todo = plan.to_run
             outcome = StageOutcome(spec.name, len(plan.partitions), skipped=len(plan.partitions) - len(todo))
             outcomes.append(outcome)
@@ -309,7 +341,13 @@ def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
                 continue
             t0 = time.perf_counter()
             if spec.prepare is not None:
-                spec.prepare(ctx, [pp.partition for pp in todo])
+                # creating outputs may invalidate partitions planned as done (a replaced array)
+                invalid = spec.prepare(ctx, [pp.partition for pp in todo], [pp.partition for pp in plan.partitions])
+                for pp in plan.partitions:
+                    if pp.reason is None and pp.partition.key in invalid:
+                        pp.reason = "array re-created"
+                        todo.append(pp)
+                        outcome.skipped -= 1
             by_key = {pp.partition.key: pp for pp in todo}
             code, chash = spec.code_version(), spec.config_hash(config)
             pending: list[RunRecord] = []

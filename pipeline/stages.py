@@ -9,6 +9,10 @@ from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
 from schemas.records import SequenceRecord
 
 INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
+# code every task runs through besides its stage's compute: the contracts, the readers/writers and
+# the task wiring; editing any of it changes every stage's code version
+SHARED_CODE = ("schemas", "catalog.store", "catalog.parquet", "catalog.meshes", "catalog.occupancy",
+               "pipeline.tasks", "stages.geometry")
 
 
 def _ingest_partitions(ctx: Context) -> list[Partition]:
@@ -48,17 +52,18 @@ def _voxelize_partitions(ctx: Context) -> list[Partition]:
     return out
 
 
-def _voxelize_prepare(ctx: Context, partitions: list[Partition]) -> None:
-    """Create the Zarr arrays of every (sequence, resolution) about to be written."""
+def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
+    """Create the Zarr arrays of every (sequence, resolution) about to be written; when an array
+    had to be replaced, every frame of it is invalidated."""
     frames = {s.sequence_id: s.frame_count for s in _sequences(ctx)}
     occ = OccupancyStore(ctx.store)
-    done = set()
-    for p in partitions:
-        seq, res = p.params["sequence_id"], p.params["resolution"]
-        if (seq, res) in done:
-            continue
-        done.add((seq, res))
-        occ.create(seq, ctx.config.voxelize.grid(res), frames[seq], ctx.config.voxelize.chunk_edge)
+    groups = {(p.params["sequence_id"], p.params["resolution"]) for p in to_run}
+    invalid: set[str] = set()
+    for seq, res in sorted(groups):
+        if occ.create(seq, ctx.config.voxelize.grid(res), frames[seq], ctx.config.voxelize.chunk_edge):
+            invalid |= {p.key for p in partitions
+                        if (p.params["sequence_id"], p.params["resolution"]) == (seq, res)}
+    return invalid
 
 
 def _metrics_partitions(ctx: Context) -> list[Partition]:
@@ -66,12 +71,11 @@ def _metrics_partitions(ctx: Context) -> list[Partition]:
     vcfg = ctx.config.voxelize
     for seq in _sequences(ctx):
         for res in ctx.resolutions:
-            key = vcfg.grid(res).key
-            needs = tuple(("voxelize", f"{seq.sequence_id}/{key}/{t:04d}") for t in range(seq.frame_count))
+            grid = vcfg.grid(res)
+            needs = tuple(("voxelize", f"{seq.sequence_id}/{grid.key}/{t:04d}") for t in range(seq.frame_count))
             out.append(Partition(
-                f"{seq.sequence_id}/{key}",
-                {"sequence_id": seq.sequence_id, "resolution": res,
-                 "region_min": list(vcfg.region_min), "region_max": list(vcfg.region_max)},
+                f"{seq.sequence_id}/{grid.key}",
+                {"sequence_id": seq.sequence_id, "resolution": res, "grid": grid.model_dump(mode="json")},
                 needs=needs,
             ))
     return out
@@ -84,7 +88,7 @@ STAGES: dict[str, StageSpec] = {
             name="ingest",
             description="procedural ADMesh library: closed metric meshes of every thing class",
             upstream=(),
-            code_modules=("stages.ingest", "stages.geometry"),
+            code_modules=("stages.ingest", *SHARED_CODE),
             reads=(),
             writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/"),
             partitions=_ingest_partitions,
@@ -94,7 +98,7 @@ STAGES: dict[str, StageSpec] = {
             name="scenes",
             description="procedural towns, traffic and ego sequences (poses, boxes, velocities)",
             upstream=("ingest",),
-            code_modules=("stages.scenes", "stages.geometry"),
+            code_modules=("stages.scenes", *SHARED_CODE),
             reads=("admesh/assets/",),
             writes=("scenes/meshes/", "scenes/placements/", "scenes/sequences/", "scenes/frames/", "scenes/actors/"),
             partitions=_scenes_partitions,
@@ -104,7 +108,7 @@ STAGES: dict[str, StageSpec] = {
             name="voxelize",
             description="panoptic voxelization of every frame's scene mesh (exact triangle-box overlap)",
             upstream=("ingest", "scenes"),
-            code_modules=("stages.voxelize", "stages.scenes", "stages.geometry"),
+            code_modules=("stages.voxelize", "stages.scenes", *SHARED_CODE),
             reads=("admesh/", "scenes/"),
             writes=("occupancy.zarr/<seq>/<res>/{semantic,instance}",),
             partitions=_voxelize_partitions,
@@ -115,7 +119,7 @@ STAGES: dict[str, StageSpec] = {
             name="metrics",
             description="spatial continuity score per frame, per sequence and per class",
             upstream=("voxelize",),
-            code_modules=("stages.metrics",),
+            code_modules=("stages.metrics", *SHARED_CODE),
             reads=("occupancy.zarr/",),
             writes=("metrics/quality/", "metrics/quality_classes/"),
             partitions=_metrics_partitions,

@@ -7,6 +7,7 @@ inside Dask workers, so they take a store (a URL) and a frozen config, never ope
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections import OrderedDict
 
@@ -18,6 +19,7 @@ from catalog.parquet import ParquetTable
 from catalog.store import Store, StoreError
 from pipeline.registry import Partition
 from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, VoxelizeConfig
+from schemas.grid import GridSpec
 from schemas.records import (
     ActorStateRecord,
     AssetRecord,
@@ -163,7 +165,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     geometry = load_geometry(store, {p.asset_id for p in placements} | {a.asset_id for a in actors}, placements)
     scene = compose_frame_scene(frame, actors, placements, geometry, grid, sequence.ego_asset_id)
     if not cfg.fill_closed:
-        scene = [type(m)(m.vertices, m.faces, m.semantic_id, m.instance_id, m.is_stuff, False, m.name) for m in scene]
+        scene = [dataclasses.replace(m, closed=False) for m in scene]
     semantic, instance = voxelize_scene(scene, grid)
     return OccupancyStore(store).write_frame(seq_id, grid, frame_index,
                                              {"semantic": semantic, "instance": instance})
@@ -175,7 +177,7 @@ def metrics_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str,
     from stages.metrics import sequence_continuity, spatial_continuity_counts
 
     seq_id, res = part.params["sequence_id"], part.params["resolution"]
-    grid = VoxelizeConfig(region_min=part.params["region_min"], region_max=part.params["region_max"]).grid(res)
+    grid = GridSpec.model_validate(part.params["grid"])
     occ = OccupancyStore(store)
     arr = occ.open(seq_id, grid, "semantic")
     per_frame = []

@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec
+from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
 
 
 class StageConfig(BaseModel):
@@ -84,8 +84,10 @@ class DatasetConfig(StageConfig):
 
 
 def parse_resolutions(text: str) -> tuple[float, ...]:
-    """Parse ``"0.2"`` or ``"0.2,0.05"`` into voxel sizes (m); each must be positive and finite."""
-    out: list[float] = []
+    """Parse ``"0.2"`` or ``"0.2,0.05"`` into voxel sizes (m); each must be positive and finite.
+    Sizes that share a store key (``0.4`` and ``0.4000001`` are both ``"0.4"``) are one
+    resolution: the first spelling is kept."""
+    out: dict[str, float] = {}
     for item in str(text).split(","):
         item = item.strip()
         if not item:
@@ -96,10 +98,12 @@ def parse_resolutions(text: str) -> tuple[float, ...]:
             raise ValueError(f"resolution {item!r} is not a number of metres") from None
         if not math.isfinite(v) or v <= 0:
             raise ValueError(f"resolution {item!r} must be a positive finite number of metres")
-        out.append(v)
+        if resolution_key(v) == "0":
+            raise ValueError(f"resolution {item!r} is below the store's micrometre precision")
+        out.setdefault(resolution_key(v), v)
     if not out:
         raise ValueError("no resolution given (e.g. --res 0.2 or --res 0.2,0.05)")
-    return tuple(dict.fromkeys(out))
+    return tuple(out.values())
 
 
 __all__ = [

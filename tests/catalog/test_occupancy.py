@@ -64,3 +64,24 @@ def test_array_fingerprint_sensitive_to_content_and_dtype():
     b[0, 0] = 1
     assert array_fingerprint(a) != array_fingerprint(b)
     assert array_fingerprint(a) != array_fingerprint(a.astype(np.uint32))
+
+
+def test_frame_fingerprint_tracks_stored_chunks(store):
+    occ = OccupancyStore(store)
+    occ.create("seq", GRID, 2, 8)
+    sem = np.zeros(GRID.shape, np.uint8)
+    sem[:, :, 0] = 1
+    out = occ.write_frame("seq", GRID, 0, {"semantic": sem})
+    (key, fp), = out.items()
+    path = occ.array_path("seq", GRID, "semantic")
+    assert occ.frame_fingerprint(path, 0) == fp
+    assert occ.frame_fingerprint(path, 1) != fp  # another frame, no chunks
+    # rewriting the same data keeps it; other data or a lost chunk changes it
+    assert occ.write_frame("seq", GRID, 0, {"semantic": sem})[key] == fp
+    sem[0, 0, 0] = 2
+    fp2 = occ.write_frame("seq", GRID, 0, {"semantic": sem})[key]
+    assert fp2 != fp
+    chunk = sorted(store.fs.find(store.path(f"occupancy.zarr/{path}/c/0")))[-1]
+    store.fs.rm(chunk)
+    assert occ.frame_fingerprint(path, 0) not in (fp, fp2)
+    assert occ.frame_fingerprint("nope/0.25/semantic", 0) is None

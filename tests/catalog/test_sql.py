@@ -61,3 +61,27 @@ def test_read_pragma_allowed(store):
     check_read_only("PRAGMA table_info('sequences')")
     cols, rows = query(store, "PRAGMA table_info('sequences')")
     assert any("sequence_id" in r for r in rows)
+
+
+def test_timestamps_and_nan_are_queryable(store):
+    from datetime import datetime, timezone
+
+    from schemas.records import QualityRecord, RunRecord
+
+    t = datetime(2026, 5, 1, 12, 0, tzinfo=timezone.utc)
+    ParquetTable(store, RunRecord).save("stage=x/r", [RunRecord(
+        run_id="r", stage="x", partition="p", code_version="c", config_hash="h", cache_key="k",
+        input_fingerprints="{}", output_fingerprints="{}", status="completed", started_at=t, ended_at=t, host="h")])
+    ParquetTable(store, QualityRecord).save("q", [QualityRecord(
+        sequence_id="s", resolution=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
+    _, rows = query(store, "SELECT started_at, now() IS NOT NULL FROM runs")
+    assert rows[0][0] == t and rows[0][1] is True
+    _, rows = query(store, "SELECT value FROM quality")
+    assert rows[0][0] != rows[0][0]  # NaN survives
+
+
+def test_resource_settings_are_locked(store):
+    with pytest.raises(QueryError):
+        query(store, "SELECT * FROM read_parquet('/etc/passwd')")
+    _, rows = query(store, "SELECT current_setting('max_temp_directory_size'), current_setting('enable_external_access')")
+    assert rows[0][1] is False

@@ -36,6 +36,9 @@ def _tree(store):
     (["run", "--res", "nan"], "--res nan"),
     (["run", "--res", "abc"], "--res abc"),
     (["run", "--res", "14"], "smaller than one voxel"),
+    (["run", "--res", "0.02"], "exceeds"),
+    (["run", "--scheduler", "foo"], "--scheduler 'foo'"),
+    (["run", "--stages", "voxelize"], "cannot run voxelize"),
 ])
 def test_bad_invocations_exit_2_and_touch_nothing(root, args, culprit):
     before = _tree(root)
@@ -44,6 +47,14 @@ def test_bad_invocations_exit_2_and_touch_nothing(root, args, culprit):
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and culprit in lines[0]
     assert _tree(root) == before
+
+
+def test_bad_invocation_on_a_new_root_creates_nothing(tmp_path):
+    new = tmp_path / "new-root"
+    for args in (["--stages", "metrics"], ["--scheduler", "nonsense://x:1"], ["--res", "0"]):
+        r = cli.invoke(app, ["run", "--root", str(new), *args])
+        assert r.exit_code == 2, r.output
+        assert not new.exists()
 
 
 def test_config_with_unknown_key(root, tmp_path):
@@ -105,3 +116,15 @@ def test_help_lists_commands():
         assert cmd in r.output
     r = cli.invoke(app, ["run", "--help"])
     assert "--scheduler" in r.output and "--force" in r.output
+
+
+def test_query_json_has_no_nan(tmp_path):
+    import json
+
+    from schemas.records import QualityRecord
+
+    store = Store(str(tmp_path / "r"))
+    ParquetTable(store, QualityRecord).save("q", [QualityRecord(
+        sequence_id="s", resolution=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
+    r = cli.invoke(app, ["catalog", "query", "SELECT value, frame_index FROM quality", "--root", store.url, "--format", "json"])
+    assert r.exit_code == 0 and json.loads(r.output) == [{"value": None, "frame_index": None}]

@@ -129,3 +129,55 @@ def test_lineage_records_inputs_and_outputs(store):
     r = next(r for r in recs if r.partition == "p0")
     assert list(json.loads(r.input_fingerprints)) == ["ingest/x"]
     assert list(json.loads(r.output_fingerprints)) == ["admesh/quarantine/b/p0.parquet"]
+
+
+def test_single_stage_run_refuses_a_stale_upstream(store):
+    _run(store)
+    cfg = DatasetConfig.model_validate({"ingest": {"seed": 5}})
+    with pytest.raises(runner.PlanError, match="upstream ingest/x is stale"):
+        _run(store, cfg, stages=["scenes"])
+    out = _run(store, cfg, stages=["ingest", "scenes"])
+    assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+
+
+def test_latest_is_ordered_by_run_id_not_worker_clock(store):
+    from datetime import datetime, timezone
+
+    from schemas.records import RunRecord
+
+    def rec(run_id, status, hour):
+        t = datetime(2026, 1, 1, hour, tzinfo=timezone.utc)
+        return RunRecord(run_id=run_id, stage="scenes", partition="p0", code_version="c", config_hash="h",
+                         cache_key="k", input_fingerprints="{}", output_fingerprints="{}", status=status,
+                         started_at=t, ended_at=t, host="w")
+
+    log = LineageLog(store)
+    log.append("scenes", "20260101T000000000000Z-a", [rec("20260101T000000000000Z-a", "completed", 23)])
+    log.append("scenes", "20260102T000000000000Z-b", [rec("20260102T000000000000Z-b", "failed", 1)])
+    # the newer run failed even though its worker's clock says earlier
+    assert log.latest("scenes")["p0"].status == "failed"
+
+
+@pytest.mark.parametrize("bad", ["foo", "tcp://", "nonsense://x:1"])
+def test_bad_scheduler_address_is_a_plan_error(store, bad):
+    with pytest.raises(runner.PlanError, match="scheduler"):
+        runner.run(store, DatasetConfig(), (0.2,), scheduler=bad)
+
+
+def test_dask_address_and_threaded_local_cluster(store, monkeypatch):
+    """The same stages on an existing scheduler (by address and by DASK_SCHEDULER_ADDRESS) and on
+    the default LocalCluster (threads for memory://, processes would not see the fake stages)."""
+    from distributed import LocalCluster
+
+    if store.is_local:
+        pytest.skip("worker processes cannot see the test's stand-in stages")
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None,
+                      scheduler_kwargs={"dashboard": False}) as cluster:
+        out = {o.stage: o for o in runner.run(store, DatasetConfig(), (0.2,), scheduler=cluster.scheduler_address)}
+        assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+        monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", cluster.scheduler_address)
+        out = {o.stage: o for o in runner.run(store, DatasetConfig(), (0.2,), force=True)}
+        assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+    monkeypatch.delenv("DASK_SCHEDULER_ADDRESS")
+    out = {o.stage: o for o in runner.run(store, DatasetConfig(), (0.2,), force=True)}  # LocalCluster
+    assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)

@@ -22,12 +22,13 @@ def test_default_sequence_is_20_frames_at_20hz():
     assert cfg.scenes.frame_count >= 20 and cfg.scenes.rate_hz == 20.0
 
 
-@pytest.mark.parametrize("text, expected", [("0.2", (0.2,)), ("0.2,0.05", (0.2, 0.05)), (" 0.1 , 0.1", (0.1,))])
+@pytest.mark.parametrize("text, expected", [("0.2", (0.2,)), ("0.2,0.05", (0.2, 0.05)), (" 0.1 , 0.1", (0.1,)),
+                                            ("0.4,0.4000001", (0.4,))])
 def test_parse_resolutions(text, expected):
     assert parse_resolutions(text) == expected
 
 
-@pytest.mark.parametrize("text", ["", "abc", "0", "-0.1", "inf", "nan", "0.2,x"])
+@pytest.mark.parametrize("text", ["", "abc", "0", "-0.1", "inf", "nan", "0.2,x", "1e-7"])
 def test_parse_resolutions_rejects(text):
     with pytest.raises(ValueError):
         parse_resolutions(text)
