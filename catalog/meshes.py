@@ -14,12 +14,21 @@ import numpy as np
 import trimesh
 
 from catalog.store import Store, StoreError
-from stages.geometry import MeshPart
+
+
+class MeshPartLike(typing.Protocol):
+    """What a mesh part must offer to be saved (``stages.geometry.MeshPart`` does): a name,
+    (N, 3) vertices in metres in the Z-up asset frame, (M, 3) faces and an RGBA colour."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    color: tuple[int, int, int, int]
 
 _Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
 
-def glb_bytes(parts: typing.Sequence[MeshPart]) -> bytes:
+def glb_bytes(parts: typing.Sequence[MeshPartLike]) -> bytes:
     """Serialize parts into one GLB (geometry names ``p000``, ``p001``... keep the part order)."""
     scene = trimesh.Scene()
     for i, part in enumerate(parts):
@@ -47,7 +56,7 @@ class MeshStore:
     def __init__(self, store: Store):
         self.store = store
 
-    def save(self, rel: str, parts: typing.Sequence[MeshPart]) -> str:
+    def save(self, rel: str, parts: typing.Sequence[MeshPartLike]) -> str:
         if not parts:
             raise ValueError(f"{rel}: a mesh needs at least one part")
         return self.store.write_bytes(rel, glb_bytes(parts))

@@ -51,10 +51,17 @@ class AssetRecord(Record):
     category: str
     subclass: str
     extent: list[float]  # bounding-box size x, y, z (m)
-    triangle_count: int
-    watertight: bool
-    scale_applied: float = 1.0
-    scale_rule: str = ""
+    vertex_count: int
+    face_count: int  # triangles, after degenerate and duplicate faces are removed
+    part_count: int
+    transparent_part_count: int
+    surface_area: float  # m^2
+    volume: float | None  # m^3, watertight assets only
+    watertight: bool  # every part closed and consistently wound
+    scale_applied: float = 1.0  # source units -> metres
+    scale_rule: str = ""  # why that scale (declared units, inferred from a size range...)
+    geometry_hash: str  # content hash of the standardized geometry (duplicates share it)
+    aliases: list[str] = []  # source paths of duplicates stored once under this asset
     mesh_path: str  # store-relative path of the standardized GLB
 
     @field_validator("extent")
@@ -73,8 +80,9 @@ class PartRecord(Record):
     material: str
     transparent: bool
     semantic_id: int
-    triangle_count: int
+    face_count: int
     watertight: bool
+    texture: str = ""  # texture reference (URI or path relative to the source), kept by reference
 
 
 class QuarantineRecord(Record):

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import hashlib
+
 import numpy as np
 
 
@@ -126,3 +128,38 @@ class AssetGeometry:
     asset_id: str
     parts: tuple[MeshPart, ...]
     part_closed: tuple[bool, ...]
+
+
+def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Total triangle area (m^2 for vertices in metres)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0.0
+    # half the norm of each edge cross product
+    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    return float(0.5 * np.linalg.norm(cross, axis=1).sum())
+
+
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Enclosed volume of a closed mesh by the divergence theorem (m^3; positive when the faces
+    wind counter-clockwise seen from outside)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0.0
+    # sum of signed tetrahedra (origin, a, b, c)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def geometry_hash(parts: list[tuple[np.ndarray, np.ndarray]], decimals: int = 5) -> str:
+    """Content hash of standardized geometry: every part's vertices rounded to ``decimals``
+    (10 micrometres by default, so float32 round trips agree) and faces, in part order."""
+    h = hashlib.sha256()
+    for v, f in parts:
+        # rounding, then +0.0 so that -0.0 and 0.0 hash alike
+        h.update(np.ascontiguousarray(np.round(np.asarray(v, np.float64), decimals) + 0.0).tobytes())
+        h.update(np.ascontiguousarray(np.asarray(f, np.int64)).tobytes())
+        h.update(b"|")
+    return h.hexdigest()[:24]

@@ -11,7 +11,7 @@ OURS = {"schemas", "stages", "catalog", "pipeline"}
 FORBIDDEN = {
     "schemas": OURS - {"schemas"} | {"numpy", "pyarrow", "zarr", "duckdb", "dask", "distributed", "typer", "trimesh"},
     "stages": {"catalog", "pipeline", "distributed", "dask", "typer", "zarr", "duckdb", "fsspec", "pyarrow"},
-    "catalog": {"pipeline", "distributed", "dask", "typer"},
+    "catalog": {"stages", "pipeline", "distributed", "dask", "typer"},
     "pipeline": set(),
 }
 

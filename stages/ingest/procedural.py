@@ -40,7 +40,8 @@ import trimesh
 from schemas import taxonomy
 from schemas.configs import IngestConfig
 from schemas.records import AssetRecord, PartRecord
-from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight
+from stages.geometry import (AssetGeometry, MeshPart, concatenate, geometry_hash, is_watertight,
+                             signed_volume, surface_area)
 
 __all__ = ["IngestResult", "ingest_procedural", "asset_id_for", "SOURCE", "LICENCE"]
 
@@ -778,13 +779,18 @@ def _records(
     asset = AssetRecord(
         asset_id=aid, source=SOURCE, source_path=f"procedural://{category}/{subclass}/{variant}",
         licence=LICENCE, category_id=_ID[category], category=category, subclass=subclass,
-        extent=[float(e) for e in extent], triangle_count=int(sum(len(p.faces) for p in parts)),
-        watertight=all(closed), scale_applied=1.0, scale_rule="metric by construction", mesh_path="",
+        extent=[float(e) for e in extent],
+        vertex_count=int(sum(len(p.vertices) for p in parts)), face_count=int(sum(len(p.faces) for p in parts)),
+        part_count=len(parts), transparent_part_count=sum(p.transparent for p in parts),
+        surface_area=sum(surface_area(p.vertices, p.faces) for p in parts),
+        volume=sum(signed_volume(p.vertices, p.faces) for p in parts) if all(closed) else None,
+        watertight=all(closed), scale_applied=1.0, scale_rule="metric by construction",
+        geometry_hash=geometry_hash([(p.vertices, p.faces) for p in parts]), mesh_path="",
     )  # fmt: skip
     part_records = [
         PartRecord(
             asset_id=aid, part_index=k, name=p.name, material=p.material, transparent=p.transparent,
-            semantic_id=p.semantic_id, triangle_count=int(len(p.faces)), watertight=c,
+            semantic_id=p.semantic_id, face_count=int(len(p.faces)), watertight=c,
         )  # fmt: skip
         for k, (p, c) in enumerate(zip(parts, closed))
     ]

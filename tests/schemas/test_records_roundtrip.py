@@ -14,10 +14,18 @@ T0 = datetime(2026, 1, 2, 3, 4, 5, 678000, tzinfo=timezone.utc)
 SAMPLES: dict[type[R.Record], list[R.Record]] = {
     R.AssetRecord: [R.AssetRecord(asset_id="a1b2", source="procedural", source_path="procedural://car/sedan/0",
                                   licence="CC0-1.0", category_id=14, category="Car", subclass="sedan",
-                                  extent=[4.6, 1.9, 1.45], triangle_count=812, watertight=True,
-                                  scale_applied=1.0, scale_rule="", mesh_path="admesh/meshes/a1b2.glb")],
+                                  extent=[4.6, 1.9, 1.45], vertex_count=410, face_count=812, part_count=2,
+                                  transparent_part_count=1, surface_area=31.5, volume=9.25, watertight=True,
+                                  scale_applied=0.01, scale_rule="declared units: cm",
+                                  geometry_hash="abc123", aliases=["x/dup.obj", "y/dup2.obj"],
+                                  mesh_path="admesh/meshes/a1b2.glb"),
+                    R.AssetRecord(asset_id="open1", source="folder", source_path="/m/sign.glb", licence="CC0-1.0",
+                                  category_id=8, category="TrafficSign", subclass="stop", extent=[0.1, 0.8, 2.5],
+                                  vertex_count=30, face_count=40, part_count=1, transparent_part_count=0,
+                                  surface_area=2.0, volume=None, watertight=False, geometry_hash="def",
+                                  mesh_path="admesh/meshes/open1.glb")],
     R.PartRecord: [R.PartRecord(asset_id="a1b2", part_index=i, name=n, material=m, transparent=t,
-                                semantic_id=14, triangle_count=12, watertight=True)
+                                semantic_id=14, face_count=12, watertight=True, texture="Textures/metal.png")
                    for i, (n, m, t) in enumerate([("body", "paint", False), ("windows", "glass", True)])],
     R.QuarantineRecord: [R.QuarantineRecord(stage="ingest", source="folder", source_path="/x/broken.obj",
                                             reason="NaN vertices", hint="re-export the mesh")],

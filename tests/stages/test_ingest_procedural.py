@@ -146,7 +146,7 @@ def test_records_describe_the_geometry(lib):
         geom = lib.geometry[a.asset_id]
         recs = parts_by_asset[a.asset_id]
         assert [r.part_index for r in recs] == list(range(len(geom.parts)))
-        assert a.triangle_count == sum(len(p.faces) for p in geom.parts) == sum(r.triangle_count for r in recs)
+        assert a.face_count == sum(len(p.faces) for p in geom.parts) == sum(r.face_count for r in recs)
         for r, p in zip(recs, geom.parts):
             assert (r.name, r.material, r.transparent) == (p.name, p.material, p.transparent)
             assert r.semantic_id == p.semantic_id
@@ -157,8 +157,8 @@ def test_records_describe_the_geometry(lib):
 def test_triangle_budget(lib):
     for a in lib.assets:
         limit = 2000 if a.category in ("Car", "Truck", "Bus", "Rider", "Pedestrian") else 1000
-        assert a.triangle_count <= limit, (a.source_path, a.triangle_count)
-    assert all(a.triangle_count <= 800 for a in _of(lib, "Building"))
+        assert a.face_count <= limit, (a.source_path, a.face_count)
+    assert all(a.face_count <= 800 for a in _of(lib, "Building"))
 
 
 def test_asset_ids_unique_and_content_derived(lib):
