@@ -14,7 +14,8 @@ from __future__ import annotations
 import duckdb
 import pyarrow as pa
 
-from catalog.parquet import ParquetTable
+from catalog.admesh import dedupe_assets, dedupe_parts
+from catalog.parquet import ParquetTable, from_table, to_table
 from catalog.store import Store
 from schemas import records, taxonomy
 
@@ -38,8 +39,11 @@ def _model_tables() -> dict[str, type[records.Record]]:
 
 
 def catalog_tables(store: Store) -> dict[str, pa.Table]:
-    """Every catalog table of the store as Arrow (empty tables keep their schema)."""
+    """Every catalog table of the store as Arrow (empty tables keep their schema); ``assets`` and
+    ``parts`` list each asset once (duplicates become aliases)."""
     out = {name: ParquetTable(store, model).load_arrow() for name, model in _model_tables().items()}
+    out["assets"] = to_table(records.AssetRecord, dedupe_assets(from_table(records.AssetRecord, out["assets"])))
+    out["parts"] = to_table(records.PartRecord, dedupe_parts(from_table(records.PartRecord, out["parts"])))
     rows = taxonomy.table_rows()
     out["classes"] = pa.Table.from_pylist(rows)
     return out

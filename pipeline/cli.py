@@ -20,6 +20,7 @@ import typer
 from pydantic import ValidationError
 
 from catalog.store import Store, StoreError
+from schemas import taxonomy
 from schemas.configs import DatasetConfig, parse_resolutions
 
 app = typer.Typer(
@@ -35,6 +36,9 @@ app = typer.Typer(
 catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
                           rich_markup_mode=None)
 app.add_typer(catalog_app, name="catalog")
+admesh_app = typer.Typer(help="Look at the ADMesh library: render assets to PNG (headless).",
+                         no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(admesh_app, name="admesh")
 
 RootOpt = Annotated[str, typer.Option("--root", help="dataset root: a directory or an fsspec URL (memory://...)")]
 ResOpt = Annotated[str, typer.Option("--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05")]
@@ -192,6 +196,49 @@ def run(
 
 
 @app.command()
+def ingest(
+    kind: Annotated[str, typer.Argument(help="source kind: folder, shapenet, buildingnet, meshfleet or carla")],
+    path: Annotated[Path, typer.Argument(help="the source's root directory")],
+    category_map: Annotated[Optional[Path], typer.Option("--category-map", help="folder sources: CSV with columns glob,category,subclass[,length_m]")] = None,
+    root: RootOpt = "data",
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous'")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="re-ingest items even when unchanged")] = False,
+) -> None:
+    """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
+    are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
+    from pipeline.ingest import IngestError, ingest_source
+    from pipeline.runner import PlanError, resolve_scheduler
+    from schemas.configs import SourceIngestConfig
+
+    try:
+        cfg = SourceIngestConfig(kind=kind, root=str(path.resolve()),
+                                 category_map=str(category_map.resolve()) if category_map else None)
+    except ValidationError as exc:
+        fail(_validation_message("ingest", exc).replace("ingest: kind: ", f"unknown source kind {kind!r}: "))
+    try:
+        resolve_scheduler(scheduler)
+    except PlanError as exc:
+        fail(str(exc))
+    store = _store(root, writable=True)
+    progress = _RichProgress()
+    try:
+        s = ingest_source(store, cfg, scheduler, force, progress, workers, log=lambda m: typer.echo(m, err=True))
+    except (IngestError, PlanError) as exc:
+        progress.close()
+        fail(str(exc))
+    progress.close()
+    for f in s.failed[:10]:
+        typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
+    reasons = ", ".join(f"{n} {r}" for r, n in s.quarantined.most_common())
+    typer.echo(f"{cfg.kind} {cfg.root}: {s.items} items, {s.ran} ingested now, {s.skipped} unchanged; "
+               f"library holds {s.ingested} assets from it, {sum(s.quarantined.values())} quarantined"
+               + (f" ({reasons})" if reasons else "") + (f"; {s.pruned} vanished items pruned" if s.pruned else ""))
+    if s.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
 def status(
     res: ResOpt = "0.2",
     root: RootOpt = "data",
@@ -287,6 +334,72 @@ def catalog_query(
         for r in cells:
             typer.echo("  ".join(v[:60].ljust(w) for v, w in zip(r, widths)))
         typer.echo(f"({len(rows)} rows)")
+
+
+def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int):
+    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view."""
+    from catalog.admesh import dedupe_parts
+    from catalog.meshes import MeshStore
+    from catalog.parquet import ParquetTable
+    from catalog.sql import QueryError, query
+    from schemas.records import PartRecord
+    from stages.geometry import MeshPart
+    from stages.render import render_asset
+
+    if asset_id is not None:
+        sql = f"SELECT asset_id, category, subclass, mesh_path FROM assets WHERE asset_id = '{asset_id.replace(chr(39), '')}'"
+    else:
+        sql = f"SELECT asset_id, category, subclass, mesh_path FROM assets WHERE {where} ORDER BY category, subclass, asset_id LIMIT {int(limit)}"
+    try:
+        _, rows = query(store, sql)
+    except QueryError as exc:
+        fail(f"--where: {exc}" if asset_id is None else str(exc))
+    if not rows:
+        fail(f"no asset {asset_id!r} in {store.url}" if asset_id else f"no asset matches --where {where!r}")
+    parts = {}
+    for p in dedupe_parts(ParquetTable(store, PartRecord).load()):
+        parts.setdefault(p.asset_id, []).append(p)
+    meshes, labels, images = MeshStore(store), [], []
+    for aid, category, subclass, mesh_path in rows:
+        recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
+        arrays = meshes.load(mesh_path)
+        mesh_parts = [MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent,
+                               color=(*taxonomy.by_id(r.semantic_id).color, 255))
+                      for r, (v, f) in zip(recs, arrays)]
+        images.append(render_asset(mesh_parts))
+        labels.append(f"{category}/{subclass} {aid[:8]}")
+    return labels, images
+
+
+@admesh_app.command("show")
+def admesh_show(
+    asset_id: Annotated[str, typer.Argument(help="the asset id (see: carlaocc catalog query 'SELECT asset_id FROM assets')")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("asset.png"),
+    root: RootOpt = "data",
+) -> None:
+    """Render one asset to a PNG, headless."""
+    from catalog.images import save_png
+
+    labels, images = _render_assets(Store(root), None, asset_id, 1)
+    save_png(None, str(out), images[0])
+    typer.echo(f"{labels[0]} -> {out}")
+
+
+@admesh_app.command("sheet")
+def admesh_sheet(
+    where: Annotated[str, typer.Option("--where", help="SQL condition over the assets view, e.g. \"category = 'Car'\" or \"category_id = 14\"")] = "true",
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("assets.png"),
+    limit: Annotated[int, typer.Option("--limit", min=1, max=400, help="at most this many assets")] = 48,
+    columns: Annotated[int, typer.Option("--columns", min=1, max=20)] = 6,
+    root: RootOpt = "data",
+) -> None:
+    """A contact sheet of the assets a query selects, headless."""
+    from catalog.images import save_png
+    from stages.render import contact_sheet
+
+    labels, images = _render_assets(Store(root), where, None, limit)
+    save_png(None, str(out), contact_sheet(images, labels, columns=columns))
+    typer.echo(f"{len(images)} assets -> {out}")
 
 
 def main() -> None:

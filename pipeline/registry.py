@@ -28,6 +28,7 @@ class Partition:
     key: str
     params: dict[str, Any] = field(default_factory=dict)
     needs: tuple[tuple[str, str], ...] = ()
+    files: tuple[str, ...] = ()  # external input files, fingerprinted by their bytes
 
 
 @dataclass(frozen=True)
@@ -56,9 +57,11 @@ class StageSpec:
     # creates outputs before tasks run (e.g. Zarr arrays); given the partitions to run and all
     # partitions, returns the keys of partitions its creation invalidated (to run as well)
     prepare: Callable[[Context, list[Partition], list[Partition]], set[str]] | None = None
+    # the stage's config: by default the DatasetConfig section of the stage's name
+    config_of: Callable[[DatasetConfig], StageConfig] | None = None
 
     def config(self, config: DatasetConfig) -> StageConfig:
-        return getattr(config, self.name)
+        return self.config_of(config) if self.config_of else getattr(config, self.name)
 
     def config_hash(self, config: DatasetConfig) -> str:
         payload = json.dumps(self.config(config).model_dump(mode="json"), sort_keys=True)

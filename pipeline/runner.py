@@ -48,7 +48,7 @@ class TaskResult:
     host: str
 
 
-def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partition,
+def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, partition: Partition,
                  kernel_threads: int | None = None) -> TaskResult:
     """Run one partition of a stage; never raises (a failure is a result with its error).
 
@@ -61,7 +61,7 @@ def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partit
         numba.set_num_threads(min(kernel_threads, numba.config.NUMBA_NUM_THREADS))
     started = datetime.now(timezone.utc)
     try:
-        outputs = STAGES[stage].task(Store(store_url), cfg, partition)
+        outputs = task(Store(store_url), cfg, partition)
         status, error = "completed", ""
     except Exception as exc:  # recorded in lineage and reported with its partition
         outputs, status = {}, "failed"
@@ -75,7 +75,7 @@ def execute_task(stage: str, store_url: str, cfg: StageConfig, partition: Partit
 class Executor:
     """Runs a batch of tasks, calling ``on_done`` as each finishes."""
 
-    def map(self, stage: str, store_url: str, cfg: StageConfig, partitions: list[Partition],
+    def map(self, spec: StageSpec, store_url: str, cfg: StageConfig, partitions: list[Partition],
             on_done: Callable[[TaskResult], None]) -> None:
         raise NotImplementedError
 
@@ -86,9 +86,9 @@ class Executor:
 class SynchronousExecutor(Executor):
     """In-process, one task after another (debugging)."""
 
-    def map(self, stage, store_url, cfg, partitions, on_done):
+    def map(self, spec, store_url, cfg, partitions, on_done):
         for p in partitions:
-            on_done(execute_task(stage, store_url, cfg, p))
+            on_done(execute_task(spec.task, spec.name, store_url, cfg, p))
 
 
 class DaskExecutor(Executor):
@@ -121,12 +121,13 @@ class DaskExecutor(Executor):
                 self._client = Client(self._cluster)
         return self._client
 
-    def map(self, stage, store_url, cfg, partitions, on_done):
+    def map(self, spec, store_url, cfg, partitions, on_done):
         from distributed import as_completed
 
+        stage = spec.name
         client = self._get_client()
         futures = {
-            client.submit(execute_task, stage, store_url, cfg, p, self.kernel_threads, pure=False,
+            client.submit(execute_task, spec.task, stage, store_url, cfg, p, self.kernel_threads, pure=False,
                           key=f"{stage}-{p.key}-{uuid.uuid4().hex[:8]}"): p
             for p in partitions
         }
@@ -206,6 +207,19 @@ def _digest(outputs: str) -> str:
     return hashlib.sha256(outputs.encode()).hexdigest()[:24]
 
 
+def file_fingerprint(path: str) -> str:
+    """Fingerprint of an external input file (a local path or fsspec URL); "missing" if absent."""
+    import fsspec
+
+    from catalog.store import fingerprint_bytes
+
+    try:
+        fs, p = fsspec.core.url_to_fs(path)
+        return fingerprint_bytes(fs.cat_file(p))
+    except FileNotFoundError:
+        return "missing"
+
+
 def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
     """Every recorded output still has its recorded fingerprint (files by their bytes, Zarr
     frames by their encoded chunks)."""
@@ -240,6 +254,9 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
             if up_key in stale_upstream.get(up_stage, set()):
                 waiting = waiting or f"upstream {up_stage}/{up_key} is stale"
             inputs[f"{up_stage}/{up_key}"] = _digest(rec.output_fingerprints)
+        # external input files (a source mesh, a category map) by their bytes
+        for path in p.files:
+            inputs[f"file:{path}"] = file_fingerprint(path)
         key = cache_key(spec.name, code, chash, p, inputs)
         rec = latest.get(p.key)
         if waiting:
@@ -262,13 +279,14 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
     return plan
 
 
-def stage_order(names: list[str] | None) -> list[StageSpec]:
+def stage_order(names: list[str] | None, registry: dict[str, StageSpec] | None = None) -> list[StageSpec]:
     """Registered stages in dependency order, optionally restricted to ``names`` (validated)."""
+    registry = STAGES if registry is None else registry
     if names:
-        unknown = [n for n in names if n not in STAGES]
+        unknown = [n for n in names if n not in registry]
         if unknown:
-            raise PlanError(f"unknown stage {unknown[0]!r} (stages: {', '.join(STAGES)})")
-    return [s for s in STAGES.values() if not names or s.name in names]
+            raise PlanError(f"unknown stage {unknown[0]!r} (stages: {', '.join(registry)})")
+    return [s for s in registry.values() if not names or s.name in names]
 
 
 def status(store: Store, config: DatasetConfig, resolutions: tuple[float, ...]) -> list[StagePlan]:
@@ -304,16 +322,18 @@ class Progress:
 def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
         stages: list[str] | None = None, scheduler: str | None = None, force: bool = False,
         progress: Progress | None = None, workers: int | None = None,
-        log: Callable[[str], None] = lambda s: None) -> list[StageOutcome]:
-    """Run the selected stages (all by default) in order; stops after a stage with failures."""
+        log: Callable[[str], None] = lambda s: None,
+        registry: dict[str, StageSpec] | None = None) -> list[StageOutcome]:
+    """Run the selected stages (all by default) of ``registry`` (the registered stages by
+    default) in order; stops after a stage with failures."""
     progress = progress or Progress()
-    selected = stage_order(stages)
+    selected = stage_order(stages, registry)
     ctx, lineage = Context(store, config, resolutions), LineageLog(store)
     scheduler = resolve_scheduler(scheduler)
     # stages not selected but upstream of a selected one: what of theirs is stale blocks the run
     stale: dict[str, set[str]] = {}
     names = {s.name for s in selected}
-    for spec in stage_order(None):
+    for spec in stage_order(None, registry):
         if spec.name in names:
             break
         upstream_plan = plan_stage(spec, ctx, lineage, False, stale)
@@ -382,7 +402,7 @@ def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
                 executor = make_executor(scheduler, store, workers)
             progress.start(spec.name, len(todo))
             try:
-                executor.map(spec.name, store.url, spec.config(config), [pp.partition for pp in todo], on_done)
+                executor.map(spec, store.url, spec.config(config), [pp.partition for pp in todo], on_done)
             finally:
                 flush()
                 progress.stop(spec.name)

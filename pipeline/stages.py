@@ -24,10 +24,18 @@ def _town_key(i: int) -> str:
 
 
 def _scenes_partitions(ctx: Context) -> list[Partition]:
-    return [
-        Partition(_town_key(i), {"town_index": i}, needs=(("ingest", INGEST_PARTITION),))
-        for i in range(ctx.config.scenes.towns)
-    ]
+    """One per town; each reads the library of the configured asset sources (the procedural
+    partition and every ingested item of the other sources)."""
+    sources = ctx.config.scenes.asset_sources
+    needs = [("ingest", INGEST_PARTITION)] if "procedural" in sources else []
+    others = tuple(s for s in sources if s != "procedural")
+    if others:
+        from catalog.lineage import LineageLog
+
+        latest = LineageLog(ctx.store).latest("ingest")
+        needs += [("ingest", k) for k, r in sorted(latest.items())
+                  if r.status == "completed" and k.split(":")[0] in others]
+    return [Partition(_town_key(i), {"town_index": i}, needs=tuple(needs)) for i in range(ctx.config.scenes.towns)]
 
 
 def _sequences(ctx: Context) -> list[SequenceRecord]:

@@ -13,12 +13,13 @@ from collections import OrderedDict
 
 import numpy as np
 
+from catalog.admesh import dedupe_assets
 from catalog.meshes import MeshStore, load_glb_arrays
 from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
 from catalog.store import Store, StoreError
 from pipeline.registry import Partition
-from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, VoxelizeConfig
+from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, SourceIngestConfig, VoxelizeConfig
 from schemas.grid import GridSpec
 from schemas.records import (
     ActorStateRecord,
@@ -28,6 +29,7 @@ from schemas.records import (
     PartRecord,
     PlacementRecord,
     QualityRecord,
+    QuarantineRecord,
     SequenceRecord,
 )
 from stages.geometry import AssetGeometry, MeshPart, is_watertight
@@ -56,14 +58,70 @@ def ingest_task(store: Store, cfg: IngestConfig, part: Partition) -> dict[str, s
     return outputs
 
 
+# -- ingest of an external source (one item per task) -------------------------------------------
+def source_table_key(cfg: SourceIngestConfig, item_key: str) -> str:
+    """Table file key of one source item: ``source=<kind>/<root hash>-<item hash>`` (so the
+    items of one source root can be listed, and pruned when they disappear)."""
+    return f"source={cfg.kind}/{root_digest(cfg.root)}-{hashlib.sha256(item_key.encode()).hexdigest()[:16]}"
+
+
+def root_digest(root: str) -> str:
+    return hashlib.sha256(root.encode()).hexdigest()[:10]
+
+
+def _raw_asset(src) -> "RawAsset":
+    """catalog SourceAsset -> stages RawAsset (same fields; the layers share no types)."""
+    from stages.ingest.raw import RawAsset, RawPart
+
+    parts = tuple(RawPart(**{f.name: getattr(p, f.name) for f in dataclasses.fields(RawPart)}) for p in src.parts)
+    fields = {f.name: getattr(src, f.name) for f in dataclasses.fields(RawAsset) if f.name != "parts"}
+    return RawAsset(parts=parts, **fields)
+
+
+def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -> dict[str, str]:
+    """Read one source item, standardize it, and write its mesh and records — or its quarantine
+    row. The other outcome's files of the same item are removed, so an item that turned bad (or
+    good) is never listed twice."""
+    from catalog.sources.base import SourceError, SourceItem
+    from catalog.sources.registry import adapter
+    from stages.ingest.raw import Rejection
+    from stages.ingest.standardize import standardize
+
+    item = SourceItem(key=part.params["item_key"], files=tuple(part.files), meta=part.params.get("meta", {}))
+    key = source_table_key(cfg, item.key)
+    t_assets, t_parts = ParquetTable(store, AssetRecord), ParquetTable(store, PartRecord)
+    t_quarantine = ParquetTable(store, QuarantineRecord)
+    source_path = item.files[0] if item.files else item.key
+    try:
+        src = adapter(cfg.kind, category_map=cfg.category_map).read(cfg.root, item)
+        source_path = src.source_path
+        result = standardize(_raw_asset(src))
+    except SourceError as exc:
+        result = Rejection(exc.reason, exc.hint)
+    if isinstance(result, Rejection):
+        for t in (t_assets, t_parts):
+            store.remove(t.path(key))
+        row = QuarantineRecord(stage="ingest", source=cfg.kind, source_path=source_path,
+                               reason=result.reason, hint=result.hint)
+        return {t_quarantine.path(key): t_quarantine.save(key, [row])}
+    store.remove(t_quarantine.path(key))
+    rel = store.asset_mesh_path(result.asset.asset_id)
+    outputs = {rel: MeshStore(store).save(rel, result.geometry.parts)}
+    asset = result.asset.model_copy(update={"mesh_path": rel})
+    outputs[t_assets.path(key)] = t_assets.save(key, [asset])
+    outputs[t_parts.path(key)] = t_parts.save(key, result.parts)
+    return outputs
+
+
 # -- scenes ---------------------------------------------------------------------------------------
 def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
     """Build one town and its sequences; write stuff meshes, placements, sequences, frames, actors."""
     from stages.scenes import build_town, simulate_sequences
 
-    assets = ParquetTable(store, AssetRecord).load()
+    assets = [a for a in dedupe_assets(ParquetTable(store, AssetRecord).load()) if a.source in cfg.asset_sources]
     if not assets:
-        raise StoreError(f"no ADMesh assets in {store.url}: run the ingest stage first")
+        raise StoreError(f"no ADMesh assets from sources {', '.join(cfg.asset_sources)} in {store.url}: "
+                         f"run the ingest stage first")
     town = build_town(cfg, part.params["town_index"], assets)
     outputs: dict[str, str] = {}
     meshes = MeshStore(store)

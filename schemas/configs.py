@@ -29,6 +29,14 @@ class IngestConfig(StageConfig):
     variants_per_subclass: int = Field(2, ge=1, le=50, description="procedural variants per sub-class")
 
 
+class SourceIngestConfig(StageConfig):
+    """Ingestion of one external mesh source (``carlaocc ingest KIND PATH``)."""
+
+    kind: Literal["folder", "shapenet", "buildingnet", "meshfleet", "carla"]
+    root: str = Field(description="the source's root directory (absolute)")
+    category_map: str | None = Field(None, description="folder sources: CSV glob,category,subclass[,length_m]")
+
+
 class ScenesConfig(StageConfig):
     """Procedural towns and ego sequences driven through them."""
 
@@ -44,6 +52,9 @@ class ScenesConfig(StageConfig):
     rate_hz: float = Field(20.0, gt=0.0, le=100.0)
     traffic_level: Literal["none", "low", "medium", "high"] = "medium"
     ego_speed: float = Field(8.0, ge=0.0, le=40.0, description="ego target speed, m/s")
+    asset_sources: tuple[str, ...] = Field(
+        ("procedural",), min_length=1,
+        description="ADMesh sources whose assets towns and traffic draw from (e.g. procedural, folder)")
 
 
 class VoxelizeConfig(StageConfig):
@@ -111,6 +122,7 @@ __all__ = [
     "IngestConfig",
     "MetricsConfig",
     "ScenesConfig",
+    "SourceIngestConfig",
     "StageConfig",
     "VoxelizeConfig",
     "parse_resolutions",
