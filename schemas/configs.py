@@ -26,7 +26,7 @@ class IngestConfig(StageConfig):
     """ADMesh ingestion from the built-in procedural source."""
 
     seed: int = 7
-    variants_per_subclass: int = Field(2, ge=1, le=50, description="procedural variants per sub-class")
+    variants_per_subclass: int = Field(3, ge=1, le=50, description="procedural variants per sub-class")
 
 
 class SourceIngestConfig(StageConfig):

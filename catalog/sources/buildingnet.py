@@ -10,8 +10,9 @@ Layout accepted
 Label file
     JSON, either a flat mapping ``{"<component>": <label>, ...}`` or an object
     ``{"labels": {...}, "subclass": "...", "licence": "..."}``. A component is an OBJ ``g`` group
-    or ``o`` object name (BuildingNet writes ``o <component index>``; the group name is tried
-    first, then the object name, exact then case-insensitive). A label is a BuildingNet label
+    or ``o`` object name (BuildingNet writes ``o <component index>``): the group name is tried
+    first, then the object name, each exact then case-insensitive, so an unlabeled group inherits
+    its object's label. An ``o`` record starts a new object with no group. A label is a BuildingNet label
     name (``"window"``) or its id in BuildingNet's 32-label list (:data:`BUILDINGNET_LABELS`,
     0 = undetermined); a taxonomy class name is accepted too. A label file matching no component
     of the OBJ (e.g. BuildingNet's per-*point* ``_label.json``) is ``"bad metadata"``.
@@ -191,8 +192,8 @@ class BuildingNetAdapter:
         label_path = self._label_path(root, obj)
         if label_path is None:
             stem = os.path.splitext(os.path.basename(obj))[0]
-            raise SourceError("bad metadata", f"no label file {stem}_label.json next to {obj}"
-                                              + (f" or in {self.labels_dir}" if self.labels_dir else ""))  # fmt: skip
+            also = f" or in {self.labels_dir}" if self.labels_dir else ""
+            raise SourceError("bad metadata", f"no label file {stem}_label.json next to {obj}{also}")
         labels, meta = self._read_labels(label_path)
         lower = {k.lower(): v for k, v in labels.items()}
 
@@ -246,9 +247,7 @@ class BuildingNetAdapter:
                 texture=mat.texture if mat else "",
                 semantic_id=semantic_id,
             ))  # fmt: skip
-        if not parts:
-            raise SourceError("unreadable file", f"{obj}: no faces")
-        if labels and matched == 0:
+        if parts and labels and matched == 0:
             raise SourceError("bad metadata", f"{label_path}: no label key names a g/o component "
                                               f"of {obj} (a per-point label file?)")  # fmt: skip
         return SourceAsset(

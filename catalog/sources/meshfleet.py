@@ -27,9 +27,10 @@ Categories (``category`` column, case/separators ignored; :data:`CATEGORIES`)
     Bicycle. Anything else (other, boat...) raises ``SourceError("no category")``.
 
 Sizes
-    MeshFleet's ``normalized_*_of_object`` columns are proportions, not lengths: the height is
-    1.0 in every published row and depth/width are relative to it (``normalized_depth_of_object``
-    is the length along the vehicle's forward axis divided by its height). They never become
+    MeshFleet's ``normalized_*_of_object`` columns are proportions, not lengths: they are
+    measured on renders (view widths in pixels over the mean pixel height), so the height is 1.0
+    in every published row and ``normalized_depth_of_object`` is the vehicle's length over its
+    height, ``normalized_width_of_object`` its width over its height. They never become
     ``target_length``; they are kept in ``SourceItem.meta`` (``length_to_height``,
     ``width_to_height``) for checks. ``target_length`` comes only from a ``length_m`` column
     (metres) when a user adds one. ``normalized=True`` (MeshFleet sizes are normalized, the
@@ -37,7 +38,9 @@ Sizes
     sub-class size range.
 
 Declarations
-    Axes by mesh format (glTF +y up / +z forward per the spec; Objaverse-XL is mostly GLB).
+    Axes by mesh format (glTF +y up / +z forward per the spec; Objaverse-XL is mostly GLB), or the
+    ``up=``/``forward=`` options for a mesh folder known to follow another convention (MeshFleet
+    itself records no orientation: its sizes are measured on renders).
     Licence: the row's ``license`` column (``""`` when empty), ``licence_required=True``: a row
     without a licence is quarantined.
 """
@@ -50,7 +53,14 @@ import os
 import re
 import sys
 
-from catalog.sources._common import MESH_EXTS, default_axes, load_parts, semantic_class
+from catalog.sources._common import (
+    MESH_EXTS,
+    check_axes,
+    default_axes,
+    load_parts,
+    semantic_class,
+    sidecar_files,
+)
 from catalog.sources.base import SourceAsset, SourceError, SourceItem
 
 DEFAULT_CSV = "meshfleet_with_vehicle_categories_df.csv"
@@ -93,9 +103,17 @@ class MeshFleetAdapter:
 
     kind = "meshfleet"
 
-    def __init__(self, csv: str | None = None, meshes: str | None = None):
+    def __init__(self, csv: str | None = None, meshes: str | None = None,
+                 up: str | None = None, forward: str | None = None):  # fmt: skip
         self.csv = csv
         self.meshes = meshes
+        if (up is None) != (forward is None):
+            raise ValueError("meshfleet: give both up and forward, or neither")
+        if up is not None:
+            why = check_axes(up, forward)
+            if why:
+                raise ValueError(f"meshfleet: {why}")
+        self.up, self.forward = up, forward
 
     def _csv_path(self, root: str) -> str:
         if self.csv:
@@ -103,7 +121,8 @@ class MeshFleetAdapter:
         default = os.path.join(root, DEFAULT_CSV)
         if os.path.isfile(default):
             return default
-        found = sorted(n for n in os.listdir(root) if n.lower().endswith(".csv")) if os.path.isdir(root) else []
+        names = os.listdir(root) if os.path.isdir(root) else []
+        found = sorted(n for n in names if n.lower().endswith(".csv"))
         if len(found) == 1:
             return os.path.join(root, found[0])
         raise SourceError("bad metadata", f"no {DEFAULT_CSV} in {root}"
@@ -173,7 +192,7 @@ class MeshFleetAdapter:
                 "width_to_height": _ratio(row, "normalized_width_of_object"),
                 "length_m": _float(row.get("length_m")),
             }
-            files = (meta["mesh"],) if mesh else ()
+            files = (meta["mesh"], *sidecar_files(meta["mesh"])) if mesh else ()
             items.append(SourceItem(key=key, files=files, meta=meta))
         items.sort(key=lambda it: it.key)
         return items
@@ -202,7 +221,7 @@ class MeshFleetAdapter:
                                               " (Objaverse-XL object of that sha256; other mesh "
                                               "extensions and the row's mesh_filename accepted)")  # fmt: skip
         parts = load_parts(mesh)
-        up, forward = default_axes(mesh)
+        up, forward = (self.up, self.forward) if self.up else default_axes(mesh)
         cls_name, subclass = cat
         semantic_class(cls_name)  # the table names real classes
         length = meta.get("length_m")

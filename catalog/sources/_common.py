@@ -1,0 +1,498 @@
+"""Shared reading helpers of the source adapters: mesh files to :class:`SourcePart` s, licence
+files, taxonomy look-ups.
+
+Mesh files (:func:`load_parts`)
+    ``.glb``/``.gltf``/``.obj``/``.ply``/``.stl``/``.off`` load with trimesh
+    (``force="scene"``); every geometry node of the scene graph becomes one part with the node's
+    world transform applied (a mirroring transform also reverses the triangle winding, so outward
+    normals stay outward). ``.dae`` loads with :mod:`catalog.sources._collada` (trimesh needs the
+    optional pycollada for it). Non-indexed triangles (every corner its own vertex) are indexed by
+    welding bit-identical positions; indexed meshes are kept as they are.
+
+Materials
+    glTF: the JSON is read next to trimesh to recover what trimesh drops. A part is transparent
+    when its material's ``alphaMode`` is ``BLEND`` or its ``baseColorFactor`` alpha is < 1, or it
+    uses ``KHR_materials_transmission`` with a factor > 0 (glass authored physically).
+    ``MASK`` (cut-outs) is not transparent. Trimesh materials are matched to the glTF materials by
+    name, ties broken by colour factor and alpha mode.
+    OBJ: the MTL is parsed here (:func:`catalog.sources._obj.parse_mtl`): ``d < 1`` or ``Tr > 0``.
+
+Texture references (``SourcePart.texture``)
+    Kept by reference, never decoded: the image path relative to the mesh file's directory
+    (glTF image ``uri``, MTL ``map_Kd``, COLLADA ``init_from``); an image embedded in a GLB
+    buffer is ``"<file name>#images/<index>"``; ``""`` when the material has no base colour
+    texture.
+
+Every read problem becomes :class:`SourceError`: a missing file ``"missing mesh"``, anything
+unparsable or truncated ``"unreadable file"``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import posixpath
+import re
+import struct
+from urllib.parse import unquote
+
+import numpy as np
+
+from catalog.sources._collada import ColladaError, read_dae
+from catalog.sources._obj import mtl_files, obj_materials
+from catalog.sources.base import Axis, SourceError, SourcePart
+from schemas.taxonomy import SemanticClass, by_id, by_name
+
+MESH_EXTS: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".dae")
+AXES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
+UNITS: tuple[str, ...] = ("m", "cm", "mm", "in", "unknown")
+
+_DAE_AXES: dict[str, tuple[Axis, Axis]] = {
+    "Y_UP": ("+y", "+z"),
+    "Z_UP": ("+z", "+x"),
+    "X_UP": ("+x", "+z"),
+}
+
+
+def ext_of(path: str) -> str:
+    return os.path.splitext(path)[1].lower()
+
+
+def is_mesh_file(path: str) -> bool:
+    return ext_of(path) in MESH_EXTS
+
+
+def check_axes(up: str, forward: str) -> str | None:
+    """Why (up, forward) is not a valid axis pair, or None."""
+    if up not in AXES:
+        return f"up {up!r} is not one of {', '.join(AXES)}"
+    if forward not in AXES:
+        return f"forward {forward!r} is not one of {', '.join(AXES)}"
+    if up[1] == forward[1]:
+        return f"up {up} and forward {forward} are the same axis"
+    return None
+
+
+def dae_up_axis(path: str) -> str:
+    """The ``<up_axis>`` of a COLLADA file ("Y_UP" when absent), read from its first 64 kB."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(65536).decode("utf-8", errors="replace")
+    except OSError:
+        return "Y_UP"
+    m = re.search(r"<up_axis>\s*([XYZ]_UP)\s*</up_axis>", head)
+    return m.group(1) if m else "Y_UP"
+
+
+def default_axes(path: str) -> tuple[Axis, Axis]:
+    """(up, forward) a mesh file's format implies.
+
+    glTF: the spec fixes +Y up and the asset front facing +Z. COLLADA: from ``<up_axis>``
+    (Y_UP: +y/+z like glTF; Z_UP: +z/+x; X_UP: +x/+z). Other formats carry no frame: our own
+    convention, +z up and +x forward, unless the caller says otherwise."""
+    ext = ext_of(path)
+    if ext in (".glb", ".gltf"):
+        return "+y", "+z"
+    if ext == ".dae":
+        return _DAE_AXES[dae_up_axis(path)]
+    return "+z", "+x"
+
+
+# -- licences --------------------------------------------------------------------------------
+
+_LICENCE_LINE = re.compile(r"^\s*(?:SPDX-License-Identifier|Licen[cs]e)\s*:\s*(.+?)\s*$", re.I)
+
+
+def licence_text(path: str) -> str:
+    """The licence a licence file states: its ``License: ...`` (or SPDX) line when it has one
+    (brackets stripped: Kenney writes ``License: (Creative Commons Zero, CC0)``), else its first
+    non-blank line."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            lines = f.read(65536).splitlines()
+    except OSError:
+        return ""
+    for line in lines:
+        m = _LICENCE_LINE.match(line)
+        if m:
+            return m.group(1).strip().strip("()").strip()
+    for line in lines:
+        if line.strip():
+            return line.strip()
+    return ""
+
+
+def find_licence_file(path: str, root: str) -> str | None:
+    """The first ``LICENSE*.txt`` / ``LICENCE*.txt`` (any case) in the file's directory or a
+    parent directory up to ``root`` (inclusive); several in one directory: the first by name."""
+    root = os.path.abspath(root)
+    d = os.path.dirname(os.path.abspath(path))
+    while True:
+        try:
+            names = sorted(os.listdir(d))
+        except OSError:
+            names = []
+        for n in names:
+            low = n.lower()
+            if low.startswith(("license", "licence")) and low.endswith(".txt"):
+                if os.path.isfile(os.path.join(d, n)):
+                    return os.path.join(d, n)
+        if d == root or os.path.dirname(d) == d or not d.startswith(root):
+            return None
+        d = os.path.dirname(d)
+
+
+# -- taxonomy --------------------------------------------------------------------------------
+
+
+def semantic_class(tag) -> SemanticClass:
+    """A taxonomy class from a name (any case/separators, CARLA enum spellings) or an id (int or
+    digit string). KeyError otherwise."""
+    if isinstance(tag, bool):
+        raise KeyError(f"not a class: {tag!r}")
+    if isinstance(tag, int):
+        return by_id(tag)
+    if isinstance(tag, float) and tag.is_integer():
+        return by_id(int(tag))
+    if isinstance(tag, str):
+        s = tag.strip()
+        if s.isdigit():
+            return by_id(int(s))
+        return by_name(s)
+    raise KeyError(f"not a class: {tag!r}")
+
+
+def default_subclass(cls: SemanticClass) -> str:
+    """The sub-class used when a source names none: the first of the class vocabulary."""
+    return cls.subclasses[0] if cls.subclasses else ""
+
+
+def check_subclass(cls: SemanticClass, subclass: str) -> str | None:
+    """Why ``subclass`` is not in the class vocabulary, or None."""
+    if subclass in cls.subclasses or (not cls.subclasses and subclass == ""):
+        return None
+    vocab = ", ".join(cls.subclasses) or "(none)"
+    return f"sub-class {subclass!r} is not one of {cls.name}'s: {vocab}"
+
+
+# -- meshes ----------------------------------------------------------------------------------
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    out, k = name, 1
+    while out in taken:
+        out = f"{name}_{k}"
+        k += 1
+    taken.add(out)
+    return out
+
+
+def weld_unindexed(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index a non-indexed triangle soup (faces == arange) by welding identical positions."""
+    n = len(vertices)
+    if n == 0 or faces.size != n or not np.array_equal(faces.ravel(), np.arange(n)):
+        return vertices, faces
+    uniq, inv = np.unique(vertices, axis=0, return_inverse=True)
+    return uniq, inv.reshape(-1, 3).astype(np.int64)
+
+
+def compact(vertices: np.ndarray, faces) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ``faces`` use (in their original order), faces re-indexed into them."""
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    used, inv = np.unique(f.ravel(), return_inverse=True)
+    return np.asarray(vertices, dtype=np.float64)[used], inv.reshape(-1, 3).astype(np.int64)
+
+
+def make_part(name, vertices, faces, *, material="default", transparent=False, texture="",
+              semantic_id=None) -> SourcePart:  # fmt: skip
+    v = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    v, f = weld_unindexed(v, f)
+    return SourcePart(name=name, vertices=v, faces=f, material=material or "default",
+                      transparent=bool(transparent), texture=texture, semantic_id=semantic_id)  # fmt: skip
+
+
+def _unreadable(path: str, why: str) -> SourceError:
+    return SourceError("unreadable file", f"{path}: {why}")
+
+
+def check_glb(path: str) -> dict:
+    """Validate a GLB container (header length, chunk bounds) and return its JSON."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except FileNotFoundError:
+        raise SourceError("missing mesh", f"{path} does not exist") from None
+    except OSError as e:
+        raise _unreadable(path, str(e)) from None
+    if len(data) < 20:
+        raise _unreadable(path, f"{len(data)} bytes: too short for a GLB (truncated or empty)")
+    magic, version, length = struct.unpack_from("<4sII", data, 0)
+    if magic != b"glTF":
+        raise _unreadable(path, "no glTF magic: not a binary glTF file")
+    if version != 2:
+        raise _unreadable(path, f"glTF container version {version}; only 2 is read")
+    if length != len(data):
+        raise _unreadable(path, f"header says {length} bytes, file has {len(data)} (truncated?)")
+    off, chunks = 12, []
+    while off < len(data):
+        if off + 8 > len(data):
+            raise _unreadable(path, f"chunk header cut at byte {off} (truncated?)")
+        clen, ctype = struct.unpack_from("<II", data, off)
+        if off + 8 + clen > len(data):
+            raise _unreadable(path, f"chunk at byte {off} runs past the end (truncated?)")
+        chunks.append((ctype, data[off + 8 : off + 8 + clen]))
+        off += 8 + clen
+    if not chunks or chunks[0][0] != 0x4E4F534A:  # "JSON"
+        raise _unreadable(path, "first chunk is not JSON")
+    try:
+        return json.loads(chunks[0][1].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise _unreadable(path, f"bad JSON chunk: {e}") from None
+
+
+def _gltf_json(path: str) -> dict:
+    if ext_of(path) == ".glb":
+        return check_glb(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except FileNotFoundError:
+        raise SourceError("missing mesh", f"{path} does not exist") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise _unreadable(path, f"bad glTF JSON: {e}") from None
+    if not isinstance(doc, dict):
+        raise _unreadable(path, "glTF JSON is not an object")
+    base = os.path.dirname(path)
+    for b in doc.get("buffers", []) or []:
+        uri = b.get("uri", "") if isinstance(b, dict) else ""
+        if uri and not uri.startswith("data:"):
+            bp = os.path.join(base, unquote(uri))
+            if not os.path.isfile(bp):
+                raise _unreadable(path, f"buffer {uri!r} not found next to the .gltf")
+            if isinstance(b.get("byteLength"), int) and os.path.getsize(bp) < b["byteLength"]:
+                raise _unreadable(path, f"buffer {uri!r} shorter than its byteLength (truncated?)")
+    return doc
+
+
+def _check_compression(path: str, doc: dict) -> None:
+    """Compressed geometry trimesh cannot decode here would load as placeholder zeros."""
+    used = set(doc.get("extensionsUsed", []) or []) | set(doc.get("extensionsRequired", []) or [])
+    if "KHR_draco_mesh_compression" in used and importlib.util.find_spec("DracoPy") is None:
+        raise _unreadable(path, "Draco-compressed geometry and no DracoPy to decode it; "
+                                "decompress it (e.g. gltf-transform copy) or install DracoPy")  # fmt: skip
+    for ext in ("EXT_meshopt_compression", "KHR_meshopt_compression"):
+        if ext in used:
+            raise _unreadable(path, f"{ext} geometry is not decoded here; decompress it first "
+                                    "(e.g. gltf-transform copy)")  # fmt: skip
+
+
+def sidecar_files(path: str) -> list[str]:
+    """Files besides ``path`` whose bytes define the mesh (for fingerprints): an OBJ's MTL
+    libraries, a .gltf's external buffers. Textures are kept by reference, not listed."""
+    ext = ext_of(path)
+    if ext == ".obj":
+        return [p for p in mtl_files(path) if p != path]
+    if ext == ".gltf":
+        try:
+            with open(path, encoding="utf-8") as f:
+                doc = json.load(f)
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            return []
+        base = os.path.dirname(os.path.abspath(path))
+        out = []
+        for b in (doc.get("buffers", []) if isinstance(doc, dict) else []) or []:
+            uri = b.get("uri", "") if isinstance(b, dict) else ""
+            if uri and not uri.startswith("data:"):
+                bp = os.path.normpath(os.path.join(base, unquote(uri)))
+                if os.path.isfile(bp) and bp not in out:
+                    out.append(bp)
+        return out
+    return []
+
+
+def _gltf_materials(doc: dict, file_name: str) -> list[dict]:
+    """Per glTF material: name, alphaMode, alpha, transmission, texture reference."""
+    images = doc.get("images", []) or []
+    textures = doc.get("textures", []) or []
+    out = []
+    for mat in doc.get("materials", []) or []:
+        if not isinstance(mat, dict):
+            mat = {}
+        pbr = mat.get("pbrMetallicRoughness", {}) or {}
+        factor = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+        try:
+            alpha = float(factor[3])
+        except (TypeError, IndexError, ValueError):
+            alpha = 1.0
+        ext = (mat.get("extensions", {}) or {}).get("KHR_materials_transmission", {}) or {}
+        try:
+            transmission = float(ext.get("transmissionFactor", 0.0))
+        except (TypeError, ValueError):
+            transmission = 0.0
+        texture = ""
+        tinfo = pbr.get("baseColorTexture")
+        if isinstance(tinfo, dict) and isinstance(tinfo.get("index"), int):
+            ti = tinfo["index"]
+            tex = textures[ti] if 0 <= ti < len(textures) and isinstance(textures[ti], dict) else {}
+            src = tex.get("source")
+            for e in (tex.get("extensions", {}) or {}).values():  # KHR_texture_basisu, EXT_texture_webp
+                if isinstance(e, dict) and isinstance(e.get("source"), int):
+                    src = e["source"] if src is None else src
+            if isinstance(src, int) and 0 <= src < len(images) and isinstance(images[src], dict):
+                uri = images[src].get("uri", "")
+                if uri and not uri.startswith("data:"):
+                    texture = posixpath.normpath(unquote(uri).replace("\\", "/"))
+                else:
+                    texture = f"{file_name}#images/{src}"
+        mode = mat.get("alphaMode", "OPAQUE")
+        transparent = mode == "BLEND" or alpha < 1.0 or transmission > 0.0
+        colour = [float(x) for x in factor] if isinstance(factor, list) else [1.0] * 4
+        out.append({"name": mat.get("name"), "mode": mode, "colour": colour,
+                    "transparent": transparent, "texture": texture})  # fmt: skip
+    return out
+
+
+def _match_gltf(material, infos: list[dict]) -> dict | None:
+    """The glTF material a trimesh PBRMaterial came from (by name, then colour and mode)."""
+    name = getattr(material, "name", None)
+    cands = [m for m in infos if m["name"] == name]
+    if len(cands) <= 1:
+        return cands[0] if cands else None
+    mode = getattr(material, "alphaMode", None) or "OPAQUE"
+    factor = getattr(material, "baseColorFactor", None)
+    colour = None if factor is None else np.asarray(factor, dtype=np.float64) / 255.0
+    best = [m for m in cands if m["mode"] == mode]
+    if colour is not None:
+        close = [m for m in best if np.allclose(m["colour"][: len(colour)], colour, atol=1 / 255)]
+        best = close or best
+    return (best or cands)[0]
+
+
+def _trimesh_material_info(material) -> tuple[str, bool]:
+    """(name, transparent) from a trimesh material alone (no glTF JSON match)."""
+    if material is None:
+        return "default", False
+    name = getattr(material, "name", None) or "default"
+    mode = getattr(material, "alphaMode", None)
+    factor = getattr(material, "baseColorFactor", None)
+    alpha_lt_1 = factor is not None and len(factor) > 3 and int(np.asarray(factor)[3]) < 255
+    return name, mode == "BLEND" or bool(alpha_lt_1)
+
+
+def _load_trimesh(path: str, ext: str) -> list[SourcePart]:
+    import trimesh  # heavy import, only when a mesh is read
+
+    infos: list[dict] = []
+    mtl: dict = {}
+    node_names: set[str] | None = None
+    if ext in (".glb", ".gltf"):
+        doc = _gltf_json(path)
+        _check_compression(path, doc)
+        infos = _gltf_materials(doc, os.path.basename(path))
+        nodes = doc.get("nodes", []) or []
+        node_names = {str(i) for i in range(len(nodes))}
+        node_names |= {n["name"] for n in nodes if isinstance(n, dict) and isinstance(n.get("name"), str)}
+    elif ext == ".obj":
+        try:
+            mtl = obj_materials(path)
+        except OSError:
+            mtl = {}
+    if not os.path.isfile(path):
+        raise SourceError("missing mesh", f"{path} does not exist")
+    try:
+        scene = trimesh.load(path, force="scene", process=False)  # read as is: no cleaning here
+    except FileNotFoundError as e:
+        raise SourceError("missing mesh", f"{path}: {e}") from None
+    except Exception as e:  # trimesh raises anything from IndexError to JSONDecodeError
+        raise _unreadable(path, f"{type(e).__name__}: {e}") from None
+
+    parts: list[SourcePart] = []
+    taken: set[str] = set()
+    for node in scene.graph.nodes_geometry:
+        transform, gname = scene.graph[node]
+        geom = scene.geometry.get(gname)
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue  # point clouds, paths: no triangles
+        T = np.asarray(transform, dtype=np.float64)
+        v = np.asarray(geom.vertices, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+        f = np.asarray(geom.faces, dtype=np.int64)
+        if np.linalg.det(T[:3, :3]) < 0:
+            f = f[:, ::-1]
+        material = getattr(geom.visual, "material", None)
+        name, transparent = _trimesh_material_info(material)
+        texture = ""
+        if infos:
+            info = _match_gltf(material, infos)
+            if info is not None:
+                transparent, texture = info["transparent"], info["texture"]
+        elif mtl and name in mtl:
+            transparent, texture = mtl[name].transparent, mtl[name].texture
+        # glTF nodes keep their names; trimesh's own per-primitive nodes carry a random suffix,
+        # so those parts are named after their (deterministic) geometry name instead
+        label = str(node) if node_names is None or str(node) in node_names else str(gname)
+        parts.append(make_part(_unique(label, taken), v, f, material=name,
+                               transparent=transparent, texture=texture))  # fmt: skip
+    return parts
+
+
+def _load_dae(path: str) -> list[SourcePart]:
+    try:
+        doc = read_dae(path)
+    except FileNotFoundError:
+        raise SourceError("missing mesh", f"{path} does not exist") from None
+    except (OSError, ColladaError) as e:
+        raise _unreadable(path, str(e)) from None
+    base = os.path.dirname(os.path.abspath(path))
+    taken: set[str] = set()
+    out = []
+    for p in doc.parts:
+        tex = p.texture
+        if tex.startswith("file://"):
+            tex = tex[len("file://") :]
+        if tex and os.path.isabs(tex):
+            tex = os.path.relpath(tex, base).replace(os.sep, "/")
+        out.append(make_part(_unique(p.name, taken), p.vertices, p.faces, material=p.material,
+                             transparent=p.transparent, texture=tex))  # fmt: skip
+    return out
+
+
+def _check_stl(path: str) -> None:
+    """A truncated STL loads as an empty or partial mesh in trimesh: check its framing."""
+    try:
+        size = os.path.getsize(path)
+        with open(path, "rb") as f:
+            head = f.read(84)
+            f.seek(max(0, size - 1024))
+            tail = f.read()
+    except OSError as e:
+        raise _unreadable(path, str(e)) from None
+    ascii_ = head.lstrip().lower().startswith(b"solid")
+    if ascii_ and b"endsolid" in tail.lower():
+        return  # a complete ASCII STL
+    n = struct.unpack_from("<I", head, 80)[0] if len(head) >= 84 else None
+    if n is not None and size >= 84 + 50 * n:
+        return  # a binary STL with all its triangles (binary headers may start with "solid" too)
+    if ascii_:
+        raise _unreadable(path, "ASCII STL without 'endsolid' (truncated?)")
+    if n is None:
+        raise _unreadable(path, f"{size} bytes: too short for a binary STL (truncated?)")
+    raise _unreadable(path, f"binary STL of {n} triangles needs {84 + 50 * n} bytes, "
+                            f"file has {size} (truncated?)")  # fmt: skip
+
+
+def load_parts(path: str) -> list[SourcePart]:
+    """One part per geometry node (per material) of a mesh file, node transforms applied, in the
+    file's own frame and units. A readable file without triangles gives no parts (the
+    standardizer quarantines it as an empty mesh). Raises SourceError ("missing mesh",
+    "unreadable file")."""
+    ext = ext_of(path)
+    if ext not in MESH_EXTS:
+        raise _unreadable(path, f"{ext or 'no extension'}: not a mesh format read here "
+                                f"({', '.join(MESH_EXTS)}); convert it (e.g. to .glb)")  # fmt: skip
+    if not os.path.exists(path):
+        raise SourceError("missing mesh", f"{path} does not exist")
+    if ext == ".stl":
+        _check_stl(path)
+    return _load_dae(path) if ext == ".dae" else _load_trimesh(path, ext)

@@ -1,0 +1,110 @@
+"""`carlaocc ingest`: one task per source item, bad items quarantined with their reason while the
+batch goes on, unchanged items skipped, a changed file re-ingested alone, vanished items pruned,
+duplicates stored once as aliases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+from catalog.sql import query
+from catalog.store import Store
+from pipeline.cli import app
+
+cli = CliRunner()
+
+
+def _glb(mesh: trimesh.Trimesh) -> bytes:
+    return trimesh.Scene([mesh]).export(file_type="glb")
+
+
+def _car(length=4.5) -> trimesh.Trimesh:
+    # glTF: +Y up, the front faces +Z; so width along x, height along y, length along z
+    return trimesh.creation.box((1.9, 1.5, length))
+
+
+@pytest.fixture
+def source(tmp_path):
+    src = tmp_path / "src"
+    (src / "cars").mkdir(parents=True)
+    (src / "cars" / "a.glb").write_bytes(_glb(_car(4.5)))
+    (src / "cars" / "a_copy.glb").write_bytes(_glb(_car(4.5)))  # duplicate geometry
+    (src / "cars" / "b.glb").write_bytes(_glb(_car(4.1)))
+    (src / "cars" / "huge.glb").write_bytes(_glb(trimesh.creation.box((1.9, 1.5, 10_000.0))))  # a 10 km "car"
+    (src / "cars" / "broken.glb").write_bytes(_glb(_car())[:100])  # truncated
+    nan = _car()
+    nan.vertices[0] = [np.nan, 0, 0]
+    (src / "cars" / "nan.obj").write_text(nan.export(file_type="obj"))
+    (src / "cars" / "empty.obj").write_text("# no geometry\nv 0 0 0\n")
+    (src / "misc").mkdir()
+    (src / "misc" / "thing.stl").write_bytes(trimesh.creation.box((1, 1, 1)).export(file_type="stl"))
+    cmap = tmp_path / "map.csv"
+    cmap.write_text("glob,category,subclass\ncars/*.glb,Car,sedan\ncars/*.obj,Car,sedan\n")
+    return src, cmap
+
+
+def _ingest(src, cmap, root, *extra):
+    return cli.invoke(app, ["ingest", "folder", str(src), "--category-map", str(cmap), "--root", str(root),
+                            "--scheduler", "synchronous", *extra])
+
+
+def test_batch_quarantines_bad_items_and_keeps_going(source, tmp_path):
+    src, cmap = source
+    root = Store(str(tmp_path / "data"))
+    r = _ingest(src, cmap, root.url)
+    assert r.exit_code == 0, r.output
+    _, rows = query(root, "SELECT source_path, reason, hint FROM quarantine ORDER BY source_path")
+    reasons = {p.split("/")[-1].split("#")[0]: reason for p, reason, _ in rows}
+    assert set(reasons) == {"huge.glb", "broken.glb", "nan.obj", "empty.obj", "thing.stl"}
+    assert "absurd size" in reasons["huge.glb"]
+    assert "unreadable" in reasons["broken.glb"]
+    assert "finite" in reasons["nan.obj"]
+    assert "empty" in reasons["empty.obj"]
+    assert reasons["thing.stl"] == "no category"
+    assert all(hint for _, _, hint in rows)
+    # the good ones: a and its copy are one asset with an alias
+    _, rows = query(root, "SELECT source_path, aliases, category, round(extent[1], 2) FROM assets ORDER BY extent[1]")
+    assert len(rows) == 2
+    assert rows[1][0].endswith("a.glb") and [p.split("/")[-1] for p in rows[1][1]] == ["a_copy.glb"]
+    assert rows[0][3] == pytest.approx(4.1, abs=0.01) and rows[1][3] == pytest.approx(4.5, abs=0.01)
+    _, rows = query(root, "SELECT count(*) FROM parts")
+    assert rows[0][0] == 2
+
+
+def test_rerun_skips_unchanged_and_reingests_changed_and_prunes(source, tmp_path):
+    src, cmap = source
+    root = Store(str(tmp_path / "data"))
+    assert _ingest(src, cmap, root.url).exit_code == 0
+    r = _ingest(src, cmap, root.url)
+    assert "0 ingested now, 8 unchanged" in r.output
+    # one file changes: only it is re-ingested
+    (src / "cars" / "b.glb").write_bytes(_glb(_car(3.9)))
+    r = _ingest(src, cmap, root.url)
+    assert "1 ingested now, 7 unchanged" in r.output
+    _, rows = query(root, "SELECT round(extent[1], 2) FROM assets ORDER BY 1")
+    assert rows[0][0] == pytest.approx(3.9, abs=0.01)
+    # a bad file fixed leaves quarantine; a removed file leaves the library
+    (src / "cars" / "nan.obj").write_text(_car(4.0).export(file_type="obj"))
+    (src / "cars" / "b.glb").unlink()
+    r = _ingest(src, cmap, root.url)
+    assert r.exit_code == 0 and "pruned" in r.output
+    _, rows = query(root, "SELECT source_path FROM quarantine")
+    assert not any("nan.obj" in p for (p,) in rows)
+    _, rows = query(root, "SELECT source_path FROM assets")
+    names = sorted(p.split("/")[-1] for (p,) in rows)
+    assert names == ["a.glb", "nan.obj"]
+
+
+def test_unusable_sources_exit_2(source, tmp_path):
+    src, cmap = source
+    bad = tmp_path / "bad.csv"
+    bad.write_text("glob,category\ncars/*.glb,Car\n")
+    for args in (["folder", str(tmp_path / "nope")], ["nosuchkind", str(src)],
+                 ["folder", str(src), "--category-map", str(bad)],
+                 ["folder", str(src), "--category-map", str(tmp_path / "missing.csv")]):
+        r = cli.invoke(app, ["ingest", *args, "--root", str(tmp_path / "data")])
+        assert r.exit_code == 2, (args, r.output)
+        assert r.output.startswith("error:") and "Traceback" not in r.output
+    assert not (tmp_path / "data").exists()

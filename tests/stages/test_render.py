@@ -1,0 +1,144 @@
+"""Headless preview rendering: framing, colours, transparency, determinism, the bitmap font and
+contact sheets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from stages.geometry import MeshPart
+from stages.render import (FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, render_asset,
+                           text_width)
+
+WHITE = np.array([255, 255, 255], dtype=np.uint8)
+
+
+def _part(mesh: trimesh.Trimesh, color=(200, 30, 30, 255), transparent=False, name="p") -> MeshPart:
+    return MeshPart(name=name, vertices=mesh.vertices, faces=mesh.faces, semantic_id=14, color=color,
+                    transparent=transparent)  # fmt: skip
+
+
+def _box(extents, centre=(0.0, 0.0, 0.0), **kw) -> MeshPart:
+    m = trimesh.creation.box(extents=extents)
+    m.apply_translation(np.asarray(centre) + (0.0, 0.0, extents[2] / 2))
+    return _part(m, **kw)
+
+
+def _foreground(img: np.ndarray, background=WHITE) -> np.ndarray:
+    return np.any(img != background, axis=2)
+
+
+def test_red_box_is_red_in_the_middle_and_background_at_the_corners():
+    img = render_asset([_box((1.0, 1.0, 1.0), color=(220, 20, 20, 255))], size=(96, 128))
+    assert img.shape == (96, 128, 3) and img.dtype == np.uint8
+    r, g, b = (int(v) for v in img[48, 64])
+    assert r > 90 and r > g + 60 and r > b + 60
+    for y, x in ((0, 0), (0, -1), (-1, 0), (-1, -1)):
+        assert (img[y, x] == WHITE).all()
+    # the box fills a good part of the frame (it is fitted to the image with a margin)
+    fg = _foreground(img)
+    assert 0.15 < fg.mean() < 0.9
+    assert not fg[:3].any() and not fg[:, :3].any()
+
+
+def test_background_colour_and_empty_input():
+    bg = (10, 20, 30)
+    img = render_asset([_box((1.0, 2.0, 0.5))], size=64, background=bg)
+    assert (img[0, 0] == bg).all()
+    empty = render_asset([], size=(8, 12), background=bg)
+    assert empty.shape == (8, 12, 3) and (empty == np.array(bg, dtype=np.uint8)).all()
+
+
+def test_rendering_is_deterministic():
+    parts = [_box((4.0, 1.8, 1.2), color=(30, 60, 160, 255)),
+             _box((2.0, 1.6, 0.5), centre=(0.0, 0.0, 1.2), color=(140, 180, 210, 110), transparent=True)]  # fmt: skip
+    a = render_asset(parts, size=(64, 80))
+    b = render_asset(parts, size=(64, 80))
+    assert a.tobytes() == b.tobytes()
+    assert render_asset(parts, size=(64, 80), azimuth_deg=40.0).tobytes() != a.tobytes()
+
+
+def test_tall_pole_renders_taller_than_wide():
+    pole = trimesh.creation.cylinder(radius=0.1, height=8.0, sections=12)
+    pole.apply_translation((0.0, 0.0, 4.0))
+    img = render_asset([_part(pole, color=(120, 120, 125, 255))], size=(128, 128), shadow=False)
+    ys, xs = np.nonzero(_foreground(img))
+    height, width = ys.max() - ys.min() + 1, xs.max() - xs.min() + 1
+    assert height > 4 * width
+    assert height > 0.8 * 128  # it is framed to fill the image height
+
+
+def test_shading_differs_between_faces_and_shadow_darkens_the_ground():
+    img = render_asset([_box((1.0, 1.0, 1.0), color=(200, 200, 200, 255))], size=(128, 128), shadow=True)
+    greys = {tuple(int(v) for v in img[y, x]) for y, x in zip(*np.nonzero(_foreground(img)))}
+    assert len(greys) >= 3  # the top and two side faces are lit differently (plus edges, shadow)
+    no_shadow = render_asset([_box((1.0, 1.0, 1.0), color=(200, 200, 200, 255))], size=(128, 128), shadow=False)
+    assert _foreground(img).sum() > _foreground(no_shadow).sum()
+
+
+def test_transparent_parts_are_blended():
+    glass = dict(color=(60, 90, 200, 110), transparent=True)
+    solid = dict(color=(60, 90, 200, 255), transparent=False)
+    see_through = render_asset([_box((1.0, 1.0, 1.0), **glass)], size=64, shadow=False)
+    opaque = render_asset([_box((1.0, 1.0, 1.0), **solid)], size=64, shadow=False)
+    c = (32, 32)
+    assert (see_through[c] != WHITE).any()
+    assert int(see_through[c].astype(int).sum()) > int(opaque[c].astype(int).sum())  # lighter: background shows
+    # glass in front of a red box lets the red through
+    red = _box((1.0, 1.0, 1.0), color=(220, 20, 20, 255))
+    front = _box((0.2, 1.4, 1.4), centre=(1.0, 0.0, -0.2), **glass)
+    behind = render_asset([red, front], size=64, azimuth_deg=0.0, elevation_deg=5.0, shadow=False)
+    r, g, b = (int(v) for v in behind[32, 32])
+    assert r > b - 40 and (r, g, b) != tuple(int(v) for v in opaque[c])
+
+
+def test_twenty_thousand_triangles_render():
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=1.0)  # 20 480 triangles
+    assert len(sphere.faces) >= 20_000
+    img = render_asset([_part(sphere, color=(90, 160, 90, 255))], size=(256, 256))
+    fg = _foreground(img)
+    assert fg[128, 128] and fg.mean() > 0.3
+
+
+def test_text_and_font():
+    assert text_width("", 1) == 0 and text_width("A", 1) == 5 and text_width("AB", 2) == 22
+    img = np.zeros((9, 20, 3), dtype=np.uint8)
+    draw_text(img, "I-", 1, 1, (255, 255, 255))
+    on = img[:, :, 0] > 0
+    assert on[1, 2:5].all()  # the top bar of "I"
+    assert on[4, 7:12].all() and not on[3, 7:12].any()  # the dash
+    # unknown characters draw a "?", text past the border is clipped
+    draw_text(img, "\u00e9\u00e9\u00e9\u00e9", 15, 5, (9, 9, 9))
+    assert (img[:, :, 0] == 9).any()
+
+
+def test_contact_sheet_layout_and_labels():
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 255, (40, 50, 3), dtype=np.uint8) for _ in range(7)]
+    images[3] = images[3][:30, :44]  # a smaller tile is centred in its cell
+    labels = ["Car/sedan", "", "Bus/city_bus", "Tree 3", "x", "y", "z"]
+    sheet = contact_sheet(images, labels, columns=3, label_background=(236, 236, 236), text_color=(20, 20, 20))
+    strip = label_strip_height(1)
+    assert strip > FONT_HEIGHT
+    assert sheet.shape == (3 * (40 + strip), 3 * 50, 3) and sheet.dtype == np.uint8
+    assert (sheet[0:40, 0:50] == images[0]).all()
+    label0 = sheet[40 : 40 + strip, 0:50]
+    label1 = sheet[40 : 40 + strip, 50:100]
+    assert (label0 == 20).all(axis=2).sum() > 20  # text pixels under the first image
+    assert not (label1 == 20).all(axis=2).any()  # an empty label leaves a blank strip
+    assert (label1 == 236).all()
+    # the last row has two empty cells of background
+    assert (sheet[2 * (40 + strip) :, 50:] == 255).all()
+    # one row when there are fewer images than columns; a bigger scale gives a taller strip
+    one = contact_sheet(images[:2], labels[:2], columns=6, label_scale=2)
+    assert one.shape == (40 + label_strip_height(2), 100, 3)
+
+
+def test_contact_sheet_checks_its_input():
+    with pytest.raises(ValueError):
+        contact_sheet([np.zeros((4, 4, 3), np.uint8)], ["a", "b"])
+    with pytest.raises(ValueError):
+        contact_sheet([], [])
+    long = contact_sheet([np.zeros((10, 30, 3), np.uint8)], ["a very long label indeed"])
+    assert long.shape == (10 + label_strip_height(1), 30, 3)
