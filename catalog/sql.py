@@ -97,7 +97,8 @@ def query(store: Store, sql: str) -> tuple[list[str], list[tuple]]:
             return [], []
         table = rel.to_arrow_table()
         cols = table.column_names
-        return cols, [tuple(r.values()) for r in table.to_pylist()]
+        # column-wise: duplicate column names (a.name, c.name) must not collapse
+        return cols, list(zip(*(c.to_pylist() for c in table.columns))) if cols else []
     except duckdb.Error as exc:
         raise QueryError(str(exc).strip()) from None
     except Exception as exc:  # a result Arrow cannot turn into Python values

@@ -85,3 +85,10 @@ def test_resource_settings_are_locked(store):
         query(store, "SELECT * FROM read_parquet('/etc/passwd')")
     _, rows = query(store, "SELECT current_setting('max_temp_directory_size'), current_setting('enable_external_access')")
     assert rows[0][1] is False
+
+
+def test_duplicate_column_names_are_kept(store):
+    _seed(store)
+    cols, rows = query(store, "SELECT s.sequence_id, c.name, c.name FROM sequences s, classes c WHERE c.id = 14")
+    assert cols[1:] == ["name", "name"] or len(cols) == 3
+    assert rows == [("town00_seq000", "Car", "Car")]
