@@ -474,7 +474,9 @@ def _pickup(rng: np.random.Generator) -> list[MeshPart]:
     )
     gy = W / 2 - 0.05
     gh_rear, gh_front = x_bed + 0.02, 0.17 * L
-    glass = _frustum((gh_rear, -gy, belt), (gh_front, gy, H - 0.06), (gh_rear + 0.06, -gy + 0.1), (gh_front - 0.5, gy - 0.1))
+    glass = _frustum(
+        (gh_rear, -gy, belt), (gh_front, gy, H - 0.06), (gh_rear + 0.06, -gy + 0.1), (gh_front - 0.5, gy - 0.1)
+    )
     roof = _box((gh_rear + 0.06, -gy + 0.1, H - 0.06), (gh_front - 0.5, gy - 0.1, H))
     parts = [
         _part("body", _union(front, bed_floor), "Car", "paint", color=paint),
@@ -496,7 +498,9 @@ def _truck_cab(
     gy = W / 2 - 0.05
     top = cab_h - 0.08 if glass_top is None else glass_top
     cab = _chamfer_front_top(_box((cab_x0, -W / 2, floor), (xf, W / 2, belt)), 0.08, 0.05)
-    glass = _frustum((cab_x0 + 0.3, -gy, belt), (xf - 0.05, gy, top), (cab_x0 + 0.3, -gy + 0.05), (xf - 0.30, gy - 0.05))
+    glass = _frustum(
+        (cab_x0 + 0.3, -gy, belt), (xf - 0.05, gy, top), (cab_x0 + 0.3, -gy + 0.05), (xf - 0.30, gy - 0.05)
+    )
     if glass_top is None:
         roof = _box((cab_x0 + 0.3, -gy + 0.05, top), (xf - 0.30, gy - 0.05, cab_h))
     else:
@@ -554,8 +558,8 @@ def _truck(subclass: str) -> Builder:
             zl, x0, x1 = max(body_h, cab_h) + 0.25, -L / 2 + 0.2, xf - 0.6
             rails = _union(_box((x0, 0.30, zl), (x1, 0.36, zl + 0.15)), _box((x0, -0.36, zl), (x1, -0.30, zl + 0.15)))
             n = int((x1 - x0) // 0.9)
-            rungs = _union(*[_box((x0 + 0.45 + 0.9 * k - 0.03, -0.29, zl + 0.05), (x0 + 0.45 + 0.9 * k + 0.03, 0.29, zl + 0.09))
-                             for k in range(n)])  # fmt: skip
+            rung_x = [x0 + 0.45 + 0.9 * k for k in range(n)]
+            rungs = _union(*[_box((x - 0.03, -0.29, zl + 0.05), (x + 0.03, 0.29, zl + 0.09)) for x in rung_x])
             turntable = _cylinder(0.6, (-L / 2 + 1.3, 0.0, body_h), (-L / 2 + 1.3, 0.0, zl - 0.01), 16)
             light = _box((xf - 1.3, -0.6, cab_h), (xf - 1.0, 0.6, cab_h + 0.12))
             parts += [
@@ -570,6 +574,7 @@ def _truck(subclass: str) -> Builder:
             xf = L / 2
             parts, cab_x0 = _truck_cab(xf, W, _u(rng, 2.3, 2.6), _u(rng, 3.6, 3.9), paint, belt=1.75, glass_top=2.75)
             trailer_x1 = cab_x0 - 0.7
+            xg = trailer_x1 - 4.5  # landing gear, clear of the tractor's rear wheels
             tanks = _union(*[_cylinder(0.30, (cab_x0 - 1.6, sy * 0.9, 0.75), (cab_x0 - 0.4, sy * 0.9, 0.75), 12)
                              for sy in (-1.0, 1.0)])  # fmt: skip
             parts += [
@@ -578,7 +583,7 @@ def _truck(subclass: str) -> Builder:
                 _part("fuel_tanks", tanks, "Truck", "metal", color=(200, 200, 205, 255)),
                 _part("trailer", _box((-L / 2, -W / 2, 1.25), (trailer_x1, W / 2, _u(rng, 3.9, 4.05))), "Truck",
                       "paint", color=_pick(rng, _BODY_COLOURS)),
-                _part("landing_gear", _union(*[_box((trailer_x1 - 4.5, sy * 0.9 - 0.06, 0.3), (trailer_x1 - 4.38, sy * 0.9 + 0.06, 1.24))
+                _part("landing_gear", _union(*[_box((xg, sy * 0.9 - 0.06, 0.3), (xg + 0.12, sy * 0.9 + 0.06, 1.24))
                                                 for sy in (-1.0, 1.0)]), "Truck", "metal"),
             ]  # fmt: skip
             axles = [xf - 1.3, xf - 4.9, xf - 6.2, -L / 2 + 1.3, -L / 2 + 2.6, -L / 2 + 3.9]
@@ -592,7 +597,8 @@ def _truck(subclass: str) -> Builder:
                                (-L / 2 + 0.3, 0.9)], -W / 2 + 0.05, W / 2 - 0.05)  # fmt: skip
             parts += [
                 _chassis(-L / 2 + 0.5, cab_x0 - 0.15),
-                _part("compactor_body", _box((xh, -W / 2, 1.0), (cab_x0 - 0.15, W / 2, H)), "Truck", "paint", color=colour),
+                _part("compactor_body", _box((xh, -W / 2, 1.0), (cab_x0 - 0.15, W / 2, H)), "Truck", "paint",
+                      color=colour),
                 _part("hopper", hopper, "Truck", "paint", color=colour),
             ]  # fmt: skip
             axles = [xf - 1.3, -L / 2 + 2.4, -L / 2 + 3.7]
@@ -604,7 +610,8 @@ def _truck(subclass: str) -> Builder:
             parts += [
                 _chassis(-L / 2 + 0.4, cab_x0 - 0.1),
                 _part("deck", _box((-L / 2, -W / 2, 1.01), (xd, W / 2, 1.16)), "Truck", "metal"),
-                _part("headboard", _box((xd + 0.01, -W / 2 + 0.1, 1.01), (xd + 0.14, W / 2 - 0.1, 2.3)), "Truck", "metal"),
+                _part("headboard", _box((xd + 0.01, -W / 2 + 0.1, 1.01), (xd + 0.14, W / 2 - 0.1, 2.3)), "Truck",
+                      "metal"),
                 _part("light_bar", _box((xf - 1.2, -0.6, cab_h), (xf - 0.9, 0.6, cab_h + 0.12)), "Truck", "lens",
                       color=_ORANGE),
             ]  # fmt: skip
@@ -628,7 +635,8 @@ def _truck(subclass: str) -> Builder:
             L, W = _u(rng, 7.0, 8.8), _u(rng, 2.45, 2.55)
             xf, cab_h, Ht = L / 2, _u(rng, 2.8, 3.0), _u(rng, 2.5, 2.9)
             parts, cab_x0 = _truck_cab(xf, W, _u(rng, 2.1, 2.4), cab_h, paint)
-            tipper = _extrude([(-W / 2 + 0.15, 1.1), (W / 2 - 0.15, 1.1), (W / 2, Ht), (-W / 2, Ht)], -L / 2, cab_x0 - 0.2, "x")
+            profile = [(-W / 2 + 0.15, 1.1), (W / 2 - 0.15, 1.1), (W / 2, Ht), (-W / 2, Ht)]  # flared sides
+            tipper = _extrude(profile, -L / 2, cab_x0 - 0.2, "x")
             zg = max(Ht, cab_h) + 0.02
             guard = _box((cab_x0 - 0.19, -W / 2 + 0.1, zg), (cab_x0 + 0.9, W / 2 - 0.1, zg + 0.1))
             colour = _pick(rng, (_YELLOW, _ORANGE, (150, 155, 160, 255), _RED))
@@ -751,7 +759,8 @@ def _tram(rng: np.random.Generator) -> list[MeshPart]:
         _part("bogies", bogies, "Train", "metal", color=_DARK),
         _doors(doors, 0.65, W / 2, floor + 0.05, glass_top - 0.1, _DARK),
         _part("pantograph_base", _box((xp - 0.6, -0.4, H), (xp + 0.6, 0.4, H + 0.12)), "Train", "metal"),
-        _part("pantograph_arm", _beam((xp - 0.5, 0.0, H + 0.1), (xp + 0.2, 0.0, H + 0.57), 0.06, 0.06), "Train", "metal"),
+        _part("pantograph_arm", _beam((xp - 0.5, 0.0, H + 0.1), (xp + 0.2, 0.0, H + 0.57), 0.06, 0.06), "Train",
+              "metal"),
         _part("pantograph_bow", _box((xp + 0.15, -0.75, H + 0.55), (xp + 0.25, 0.75, H + 0.6)), "Train", "metal"),
     ]
 
@@ -763,7 +772,9 @@ def _metro(rng: np.random.Generator) -> list[MeshPart]:
     paint = _pick(rng, (_PAINTS[2], _WHITE, _BLUE, (200, 200, 195, 255)))
     gy = W / 2 - 0.04
     body = _box((-L / 2, -W / 2, 0.95), (L / 2, W / 2, 1.9))
-    glass = _frustum((-L / 2 + 0.03, -gy, 1.9), (L / 2 - 0.03, gy, 2.9), (-L / 2 + 0.15, -gy + 0.02), (L / 2 - 0.15, gy - 0.02))
+    glass = _frustum(
+        (-L / 2 + 0.03, -gy, 1.9), (L / 2 - 0.03, gy, 2.9), (-L / 2 + 0.15, -gy + 0.02), (L / 2 - 0.15, gy - 0.02)
+    )
     roof = _box((-L / 2 + 0.15, -gy + 0.02, 2.9), (L / 2 - 0.15, gy - 0.02, H))
     centres = [-L / 2 + 2.6, L / 2 - 2.6]
     bogies = _union(*[_box((c - 1.3, -W / 2 + 0.35, 0.35), (c + 1.3, W / 2 - 0.35, 0.94)) for c in centres])
@@ -922,7 +933,8 @@ def _motorcycle_parts(rng: np.random.Generator, kind: str) -> tuple[list[MeshPar
         ]
     else:  # moped: a light frame with a small engine and tank
         parts += [
-            _part("frame", _beam((xr + 0.30, 0.0, 0.62), bar + (-0.05, 0, -0.15), 0.05, 0.05), sem, "metal", color=paint),
+            _part("frame", _beam((xr + 0.30, 0.0, 0.62), bar + (-0.05, 0, -0.15), 0.05, 0.05), sem, "metal",
+                  color=paint),
             _part("engine", _box((-0.25, -0.12, 0.20), (0.15, 0.12, 0.45)), sem, "metal"),
             _part("tank", _box((xr + 0.05, -0.13, 0.50), (xr + 0.55, 0.13, 0.62)), sem, "paint", color=paint),
             _part("seat", _box((xr + 0.10, -0.13, 0.64), (xr + 0.60, 0.13, seat_z)), sem, "leather"),
@@ -960,7 +972,8 @@ def _rider(family: str) -> Builder:
         H = _u(rng, 1.60, 1.90)  # standing height of the rider
         cloth, skin = _pick(rng, _CLOTHES), _pick(rng, _SKINS)
         helmet = family == "motorcycle" or rng.uniform() < 0.5
-        lean_x, lean_z = {"road_bike": (0.42, 0.26), "cruiser": (0.12, 0.32), "scooter": (0.12, 0.32)}.get(kind, (0.30, 0.30))
+        leans = {"road_bike": (0.42, 0.26), "cruiser": (0.12, 0.32), "scooter": (0.12, 0.32)}  # forward, up (x H)
+        lean_x, lean_z = leans.get(kind, (0.30, 0.30))
         hip = a["seat"] + (0.0, 0.0, 0.10)
         shoulder = hip + (lean_x, 0.0, lean_z * H)
         tr, ar, lr = 0.085 * H * 0.9, 0.028 * H, 0.045 * H
@@ -980,7 +993,8 @@ def _rider(family: str) -> Builder:
             knee = (hip + foot) / 2 + (0.22, sy * 0.10, 0.12)
             parts += [
                 _part(f"rider_arm_{side}", _capsule(ar, sh, hand), "Rider", "cloth", color=cloth),
-                _part(f"rider_thigh_{side}", _capsule(lr, hip + (0.0, sy * 0.09, 0.0), knee), "Rider", "cloth", color=cloth),
+                _part(f"rider_thigh_{side}", _capsule(lr, hip + (0.0, sy * 0.09, 0.0), knee), "Rider", "cloth",
+                      color=cloth),
                 _part(f"rider_shin_{side}", _capsule(lr * 0.85, knee + (0.0, 0.0, -0.02), foot), "Rider", "cloth",
                       color=cloth),
             ]  # fmt: skip
@@ -1026,8 +1040,8 @@ def _pedestrian(subclass: str) -> Builder:
             sh = np.array([0.0, y_arm, torso_top - 0.02 * H])
             hands[side] = sh + arm_len * np.array([np.sin(sw), 0.0, -np.cos(sw)])
             parts += [
-                _part(f"leg_{side}", _capsule(leg_r, (0.0, y_leg, hip_z), (foot_x, y_leg, leg_r)), "Pedestrian", "cloth",
-                      color=bottom),
+                _part(f"leg_{side}", _capsule(leg_r, (0.0, y_leg, hip_z), (foot_x, y_leg, leg_r)), "Pedestrian",
+                      "cloth", color=bottom),
                 _part(f"arm_{side}", _capsule(arm_r, sh, hands[side]), "Pedestrian", "cloth" if sleeves else "skin",
                       color=top if sleeves else skin),
             ]  # fmt: skip
@@ -1242,7 +1256,8 @@ def _commercial(rng: np.random.Generator) -> list[MeshPart]:
             "left": [(-D / 2 + 0.8, D / 2 - 0.8)], "right": [(-D / 2 + 0.8, D / 2 - 0.8)],
         }))  # fmt: skip
     n = int(rng.integers(1, 4))
-    units = [_box((-2.0, yc - 1.2, H), (1.0, yc + 1.2, H + 1.5)) for yc in (-F / 2 + (k + 1) * F / (n + 1) for k in range(n))]
+    centres = [-F / 2 + (k + 1) * F / (n + 1) for k in range(n)]
+    units = [_box((-2.0, yc - 1.2, H), (1.0, yc + 1.2, H + 1.5)) for yc in centres]
     return [
         _part("walls", _box((-D / 2, -F / 2, 0.0), (D / 2, F / 2, H)), "Building", material,
               color=_pick(rng, _FACADES[material])),
@@ -1274,7 +1289,8 @@ def _industrial(rng: np.random.Generator) -> list[MeshPart]:
     nd = int(rng.integers(1, 4))
     w = min(4.0, F / 2 / nd - 0.4)
     doors = _union(*[_box((D / 2 - 0.05, a, 0.0), (D / 2 + 0.08, b, 4.5)) for a, b in _bays(-F / 4, F / 4, nd, w)])
-    chimney = _cylinder(_u(rng, 0.6, 1.0), (-D / 2 + 3.0, F / 2 - 3.0, 0.0), (-D / 2 + 3.0, F / 2 - 3.0, _u(rng, 14.0, 22.0)))
+    chimney_r, chimney_h = _u(rng, 0.6, 1.0), _u(rng, 14.0, 22.0)
+    chimney = _cylinder(chimney_r, (-D / 2 + 3.0, F / 2 - 3.0, 0.0), (-D / 2 + 3.0, F / 2 - 3.0, chimney_h))
     return [
         _part("walls", _box((-D / 2, -F / 2, 0.0), (D / 2, F / 2, wall_h)), "Building", material,
               color=_pick(rng, _FACADES[material])),
@@ -1297,9 +1313,9 @@ def _warehouse(rng: np.random.Generator) -> list[MeshPart]:
     spacing = (F - 4.0) / nd
     doors = _union(*[_box((D / 2 - 0.04, a, 1.21), (D / 2 + 0.06, b, 5.2))
                      for a, b in _bays(-F / 2 + 2.0, F / 2 - 2.0, nd, min(3.5, spacing - 0.8))])  # fmt: skip
-    ribbons = _windows_on_facades(D, F, [(wall_h - 1.8, wall_h - 0.8)], {
-        "back": [(-F / 2 + 1.0, F / 2 - 1.0)], "left": [(-D / 2 + 1.0, D / 2 - 1.0)], "right": [(-D / 2 + 1.0, D / 2 - 1.0)],
-    })  # fmt: skip
+    along_y, along_x = [(-F / 2 + 1.0, F / 2 - 1.0)], [(-D / 2 + 1.0, D / 2 - 1.0)]
+    high = [(wall_h - 1.8, wall_h - 0.8)]
+    ribbons = _windows_on_facades(D, F, high, {"back": along_y, "left": along_x, "right": along_x})
     return [
         _part("walls", _box((-D / 2, -F / 2, 0.0), (D / 2, F / 2, wall_h)), "Building", "metal",
               color=_pick(rng, _FACADES["metal"])),
@@ -1320,7 +1336,8 @@ def _garage(rng: np.random.Generator) -> list[MeshPart]:
     Hf = _u(rng, 2.4, 2.7)
     roof = _extrude([(-D / 2 - 0.2, Hf), (D / 2 + 0.3, Hf), (D / 2 + 0.3, Hf + 0.15), (-D / 2 - 0.2, Hf + 0.5)],
                     -F / 2 - 0.2, F / 2 + 0.2)  # fmt: skip
-    doors = _union(*[_box((D / 2 - 0.04, a, 0.0), (D / 2 + 0.05, b, 2.1)) for a, b in _bays(-F / 2, F / 2, bays, F / bays - 0.7)])
+    spans = _bays(-F / 2, F / 2, bays, F / bays - 0.7)
+    doors = _union(*[_box((D / 2 - 0.04, a, 0.0), (D / 2 + 0.05, b, 2.1)) for a, b in spans])
     material = _pick(rng, ("plaster", "brick"))
     return [
         _part("walls", _box((-D / 2, -F / 2, 0.0), (D / 2, F / 2, Hf)), "Building", material,
@@ -1338,12 +1355,13 @@ def _gas_station(rng: np.random.Generator) -> list[MeshPart]:
     Dc, Fc, Hc = _u(rng, 10.0, 14.0), _u(rng, 14.0, 22.0), _u(rng, 4.8, 5.5)
     x0 = Ds + _u(rng, 3.0, 5.0)  # the canopy's back edge (the shop spans x 0 .. Ds)
     colour = _pick(rng, (_RED, _BLUE, _GREEN, _YELLOW))
-    shop_glass = _shift(_windows_on_facades(Ds, Fs, [(0.4, 2.8)], {"front": [(-Fs / 2 + 0.6, -1.2), (1.2, Fs / 2 - 0.6)]}),
-                        (Ds / 2, 0.0, 0.0))  # fmt: skip
+    shop_front = {"front": [(-Fs / 2 + 0.6, -1.2), (1.2, Fs / 2 - 0.6)]}
+    shop_glass = _shift(_windows_on_facades(Ds, Fs, [(0.4, 2.8)], shop_front), (Ds / 2, 0.0, 0.0))
     n_isl = 3 if Fc > 18.0 else 2
     ys = [-Fc / 2 + (k + 0.5) * Fc / n_isl for k in range(n_isl)]
     islands = _union(*[_box((x0 + 2.0, y - 0.6, 0.0), (x0 + Dc - 2.0, y + 0.6, 0.15)) for y in ys])
-    columns = _union(*[_cylinder(0.25, (x, y, 0.16), (x, y, Hc - 0.01), 12) for y in ys for x in (x0 + 2.4, x0 + Dc - 2.4)])
+    xs = (x0 + 2.4, x0 + Dc - 2.4)
+    columns = _union(*[_cylinder(0.25, (x, y, 0.16), (x, y, Hc - 0.01), 12) for y in ys for x in xs])
     pumps = _union(*[_box((x0 + Dc / 2 - 0.3, y - 0.45, 0.16), (x0 + Dc / 2 + 0.3, y + 0.45, 1.9)) for y in ys])
     pylon = _box((x0 + Dc + 1.0, Fc / 2 - 2.0, 0.0), (x0 + Dc + 1.4, Fc / 2, _u(rng, 6.0, 8.0)))
     return [
@@ -1367,14 +1385,15 @@ def _religious(rng: np.random.Generator) -> list[MeshPart]:
     if rng.uniform() < 0.6:
         D, Fw, wall_h = _u(rng, 20.0, 32.0), _u(rng, 10.0, 15.0), _u(rng, 7.0, 10.0)
         T, Ht = _u(rng, 4.5, 6.5), _u(rng, 18.0, 28.0)
-        roof = _extrude([(-Fw / 2 - 0.4, wall_h), (Fw / 2 + 0.4, wall_h), (0.0, wall_h + 0.6 * Fw)], -D / 2 - 0.3, D / 2 + 0.3, "x")
-        n = int(D // 4.0)
-        nave_glass = _windows_on_facades(D, Fw, [(2.5, wall_h - 1.0)], {"left": _bays(-D / 2, D / 2, n, 1.2),
-                                                                       "right": _bays(-D / 2, D / 2, n, 1.2)})  # fmt: skip
+        gable = [(-Fw / 2 - 0.4, wall_h), (Fw / 2 + 0.4, wall_h), (0.0, wall_h + 0.6 * Fw)]
+        roof = _extrude(gable, -D / 2 - 0.3, D / 2 + 0.3, "x")  # ridge along X
+        bays = _bays(-D / 2, D / 2, int(D // 4.0), 1.2)
+        nave_glass = _windows_on_facades(D, Fw, [(2.5, wall_h - 1.0)], {"left": bays, "right": bays})
         xt = D / 2 + T / 2
         belfry = _union(
             _box((D / 2 + T - 0.05, -0.6, Ht - 4.0), (D / 2 + T + 0.05, 0.6, Ht - 1.5)),
-            *[_box((xt - 0.6, sy * T / 2 - 0.05, Ht - 4.0), (xt + 0.6, sy * T / 2 + 0.05, Ht - 1.5)) for sy in (-1.0, 1.0)],
+            *[_box((xt - 0.6, sy * T / 2 - 0.05, Ht - 4.0), (xt + 0.6, sy * T / 2 + 0.05, Ht - 1.5))
+              for sy in (-1.0, 1.0)],
         )  # fmt: skip
         return [
             _part("nave", _box((-D / 2, -Fw / 2, 0.0), (D / 2, Fw / 2, wall_h)), "Building", "stone", color=stone),
@@ -1399,7 +1418,8 @@ def _religious(rng: np.random.Generator) -> list[MeshPart]:
         _part("drum", _cylinder(r, (0.0, 0.0, wall_h), (0.0, 0.0, drum_top), 16), "Building", "stone", color=stone),
         _part("dome", _ellipsoid((0.0, 0.0, drum_top), (r, r, r * _u(rng, 0.8, 1.1)), 2), "Building", "metal",
               color=_pick(rng, ((60, 120, 110, 255), (200, 170, 80, 255), (90, 100, 140, 255)))),
-        _part("tower", _cylinder(1.2, (D / 2 - 2.0, yt, 0.0), (D / 2 - 2.0, yt, Ht), 12), "Building", "stone", color=stone),
+        _part("tower", _cylinder(1.2, (D / 2 - 2.0, yt, 0.0), (D / 2 - 2.0, yt, Ht), 12), "Building", "stone",
+              color=stone),
         _part("tower_cap", _cone(1.5, 3.0, (D / 2 - 2.0, yt, Ht), 12), "Building", "metal"),
         _glass("glazing", glass, "Building"),
         _part("door", _box((D / 2 - 0.06, -1.2, 0.0), (D / 2 + 0.06, 1.2, 4.0)), "Building", "wood"),
@@ -1426,7 +1446,8 @@ def _public(rng: np.random.Generator) -> list[MeshPart]:
                        for k in range(n_col)])  # fmt: skip
     half = Wp / 2 + 1.2
     entablature = _box((D / 2, -half, H - 1.6), (D / 2 + 2.8, half, H - 0.9))
-    pediment = _extrude([(-half, H - 0.89), (half, H - 0.89), (0.0, H - 0.89 + _u(rng, 1.5, 2.2))], D / 2 - 0.2, D / 2 + 2.8, "x")
+    gable = [(-half, H - 0.89), (half, H - 0.89), (0.0, H - 0.89 + _u(rng, 1.5, 2.2))]
+    pediment = _extrude(gable, D / 2 - 0.2, D / 2 + 2.8, "x")
     return [
         _part("walls", _box((-D / 2, -F / 2, 0.0), (D / 2, F / 2, H)), "Building", material, color=colour),
         _glass("glazing", glazing, "Building"),
@@ -1509,7 +1530,8 @@ def _utility_pole(rng: np.random.Generator) -> list[MeshPart]:
     """Wooden utility pole, 9-12 m: a cross-arm near the top with four insulators, and on half of
     them a pole-mounted transformer on the +X side."""
     h, r, a = _u(rng, 9.0, 12.0), _u(rng, 0.11, 0.14), _u(rng, 0.9, 1.2)
-    insulators = _union(*[_cylinder(0.05, (0.0, y, h - 0.48), (0.0, y, h - 0.28), 8) for y in (-a + 0.1, -a / 2, a / 2, a - 0.1)])
+    ys = (-a + 0.1, -a / 2, a / 2, a - 0.1)
+    insulators = _union(*[_cylinder(0.05, (0.0, y, h - 0.48), (0.0, y, h - 0.28), 8) for y in ys])
     parts = [
         _part("pole", _cylinder(r, (0.0, 0.0, 0.0), (0.0, 0.0, h), 10), "Pole", "wood"),
         _part("crossarm", _box((-0.05, -a, h - 0.6), (0.05, a, h - 0.48)), "Pole", "wood"),
@@ -1608,11 +1630,13 @@ def _sign(subclass: str) -> Builder:
         elif subclass == "no_entry":
             R = _u(rng, 0.28, 0.32)
             plate, colour = _plate_x(R, 0.03, (x, 0.0, zc), 20, 0.0), _RED
-            extra.append(("symbol", _box((xs - 0.005, -0.65 * R, zc - 0.1 * R), (xs + 0.005, 0.65 * R, zc + 0.1 * R)), _WHITE))
+            bar = _box((xs - 0.005, -0.65 * R, zc - 0.1 * R), (xs + 0.005, 0.65 * R, zc + 0.1 * R))
+            extra.append(("symbol", bar, _WHITE))
         elif subclass in ("yield", "warning"):
             # the primitive's corner at spin 0 ends at -Z after the turn: point down for yield
             spin = 0.0 if subclass == "yield" else np.pi
-            plate, colour = _plate_x(_u(rng, 0.42, 0.48), 0.03, (x, 0.0, zc), 3, spin), (_WHITE if subclass == "yield" else _YELLOW)
+            plate = _plate_x(_u(rng, 0.42, 0.48), 0.03, (x, 0.0, zc), 3, spin)
+            colour = _WHITE if subclass == "yield" else _YELLOW
         elif subclass == "one_way":
             w, hgt = _u(rng, 0.8, 1.0), _u(rng, 0.25, 0.32)
             plate = _box((x - 0.015, -w / 2, zc - hgt / 2), (x + 0.015, w / 2, zc + hgt / 2))
@@ -1627,7 +1651,8 @@ def _sign(subclass: str) -> Builder:
             a = _u(rng, 0.55, 0.65)
             plate, colour = _box((x - 0.015, -a / 2, zc - a / 2), (x + 0.015, a / 2, zc + a / 2)), _BLUE
             if subclass == "pedestrian_crossing":
-                sym = _extrude([(-0.3 * a, -0.25 * a), (0.3 * a, -0.25 * a), (0.0, 0.3 * a)], xs - 0.005, xs + 0.005, "x")
+                triangle = [(-0.3 * a, -0.25 * a), (0.3 * a, -0.25 * a), (0.0, 0.3 * a)]
+                sym = _extrude(triangle, xs - 0.005, xs + 0.005, "x")
                 sym = _shift(sym, (0.0, 0.0, zc))
             else:  # a blocky "P": stem and bowl
                 sym = _union(
@@ -1674,19 +1699,23 @@ def _bin(rng: np.random.Generator) -> list[MeshPart]:
     colour = _pick(rng, (_DARK, _GREEN, (60, 60, 60, 255), (150, 155, 160, 255)))
     body = _cylinder(r, (0.0, 0.0, 0.0), (0.0, 0.0, h), 16)
     lid = _cylinder(r + 0.02, (0.0, 0.0, h), (0.0, 0.0, h + 0.05), 16)
-    return [_part("body", body, "Static", "plastic", color=colour), _part("lid", lid, "Static", "plastic", color=colour)]
+    return [
+        _part("body", body, "Static", "plastic", color=colour),
+        _part("lid", lid, "Static", "plastic", color=colour),
+    ]
 
 
 def _hydrant(rng: np.random.Generator) -> list[MeshPart]:
     """Fire hydrant, 0.6-0.8 m: a base flange, a barrel, a domed cap and side outlets."""
     h, r = _u(rng, 0.5, 0.65), _u(rng, 0.10, 0.13)
     colour = _pick(rng, (_RED, _YELLOW, (200, 200, 195, 255)))
+    zo = 0.06 + 0.7 * h  # outlet height
     return [
         _part("base", _cylinder(r + 0.04, (0.0, 0.0, 0.0), (0.0, 0.0, 0.06), 12), "Static", "metal", color=colour),
         _part("barrel", _cylinder(r, (0.0, 0.0, 0.06), (0.0, 0.0, 0.06 + h), 12), "Static", "metal", color=colour),
         _part("cap", _ellipsoid((0.0, 0.0, 0.06 + h), (r + 0.01, r + 0.01, 0.09), 1), "Static", "metal", color=colour),
-        _part("outlets", _cylinder(0.045, (0.0, -r - 0.08, 0.06 + 0.7 * h), (0.0, r + 0.08, 0.06 + 0.7 * h), 10), "Static",
-              "metal", color=colour),
+        _part("outlets", _cylinder(0.045, (0.0, -r - 0.08, zo), (0.0, r + 0.08, zo), 10), "Static", "metal",
+              color=colour),
     ]  # fmt: skip
 
 
@@ -1694,8 +1723,8 @@ def _bus_stop(rng: np.random.Generator) -> list[MeshPart]:
     """Bus shelter, 3.5-6 m long: a roof on four posts, a glass back wall at -X and a glass side
     panel, a bench; the open side faces +X."""
     L, H = _u(rng, 3.5, 6.0), _u(rng, 2.5, 2.8)
-    posts = _union(*[_cylinder(0.04, (sx * 0.65, sy * (L / 2 - 0.1), 0.0), (sx * 0.65, sy * (L / 2 - 0.1), H - 0.11), 10)
-                     for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)])  # fmt: skip
+    corners = [(sx * 0.65, sy * (L / 2 - 0.1)) for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)]
+    posts = _union(*[_cylinder(0.04, (x, y, 0.0), (x, y, H - 0.11), 10) for x, y in corners])
     glass = _union(
         _box((-0.72, -L / 2 + 0.15, 0.10), (-0.68, L / 2 - 0.15, H - 0.2)),
         _box((-0.60, L / 2 - 0.12, 0.10), (0.40, L / 2 - 0.08, H - 0.2)),
@@ -1705,8 +1734,8 @@ def _bus_stop(rng: np.random.Generator) -> list[MeshPart]:
         _part("posts", posts, "Static", "metal"),
         _glass("panels", glass, "Static"),
         _part("bench", _box((-0.62, -L / 3, 0.42), (-0.25, L / 3, 0.47)), "Static", "wood"),
-        _part("bench_legs", _union(*[_box((-0.5, y - 0.03, 0.0), (-0.4, y + 0.03, 0.41)) for y in (-L / 4, L / 4)]), "Static",
-              "metal"),
+        _part("bench_legs", _union(*[_box((-0.5, y - 0.03, 0.0), (-0.4, y + 0.03, 0.41)) for y in (-L / 4, L / 4)]),
+              "Static", "metal"),
     ]  # fmt: skip
 
 
@@ -1718,7 +1747,8 @@ def _mailbox(rng: np.random.Generator) -> list[MeshPart]:
         return [
             _part("body", _cylinder(r, (0.0, 0.0, 0.0), (0.0, 0.0, h), 16), "Static", "metal", color=colour),
             _part("cap", _ellipsoid((0.0, 0.0, h), (r + 0.02, r + 0.02, 0.12), 1), "Static", "metal", color=colour),
-            _part("slot", _box((r - 0.02, -0.1, h - 0.25), (r + 0.01, 0.1, h - 0.21)), "Static", "plastic", color=_BLACK),
+            _part("slot", _box((r - 0.02, -0.1, h - 0.25), (r + 0.01, 0.1, h - 0.21)), "Static", "plastic",
+                  color=_BLACK),
         ]  # fmt: skip
     w, hb = _u(rng, 0.35, 0.45), _u(rng, 0.45, 0.6)
     return [
@@ -1769,7 +1799,8 @@ def _barrier(rng: np.random.Generator) -> list[MeshPart]:
     profile = [(-0.3, 0.0), (0.3, 0.0), (0.3, 0.08), (0.1, 0.81), (-0.1, 0.81), (-0.3, 0.08)]
     if rng.uniform() < 0.6:
         return [_part("barrier", _extrude(profile, -L / 2, L / 2, "x"), "Static", "concrete")]
-    return [_part("barrier", _extrude(profile, -L / 2, L / 2, "x"), "Static", "plastic", color=_pick(rng, (_RED, _WHITE)))]
+    colour = _pick(rng, (_RED, _WHITE))
+    return [_part("barrier", _extrude(profile, -L / 2, L / 2, "x"), "Static", "plastic", color=colour)]
 
 
 def _traffic_cone(rng: np.random.Generator) -> list[MeshPart]:
@@ -1789,7 +1820,8 @@ def _billboard(rng: np.random.Generator) -> list[MeshPart]:
     posts = _union(*[_cylinder(0.15, (-0.2, y, 0.0), (-0.2, y, Hb + Hh - 0.3), 12) for y in ys])
     return [
         _part("posts", posts, "Static", "metal"),
-        _part("board", _box((-0.04, -W / 2, Hb), (0.2, W / 2, Hb + Hh)), "Static", "sign_face", color=_pick(rng, _PAINTS)),
+        _part("board", _box((-0.04, -W / 2, Hb), (0.2, W / 2, Hb + Hh)), "Static", "sign_face",
+              color=_pick(rng, _PAINTS)),
     ]
 
 
@@ -1832,7 +1864,8 @@ def _movable_bin(rng: np.random.Generator) -> list[MeshPart]:
     h = _u(rng, 0.95, 1.05)
     colour = _pick(rng, (_GREEN, _DARK, _BLUE, (110, 80, 50, 255), (150, 155, 160, 255)))
     body = _frustum((-0.28, -0.25, 0.05), (0.28, 0.25, h), (-0.31, -0.29), (0.31, 0.29))
-    wheels = _union(*[_cylinder(0.1, (-0.24, sy * 0.26 - 0.025, 0.1), (-0.24, sy * 0.26 + 0.025, 0.1), 12) for sy in (-1.0, 1.0)])
+    wheels = _union(*[_cylinder(0.1, (-0.24, sy * 0.26 - 0.025, 0.1), (-0.24, sy * 0.26 + 0.025, 0.1), 12)
+                      for sy in (-1.0, 1.0)])  # fmt: skip
     return [
         _part("body", body, "Dynamic", "plastic", color=colour),
         _part("lid", _box((-0.33, -0.31, h + 0.001), (0.33, 0.31, h + 0.05)), "Dynamic", "plastic", color=colour),
@@ -1857,9 +1890,11 @@ def _luggage(rng: np.random.Generator) -> list[MeshPart]:
     """Upright suitcase, 0.55-0.75 m, with an extended telescopic handle and two wheels."""
     d, w, h = _u(rng, 0.22, 0.30), _u(rng, 0.38, 0.50), _u(rng, 0.55, 0.75)
     hh = _u(rng, 0.3, 0.45)
-    rods = _union(*[_box((-d / 2 + 0.02, y - 0.01, h + 0.05), (-d / 2 + 0.04, y + 0.01, h + 0.05 + hh)) for y in (-0.12, 0.12)])
-    wheels = _union(*[_cylinder(0.03, (-d / 2 + 0.04, sy * (w / 2 - 0.05) - 0.015, 0.03),
-                                (-d / 2 + 0.04, sy * (w / 2 - 0.05) + 0.015, 0.03), 10) for sy in (-1.0, 1.0)])  # fmt: skip
+    rods = _union(*[_box((-d / 2 + 0.02, y - 0.01, h + 0.05), (-d / 2 + 0.04, y + 0.01, h + 0.05 + hh))
+                    for y in (-0.12, 0.12)])  # fmt: skip
+    yw = w / 2 - 0.05  # wheel centres at +-yw
+    xw = -d / 2 + 0.04
+    wheels = _union(*[_cylinder(0.03, (xw, y - 0.015, 0.03), (xw, y + 0.015, 0.03), 10) for y in (-yw, yw)])
     return [
         _part("case", _box((-d / 2, -w / 2, 0.05), (d / 2, w / 2, h + 0.05)), "Dynamic", "plastic",
               color=_pick(rng, _PAINTS)),
