@@ -322,7 +322,7 @@ def catalog_query(
         typer.echo(json.dumps([{c: clean(v) for c, v in zip(cols, r)} for r in rows], default=str, indent=1))
     elif fmt == "csv":
         buf = io.StringIO()
-        w = csv.writer(buf)
+        w = csv.writer(buf, lineterminator="\n")
         w.writerow(cols)
         w.writerows(rows)
         typer.echo(buf.getvalue().rstrip("\n"))
@@ -336,8 +336,9 @@ def catalog_query(
         typer.echo(f"({len(rows)} rows)")
 
 
-def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int):
-    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view."""
+def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int, size: int = 512):
+    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view,
+    each part in its semantic class's palette colour, glass translucent."""
     from catalog.admesh import dedupe_parts
     from catalog.meshes import MeshStore
     from catalog.parquet import ParquetTable
@@ -364,9 +365,9 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
         recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
         arrays = meshes.load(mesh_path)
         mesh_parts = [MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent,
-                               color=(*taxonomy.by_id(r.semantic_id).color, 255))
+                               color=(*taxonomy.by_id(r.semantic_id).color, 110 if r.transparent else 255))
                       for r, (v, f) in zip(recs, arrays)]
-        images.append(render_asset(mesh_parts))
+        images.append(render_asset(mesh_parts, size=size))
         labels.append(f"{category}/{subclass} {aid[:8]}")
     return labels, images
 
@@ -377,7 +378,7 @@ def admesh_show(
     out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("asset.png"),
     root: RootOpt = "data",
 ) -> None:
-    """Render one asset to a PNG, headless."""
+    """Render one asset to a PNG (semantic colours, glass translucent), headless."""
     from catalog.images import save_png
 
     labels, images = _render_assets(Store(root), None, asset_id, 1)
@@ -391,13 +392,14 @@ def admesh_sheet(
     out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("assets.png"),
     limit: Annotated[int, typer.Option("--limit", min=1, max=400, help="at most this many assets")] = 48,
     columns: Annotated[int, typer.Option("--columns", min=1, max=20)] = 6,
+    size: Annotated[int, typer.Option("--size", min=64, max=1024, help="thumbnail edge, pixels")] = 256,
     root: RootOpt = "data",
 ) -> None:
-    """A contact sheet of the assets a query selects, headless."""
+    """A contact sheet of the assets a query selects (semantic colours), headless."""
     from catalog.images import save_png
     from stages.render import contact_sheet
 
-    labels, images = _render_assets(Store(root), where, None, limit)
+    labels, images = _render_assets(Store(root), where, None, limit, size)
     save_png(None, str(out), contact_sheet(images, labels, columns=columns))
     typer.echo(f"{len(images)} assets -> {out}")
 
