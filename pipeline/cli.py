@@ -354,7 +354,10 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
     try:
         _, rows = query(store, sql)
     except QueryError as exc:
-        fail(f"--where: {exc}" if asset_id is None else str(exc))
+        message = str(exc).splitlines()[0]
+        if "convert string" in message and "category" in message:
+            message += " (category holds class names: use category = 'Car', or category_id = 14)"
+        fail(f"--where: {message}" if asset_id is None else message)
     if not rows:
         fail(f"no asset {asset_id!r} in {store.url}" if asset_id else f"no asset matches --where {where!r}")
     parts = {}
