@@ -366,13 +366,27 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
     meshes, labels, images = MeshStore(store), [], []
     for aid, category, subclass, mesh_path in rows:
         recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
-        arrays = meshes.load(mesh_path)
+        try:
+            arrays = meshes.load(mesh_path)
+        except StoreError as exc:
+            fail(f"asset {aid}: {exc}")
         mesh_parts = [MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent,
                                color=(*taxonomy.by_id(r.semantic_id).color, 110 if r.transparent else 255))
                       for r, (v, f) in zip(recs, arrays)]
         images.append(render_asset(mesh_parts, size=size))
         labels.append(f"{category}/{subclass} {aid[:8]}")
     return labels, images
+
+
+def _write_png(out: Path, image) -> None:
+    from catalog.images import save_png
+
+    if out.is_dir():
+        fail(f"--out {out} is a directory; give a file name such as {out / 'asset.png'}")
+    try:
+        save_png(None, str(out), image)
+    except (OSError, StoreError) as exc:
+        fail(f"--out {out}: cannot write: {exc}")
 
 
 @admesh_app.command("show")
@@ -382,10 +396,8 @@ def admesh_show(
     root: RootOpt = "data",
 ) -> None:
     """Render one asset to a PNG (semantic colours, glass translucent), headless."""
-    from catalog.images import save_png
-
     labels, images = _render_assets(Store(root), None, asset_id, 1)
-    save_png(None, str(out), images[0])
+    _write_png(out, images[0])
     typer.echo(f"{labels[0]} -> {out}")
 
 
@@ -399,11 +411,10 @@ def admesh_sheet(
     root: RootOpt = "data",
 ) -> None:
     """A contact sheet of the assets a query selects (semantic colours), headless."""
-    from catalog.images import save_png
     from stages.render import contact_sheet
 
     labels, images = _render_assets(Store(root), where, None, limit, size)
-    save_png(None, str(out), contact_sheet(images, labels, columns=columns))
+    _write_png(out, contact_sheet(images, labels, columns=columns))
     typer.echo(f"{len(images)} assets -> {out}")
 
 

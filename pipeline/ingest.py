@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from catalog.parquet import ParquetTable
 from catalog.sources.base import SourceError
 from catalog.sources.registry import adapter
-from catalog.store import Store
+from catalog.store import ADMESH_MESHES, Store
 from pipeline import tasks
 from pipeline.registry import Partition, StageSpec
 from pipeline.runner import Progress, StageOutcome, run
@@ -40,13 +40,24 @@ def source_partitions(cfg: SourceIngestConfig) -> list[Partition]:
         raise IngestError(f"category map {cfg.category_map} does not exist")
     try:
         items = adapter(cfg.kind, category_map=cfg.category_map).list_items(cfg.root)
+    except ValueError as exc:  # an option this kind does not take (e.g. a category map)
+        raise IngestError(f"{cfg.kind} source: {exc}") from None
     except SourceError as exc:
         raise IngestError(f"{cfg.kind} source {cfg.root}: {exc.reason}" + (f" ({exc.hint})" if exc.hint else "")) from None
-    extra = (cfg.category_map,) if cfg.category_map else ()
     return [
-        Partition(partition_key(cfg, it.key), {"item_key": it.key, "meta": it.meta}, files=tuple(it.files) + extra)
+        Partition(partition_key(cfg, it.key), {"item_key": it.key, "meta": _stable_meta(it.meta)},
+                  files=tuple(it.files))
         for it in items
     ]
+
+
+def _stable_meta(meta: dict) -> dict:
+    """Item metadata as it enters the cache key: the category-map row an item matched counts,
+    its line number does not (editing another row, or adding a comment, re-ingests nothing)."""
+    row = meta.get("row")
+    if isinstance(row, dict) and "line" in row:
+        meta = {**meta, "row": {k: v for k, v in row.items() if k != "line"}}
+    return meta
 
 
 def source_spec(cfg: SourceIngestConfig) -> StageSpec:
@@ -97,6 +108,16 @@ def prune_vanished(store: Store, cfg: SourceIngestConfig, keys: set[str]) -> int
     return removed
 
 
+def prune_orphan_meshes(store: Store) -> int:
+    """Remove standardized meshes no asset row references any more (an item that changed,
+    turned bad or vanished leaves its old GLB behind)."""
+    referenced = {a.mesh_path for a in ParquetTable(store, AssetRecord).load()}
+    orphans = [rel for rel in store.glob(ADMESH_MESHES, ".glb") if rel not in referenced]
+    for rel in orphans:
+        store.remove(rel)
+    return len(orphans)
+
+
 def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None = None, force: bool = False,
                   progress: Progress | None = None, workers: int | None = None, log=lambda s: None) -> IngestSummary:
     """Ingest one source into the store's ADMesh library."""
@@ -107,6 +128,7 @@ def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None =
     (o,) = outcomes
     summary = IngestSummary(items=len(parts), ran=o.ran, skipped=o.skipped, failed=o.failed)
     summary.pruned = prune_vanished(store, cfg, {p.params["item_key"] for p in parts})
+    prune_orphan_meshes(store)
     # what the library now holds of this source
     prefix = f"source={cfg.kind}/{tasks.root_digest(cfg.root)}-"
     for model in (AssetRecord, QuarantineRecord):
@@ -114,7 +136,7 @@ def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None =
         keys = [rel[len(table.dir) + 1 : -len(".parquet")] for rel in table.paths()]
         rows = table.load([k for k in keys if k.startswith(prefix)])
         if model is AssetRecord:
-            summary.ingested = len(rows)
+            summary.ingested = len({r.asset_id for r in rows})  # duplicates are one asset
         else:
             summary.quarantined = Counter(r.reason for r in rows)
     return summary

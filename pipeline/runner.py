@@ -215,9 +215,13 @@ def file_fingerprint(path: str) -> str:
 
     try:
         fs, p = fsspec.core.url_to_fs(path)
+        if fs.isfile(p) is False and fs.exists(p):
+            return "not a regular file"
         return fingerprint_bytes(fs.cat_file(p))
     except FileNotFoundError:
         return "missing"
+    except OSError as exc:  # a link loop, no permission...: the task reports it
+        return f"unreadable: {exc.strerror or exc}"
 
 
 def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:

@@ -98,6 +98,8 @@ def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -
         result = standardize(_raw_asset(src))
     except SourceError as exc:
         result = Rejection(exc.reason, exc.hint)
+    except Exception as exc:  # whatever else one bad file does, the batch goes on
+        result = Rejection("unreadable file", f"{type(exc).__name__}: {exc}; check or re-export {source_path}")
     if isinstance(result, Rejection):
         for t in (t_assets, t_parts):
             store.remove(t.path(key))
@@ -118,7 +120,8 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
     """Build one town and its sequences; write stuff meshes, placements, sequences, frames, actors."""
     from stages.scenes import build_town, simulate_sequences
 
-    assets = [a for a in dedupe_assets(ParquetTable(store, AssetRecord).load()) if a.source in cfg.asset_sources]
+    # the sources first, then duplicates: an asset also ingested from another source stays in
+    assets = dedupe_assets([a for a in ParquetTable(store, AssetRecord).load() if a.source in cfg.asset_sources])
     if not assets:
         raise StoreError(f"no ADMesh assets from sources {', '.join(cfg.asset_sources)} in {store.url}: "
                          f"run the ingest stage first")

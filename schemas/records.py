@@ -62,6 +62,7 @@ class AssetRecord(Record):
     scale_rule: str = ""  # why that scale (declared units, inferred from a size range...)
     geometry_hash: str  # content hash of the standardized geometry (duplicates share it)
     aliases: list[str] = []  # source paths of duplicates stored once under this asset
+    notes: str = ""  # what standardization changed (faces removed, winding repaired, turned...)
     mesh_path: str  # store-relative path of the standardized GLB
 
     @field_validator("extent")

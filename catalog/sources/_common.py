@@ -247,9 +247,39 @@ def check_glb(path: str) -> dict:
     if not chunks or chunks[0][0] != 0x4E4F534A:  # "JSON"
         raise _unreadable(path, "first chunk is not JSON")
     try:
-        return json.loads(chunks[0][1].decode("utf-8"))
+        doc = json.loads(chunks[0][1].decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise _unreadable(path, f"bad JSON chunk: {e}") from None
+    check_accessors(path, doc)
+    return doc
+
+
+_COMPONENT_BYTES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+# an accessor without a buffer view is zero-filled by readers: bound what it may claim
+MAX_ACCESSOR_ELEMENTS = 50_000_000
+
+
+def check_accessors(path: str, doc: dict) -> None:
+    """Refuse accessors that claim more elements than their buffer view holds (or, without a
+    buffer view, more than MAX_ACCESSOR_ELEMENTS): a 500-byte file must not allocate gigabytes."""
+    views = doc.get("bufferViews") or []
+    for i, acc in enumerate(doc.get("accessors") or []):
+        try:
+            count = int(acc.get("count", 0))
+            size = _COMPONENT_BYTES.get(acc.get("componentType"), 4) * _COMPONENTS.get(acc.get("type"), 1)
+            if count < 0 or count > MAX_ACCESSOR_ELEMENTS:
+                raise _unreadable(path, f"accessor {i} claims {count} elements")
+            if acc.get("bufferView") is None or count == 0:
+                continue
+            view = views[int(acc["bufferView"])]
+            stride = int(view.get("byteStride") or size)
+            need = int(acc.get("byteOffset", 0)) + (count - 1) * stride + size
+            if need > int(view.get("byteLength", 0)):
+                raise _unreadable(path, f"accessor {i} needs {need} bytes, its buffer view has "
+                                        f"{view.get('byteLength', 0)} (corrupt or truncated)")
+        except (TypeError, ValueError, IndexError, KeyError, AttributeError):
+            raise _unreadable(path, f"accessor {i} is malformed") from None
 
 
 def _gltf_json(path: str) -> dict:
@@ -273,6 +303,7 @@ def _gltf_json(path: str) -> dict:
                 raise _unreadable(path, f"buffer {uri!r} not found next to the .gltf")
             if isinstance(b.get("byteLength"), int) and os.path.getsize(bp) < b["byteLength"]:
                 raise _unreadable(path, f"buffer {uri!r} shorter than its byteLength (truncated?)")
+    check_accessors(path, doc)
     return doc
 
 

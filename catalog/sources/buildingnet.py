@@ -58,7 +58,7 @@ import json
 import os
 import re
 
-from catalog.sources._common import check_subclass, compact, make_part, semantic_class
+from catalog.sources._common import check_subclass, compact, make_part, semantic_class, sidecar_files
 from catalog.sources._obj import ObjError, obj_materials, read_obj
 from catalog.sources.base import SourceAsset, SourceError, SourceItem
 from schemas.taxonomy import by_name
@@ -162,7 +162,8 @@ class BuildingNetAdapter:
                 obj = os.path.join(d, name)
                 key = os.path.splitext(os.path.relpath(obj, root))[0].replace(os.sep, "/")
                 label = self._label_path(root, obj)
-                files_ = (obj, label) if label else (obj,)
+                # the OBJ, its MTL libraries (transparency lives there) and its label file
+                files_ = (obj, *sidecar_files(obj), *((label,) if label else ()))
                 items.append(SourceItem(key=key, files=files_, meta={"labels": label}))
         items.sort(key=lambda it: it.key)
         return items

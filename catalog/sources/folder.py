@@ -43,6 +43,7 @@ import csv
 import fnmatch
 import math
 import os
+import stat
 
 from catalog.sources._common import (
     UNITS,
@@ -173,6 +174,11 @@ class FolderAdapter:
                 path = os.path.join(d, name)
                 if name.startswith(".") or not is_mesh_file(name):
                     continue
+                try:
+                    if not stat.S_ISREG(os.stat(path).st_mode):
+                        continue  # a FIFO, socket or device named like a mesh: never opened
+                except OSError:
+                    pass  # a dangling link or a link loop: listed, and reported when read
                 rel = os.path.relpath(path, root).replace(os.sep, "/")
                 row = match_row(rel, rows)
                 files_ = [path, *sidecar_files(path)]
@@ -194,7 +200,7 @@ class FolderAdapter:
                 hint = (f"add a row to the category map matching {item.key!r} "
                         f"(columns glob,category,subclass[,length_m]); map: {where}")  # fmt: skip
             else:
-                hint = f"excluded by line {row['line']} of {where} (empty category)"
+                hint = f"excluded by the row {row['glob']!r} of {where} (empty category)"
             raise SourceError("no category", hint)
         parts = load_parts(path)
         up, forward = default_axes(path)

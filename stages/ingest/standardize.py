@@ -68,6 +68,11 @@ __all__ = [
 
 # unknown units: beyond this ratio to the typical size no rescaling is attempted
 FALLBACK_MAX_RATIO = 100.0
+# vertices closer than this fraction of the asset's bounding-box diagonal are one vertex
+WELD_REL = 1e-9
+# classes whose length runs along their forward axis: lying sideways (y > 1.1 x) is corrected
+LONG_ALONG_X = frozenset({"Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle"})
+SIDEWAYS_RATIO = 1.1
 
 SizeRange = tuple[str, float, float, float]  # (dimension, min, typical, max), metres
 
@@ -349,8 +354,24 @@ def _check_arrays(k: int, part: RawPart) -> tuple[np.ndarray, np.ndarray] | Reje
     return v, f
 
 
-def _clean(v: np.ndarray, f: np.ndarray, tol2: float) -> _Clean:
-    """Drop degenerate then duplicate faces, then unreferenced vertices (order kept)."""
+def _weld(v: np.ndarray, f: np.ndarray, quantum: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices at the same position (to ``quantum``): exporters split vertices along
+    seams (normals, UVs), which would make every closed mesh look open. First occurrence wins."""
+    if len(v) == 0 or quantum <= 0:
+        return v, f
+    keys = np.round(v / quantum).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    # keep the welded vertices in their original order
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return v[first[order]], rank[inverse.reshape(-1)][f]
+
+
+def _clean(v: np.ndarray, f: np.ndarray, tol2: float, quantum: float = 0.0) -> _Clean:
+    """Weld coincident vertices, drop degenerate then duplicate faces, then unreferenced
+    vertices (order kept)."""
+    v, f = _weld(v, f, quantum)
     n_in = len(f)
     # repeated index, or (twice the) area below the tolerance
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
@@ -586,7 +607,7 @@ def standardize(raw: RawAsset) -> StandardizedAsset | Rejection:
     notes: list[str] = []
     cleaned: list[tuple[RawPart, _Clean, int]] = []
     for k, (part, v, f, sid) in enumerate(checked):
-        c = _clean(v, f, tol2)
+        c = _clean(v, f, tol2, quantum=WELD_REL * diag)
         label = f"part {k} '{part.name}'"
         if c.degenerate or c.duplicates or c.unreferenced:
             notes.append(f"{label}: removed {c.degenerate} degenerate and {c.duplicates} duplicate "
@@ -603,6 +624,15 @@ def standardize(raw: RawAsset) -> StandardizedAsset | Rejection:
     rotated = [c.vertices @ R.T for _, c, _ in cleaned]
     allv = np.concatenate(rotated)
     lo, hi = allv.min(axis=0), allv.max(axis=0)
+    # a vehicle is longer than wide: one lying sideways had its forward axis mis-declared, so its
+    # long side is turned to +X (a quarter turn about +Z; front and back stay ambiguous)
+    if category in LONG_ALONG_X and (hi[1] - lo[1]) > SIDEWAYS_RATIO * (hi[0] - lo[0]):
+        quarter = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +Y -> +X
+        rotated = [v @ quarter.T for v in rotated]
+        allv = np.concatenate(rotated)
+        lo, hi = allv.min(axis=0), allv.max(axis=0)
+        notes.append(f"turned a quarter about +Z: its long side lay along Y (declared forward "
+                     f"{raw.forward} is sideways)")
     chosen = _choose_scale(raw, category, hi - lo)
     if isinstance(chosen, Rejection):
         return chosen
@@ -652,7 +682,9 @@ def standardize(raw: RawAsset) -> StandardizedAsset | Rejection:
         closed.append(tight)
 
     ghash = geometry_hash([(p.vertices, p.faces) for p in mesh_parts])
-    ids = ",".join(str(p.semantic_id) for p in mesh_parts)
+    # labels and surface properties are part of identity: two files are one asset only when
+    # they agree on geometry, classes, materials and transparency
+    ids = ",".join(f"{p.semantic_id}:{p.material}:{int(p.transparent)}" for p in mesh_parts)
     aid = hashlib.sha256(f"{category}|{raw.subclass}|{ghash}|{ids}".encode()).hexdigest()[:16]
     watertight = all(closed)
     asset = AssetRecord(
@@ -665,7 +697,7 @@ def standardize(raw: RawAsset) -> StandardizedAsset | Rejection:
         surface_area=float(sum(surface_area(p.vertices, p.faces) for p in mesh_parts)),
         volume=float(sum(signed_volume(p.vertices, p.faces) for p in mesh_parts)) if watertight else None,
         watertight=watertight, scale_applied=float(scale), scale_rule=rule, geometry_hash=ghash,
-        aliases=[], mesh_path="",
+        aliases=[], notes="; ".join(notes), mesh_path="",
     )  # fmt: skip
     part_records = [
         PartRecord(

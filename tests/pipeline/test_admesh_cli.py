@@ -29,12 +29,30 @@ def _png_size(path) -> tuple[int, int]:
     return w, h
 
 
+def _pixels(path):
+    """RGB pixels of a PNG written by catalog.images (one IDAT chunk, filter 0)."""
+    import zlib
+
+    import numpy as np
+
+    data = path.read_bytes()
+    w, h = _png_size(path)
+    n = struct.unpack(">I", data[33:37])[0]
+    raw = np.frombuffer(zlib.decompress(data[41:41 + n]), np.uint8).reshape(h, 1 + 3 * w)
+    return raw[:, 1:].reshape(h, w, 3)
+
+
 def test_show_one_asset(library, tmp_path):
     (aid,), = query(library, "SELECT asset_id FROM assets WHERE category = 'Car' ORDER BY asset_id LIMIT 1")[1]
     out = tmp_path / "car.png"
     r = cli.invoke(app, ["admesh", "show", aid, "--out", str(out), "--root", library.url])
     assert r.exit_code == 0, r.output
     assert _png_size(out) == (512, 512)
+    px = _pixels(out)
+    # white background at the corner, the car in the middle (Car's palette colour is blue)
+    assert (px[0, 0] == 255).all()
+    centre = px[192:320, 192:320].reshape(-1, 3).astype(int)
+    assert ((centre[:, 2] > centre[:, 0] + 40)).mean() > 0.2
 
 
 def test_contact_sheet_of_a_query(library, tmp_path):

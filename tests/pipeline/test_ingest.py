@@ -30,7 +30,8 @@ def source(tmp_path):
     src = tmp_path / "src"
     (src / "cars").mkdir(parents=True)
     (src / "cars" / "a.glb").write_bytes(_glb(_car(4.5)))
-    (src / "cars" / "a_copy.glb").write_bytes(_glb(_car(4.5)))  # duplicate geometry
+    # the same geometry under another node name: other bytes, one asset
+    (src / "cars" / "a_copy.glb").write_bytes(trimesh.Scene({"other_name": _car(4.5)}).export(file_type="glb"))
     (src / "cars" / "b.glb").write_bytes(_glb(_car(4.1)))
     (src / "cars" / "huge.glb").write_bytes(_glb(trimesh.creation.box((1.9, 1.5, 10_000.0))))  # a 10 km "car"
     (src / "cars" / "broken.glb").write_bytes(_glb(_car())[:100])  # truncated
@@ -95,6 +96,45 @@ def test_rerun_skips_unchanged_and_reingests_changed_and_prunes(source, tmp_path
     _, rows = query(root, "SELECT source_path FROM assets")
     names = sorted(p.split("/")[-1] for (p,) in rows)
     assert names == ["a.glb", "nan.obj"]
+    # no standardized mesh is left that no asset references (b's old GLB, nan's none)
+    _, rows = query(root, "SELECT mesh_path FROM assets")
+    on_disk = sorted(root.glob("admesh/meshes", ".glb"))
+    assert on_disk == sorted(p for (p,) in rows)
+
+
+def test_odd_files_are_quarantined_or_skipped_never_fatal(tmp_path):
+    import os
+
+    src = tmp_path / "odd"
+    src.mkdir()
+    (src / "good car ü.glb").write_bytes(_glb(_car(4.5)))  # spaces and unicode
+    (src / "flat.obj").write_text("v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n")  # 2-component vertices
+    os.symlink(src / "loop_b.obj", src / "loop_a.obj")
+    os.symlink(src / "loop_a.obj", src / "loop_b.obj")
+    os.mkfifo(src / "pipe.obj")  # would block a reader forever
+    cmap = tmp_path / "map.csv"
+    cmap.write_text("glob,category,subclass\n*,Car,sedan\n")
+    root = Store(str(tmp_path / "data"))
+    r = _ingest(src, cmap, root.url)
+    assert r.exit_code == 0, r.output
+    _, rows = query(root, "SELECT source_path FROM assets")
+    assert [p.split("/")[-1] for (p,) in rows] == ["good car ü.glb"]
+    _, rows = query(root, "SELECT source_path, reason FROM quarantine ORDER BY 1")
+    got = {p.split("/")[-1]: reason for p, reason in rows}
+    assert set(got) == {"flat.obj", "loop_a.obj", "loop_b.obj"}  # the FIFO is never opened
+
+
+def test_category_map_edits_reingest_only_the_items_they_touch(source, tmp_path):
+    src, cmap = source
+    root = Store(str(tmp_path / "data"))
+    assert _ingest(src, cmap, root.url).exit_code == 0
+    # a comment-free append of an unrelated row: no item's matched row changes
+    cmap.write_text(cmap.read_text() + "misc/*.ply,Static,bench\n")
+    assert "0 ingested now" in _ingest(src, cmap, root.url).output
+    # the .stl row now matches: only thing.stl is re-ingested
+    cmap.write_text(cmap.read_text() + "misc/*.stl,Static,bollard\n")
+    r = _ingest(src, cmap, root.url)
+    assert "1 ingested now" in r.output, r.output
 
 
 def test_unusable_sources_exit_2(source, tmp_path):
@@ -151,4 +191,36 @@ def test_meshfleet_rows_without_mesh_are_reported_not_fatal(tmp_path):
     counts = dict(rows)
     assert counts.get("missing mesh", 0) >= 1000
     _, rows = query(root, "SELECT count(*), min(licence) FROM assets")
-    assert rows[0][0] <= 1
+    assert rows[0][0] == 1 and rows[0][1] == first["license"] if "license" in first else rows[0][0] == 1
+
+
+def test_shapenet_model_in_its_own_frame_comes_out_upright_and_forward(tmp_path):
+    """ShapeNetCore v2 models are normalized, +Y up, front facing -Z: the BMW hull (ours: +X
+    forward, +Z up) written in that frame must come back long along X, upright, at car size."""
+    import json
+    import os
+
+    from stages.ingest.standardize import rotation_to_asset_frame
+
+    hull = "/work/shared/testdata/meshes/scenic/bmwx5_hull.obj"
+    if not os.path.exists(hull):
+        pytest.skip("shared BMW hull absent")
+    car = trimesh.load(hull, force="mesh")
+    R = rotation_to_asset_frame("+y", "-z")  # ShapeNet -> ours; its transpose: ours -> ShapeNet
+    v = (car.vertices - car.vertices.mean(axis=0)) @ R  # row vectors: v @ R == (R.T @ v.T).T
+    v /= np.linalg.norm(v.max(axis=0) - v.min(axis=0))  # normalized: unit bounding-box diagonal
+    root = tmp_path / "ShapeNetCore.v2"
+    d = root / "02958343" / "bmw0001" / "models"
+    d.mkdir(parents=True)
+    (d / "model_normalized.obj").write_text(trimesh.Trimesh(v, car.faces, process=False).export(file_type="obj"))
+    (root / "taxonomy.json").write_text(json.dumps([{"synsetId": "02958343", "name": "car,auto", "children": []}]))
+    store = Store(str(tmp_path / "data"))
+    r = cli.invoke(app, ["ingest", "shapenet", str(root), "--root", store.url, "--scheduler", "synchronous"])
+    assert r.exit_code == 0, r.output
+    _, rows = query(store, "SELECT extent, scale_rule, notes FROM assets")
+    (extent, rule, notes), = rows
+    assert rule.startswith("normalized")
+    assert extent[0] > extent[1] and extent[0] > extent[2]  # long along X
+    assert extent[0] == pytest.approx(4.5, rel=0.15)  # a plausible car length
+    assert extent[2] == pytest.approx(4.5 * 1.835 / 4.853, rel=0.05)  # upright: its height on Z
+    assert "quarter" not in notes  # no correction needed: the declared frame was right

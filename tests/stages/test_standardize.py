@@ -223,10 +223,12 @@ def test_milk_truck_multipart_yup():
     glass = next(p for p in s.geometry.parts if p.material == "glass")
     assert glass.transparent and glass.vertices[:, 0].mean() > 0.0  # the cab stays in front
     # right-handed: the source's +z side (the truck's right when +y up, +x forward) is -Y
-    src = np.concatenate([p.vertices for p in raw.parts])
-    out = _all_vertices(s)
-    top = np.argmax(src[:, 2])
-    assert out[top, 1] == pytest.approx(out[:, 1].min(), abs=1e-6)
+    # right-handed: with +y up and +x forward, the source's +z side (the truck's right) is -Y
+    from stages.ingest.standardize import rotation_to_asset_frame
+
+    R = rotation_to_asset_frame("+y", "+x")
+    np.testing.assert_allclose(R @ [0.0, 0.0, 1.0], [0.0, -1.0, 0.0], atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
     assert s.asset.face_count <= 3624 and sum(p.face_count for p in s.parts) == s.asset.face_count
     assert s.asset.volume is None or s.asset.watertight
 
@@ -445,3 +447,24 @@ def test_unknown_units_rescale_game_units_but_reject_a_10km_car():
     # a 10 km "car" in unknown units: mm would make it 10 m, no unit fits, and it is > 100x typical
     huge = standardize(_raw((part(box(10_000.0)),), category="Car", subclass="sedan", units="unknown"))
     assert isinstance(huge, Rejection) and huge.reason == "absurd size" and "1e+04" in huge.hint
+
+
+def test_split_seam_vertices_are_welded_so_closed_meshes_stay_watertight():
+    box = trimesh.creation.box((4.5, 1.8, 1.5))
+    # exporters split vertices per face (normals/UVs): 36 vertices, every face on its own
+    v = box.vertices[box.faces].reshape(-1, 3)
+    f = np.arange(len(v)).reshape(-1, 3)
+    s = _ok(standardize(_raw(((v, f),), category="Car", subclass="sedan", units="m")))
+    assert s.asset.watertight and s.geometry.part_closed == (True,)
+    assert s.asset.vertex_count == 8
+    assert s.asset.volume == pytest.approx(4.5 * 1.8 * 1.5, rel=1e-9)
+
+
+def test_sideways_vehicle_is_turned_long_side_to_x():
+    box = trimesh.creation.box((1.8, 4.5, 1.5))  # lying along y: forward declared wrong
+    s = _ok(standardize(_raw(((box.vertices, box.faces),), category="Car", subclass="sedan", units="m")))
+    np.testing.assert_allclose(s.asset.extent, [4.5, 1.8, 1.5], atol=1e-9)
+    assert "quarter" in s.asset.notes
+    # a building may be wider than deep: left as declared
+    b = _ok(standardize(_raw(((box.vertices * 4, box.faces),), category="Building", subclass="house", units="m")))
+    np.testing.assert_allclose(b.asset.extent, [7.2, 18.0, 6.0], atol=1e-9)
