@@ -1,0 +1,70 @@
+import math
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from schemas.rig import CameraSpec, LidarSpec, RigConfig
+
+
+def _project(cam: CameraSpec, p_ego) -> tuple[float, float, float]:
+    """Project an ego-frame point into the camera image: (u, v, depth)."""
+    T = np.array(cam.camera_to_ego())
+    p = np.linalg.inv(T) @ np.array([*p_ego, 1.0])
+    uvw = np.array(cam.intrinsics) @ p[:3]
+    return uvw[0] / uvw[2], uvw[1] / uvw[2], p[2]
+
+
+def test_reference_rig_intrinsics_are_derived():
+    rig = RigConfig()
+    assert [c.name for c in rig.cameras] == [f"camera_0{i}" for i in range(6)]
+    cam = rig.cameras[0]
+    assert (cam.width, cam.height) == (1408, 376)
+    f = 1408 / (2 * math.tan(math.radians(103.744808 / 2)))
+    assert cam.focal_px == pytest.approx(f) and cam.focal_px == pytest.approx(552.55, abs=0.01)
+    K = np.array(cam.intrinsics)
+    np.testing.assert_allclose(K, [[f, 0, 704], [0, f, 188], [0, 0, 1]])
+    assert cam.vfov_deg == pytest.approx(math.degrees(2 * math.atan(188 / f)))
+
+
+def test_carla_positions_convert_once_to_our_frame():
+    rig = RigConfig()
+    by = {c.name: c for c in rig.cameras}
+    # camera_00 sits at CARLA y = -0.3 (left in CARLA's y-right frame): ours y = +0.3
+    T = np.array(by["camera_00"].sensor_to_ego())
+    np.testing.assert_allclose(T[:3, 3], [0.8, 0.3, 1.55])
+    # a point 10 m straight ahead of camera_00 lands on the principal point
+    u, v, d = _project(by["camera_00"], [10.8, 0.3, 1.55])
+    assert (u, v, d) == pytest.approx((704.0, 188.0, 10.0))
+    # camera_02 has CARLA yaw -90 (turned left): it sees a point on our +y side
+    u, v, d = _project(by["camera_02"], [0.0, 10.0, 1.55])
+    assert d > 0 and u == pytest.approx(704.0) and v == pytest.approx(188.0)
+    # camera_03 (yaw +90, right) sees -y; the rear pair sees -x
+    assert _project(by["camera_03"], [0.0, -10.0, 1.55])[2] > 0
+    assert _project(by["camera_04"], [-10.0, 0.3, 1.55])[2] > 0
+    # image axes: a point to the camera's right has larger u, a point lower has larger v
+    u_r, _, _ = _project(by["camera_00"], [10.8, -1.0, 1.55])
+    _, v_d, _ = _project(by["camera_00"], [10.8, 0.3, 0.5])
+    assert u_r > 704.0 and v_d > 188.0
+    for cam in rig.cameras:
+        R = np.array(cam.camera_to_ego())[:3, :3]
+        assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_lidar_beams_and_points():
+    lidar = RigConfig().lidar
+    assert lidar.z == 1.73 and lidar.channels == 32 and lidar.range_m == 80.0
+    el = lidar.beam_elevations_deg
+    assert len(el) == 32 and el[0] == 10.0 and el[-1] == pytest.approx(-30.0)
+    assert lidar.points_per_frame == 12_500
+
+
+def test_bad_rigs_are_refused():
+    with pytest.raises(ValidationError, match="unique"):
+        RigConfig(cameras=(CameraSpec(name="a"), CameraSpec(name="a")))
+    with pytest.raises(ValidationError):
+        CameraSpec(name="c", hfov_deg=180.0)
+    with pytest.raises(ValidationError, match="below"):
+        LidarSpec(upper_fov_deg=-30, lower_fov_deg=10)
+    with pytest.raises(ValidationError):
+        RigConfig(camera=())
