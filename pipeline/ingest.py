@@ -18,6 +18,7 @@ from catalog.store import ADMESH_MESHES, Store
 from pipeline import tasks
 from pipeline.registry import Partition, StageSpec
 from pipeline.runner import Progress, StageOutcome, run
+from pipeline.stages import SHARED_CODE
 from schemas.configs import DatasetConfig, SourceIngestConfig
 from schemas.records import AssetRecord, PartRecord, QuarantineRecord
 
@@ -67,19 +68,13 @@ def source_spec(cfg: SourceIngestConfig) -> StageSpec:
         name=STAGE,
         description=f"ingest the {cfg.kind} source {cfg.root}",
         upstream=(),
-        code_modules=("stages.ingest", "catalog.sources", *_shared_code()),
+        code_modules=("stages.ingest", "catalog.sources", *SHARED_CODE),
         reads=(cfg.root,),
         writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/", "admesh/quarantine/"),
         partitions=lambda ctx: parts,
         task=tasks.ingest_source_task,
         config_of=lambda _: cfg,
     )
-
-
-def _shared_code() -> tuple[str, ...]:
-    from pipeline.stages import SHARED_CODE
-
-    return SHARED_CODE
 
 
 @dataclass

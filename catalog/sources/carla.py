@@ -219,15 +219,16 @@ class CarlaAdapter:
                 continue
             path = os.path.join(odir, name)
             files = [path]
+            # a malformed object is still listed (with just its JSON as input): read() reports it
             try:
-                doc = _load_object(path)
-                for c in doc["components"]:
-                    mesh = os.path.abspath(os.path.join(root, c["mesh"]))
-                    if mesh not in files:
-                        files.append(mesh)
-                        files += [m for m in mtl_files(mesh) if m not in files]
+                components = _load_object(path)["components"]
             except SourceError:
-                pass  # listed anyway; read() reports it
+                components = []
+            for c in components:
+                mesh = os.path.abspath(os.path.join(root, c["mesh"]))
+                if mesh not in files:
+                    files.append(mesh)
+                    files += [m for m in mtl_files(mesh) if m not in files]
             items.append(SourceItem(key=os.path.splitext(name)[0], files=tuple(files), meta={}))
         items.sort(key=lambda it: it.key)
         return items

@@ -174,11 +174,14 @@ class FolderAdapter:
                 path = os.path.join(d, name)
                 if name.startswith(".") or not is_mesh_file(name):
                     continue
+                # a FIFO, socket or device named like a mesh is never opened; a dangling link or
+                # a link loop (stat fails) is listed, and reported when read
                 try:
-                    if not stat.S_ISREG(os.stat(path).st_mode):
-                        continue  # a FIFO, socket or device named like a mesh: never opened
+                    regular = stat.S_ISREG(os.stat(path).st_mode)
                 except OSError:
-                    pass  # a dangling link or a link loop: listed, and reported when read
+                    regular = True
+                if not regular:
+                    continue
                 rel = os.path.relpath(path, root).replace(os.sep, "/")
                 row = match_row(rel, rows)
                 files_ = [path, *sidecar_files(path)]
