@@ -25,13 +25,6 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str]] = {
 }
 
 
-def array_fingerprint(data: np.ndarray) -> str:
-    """Content fingerprint of an in-memory array: dtype, shape and bytes (hashed in place)."""
-    h = hashlib.sha256(f"{data.dtype.str}{data.shape}".encode())
-    h.update(memoryview(np.ascontiguousarray(data)).cast("B"))
-    return "sha256:" + h.hexdigest()[:24]
-
-
 def parse_output_key(key: str) -> tuple[str, int] | None:
     """``occupancy.zarr/<seq>/<res>/<name>[<frame>]`` -> (array path, frame); None otherwise."""
     if not (key.startswith(OCCUPANCY_ZARR + "/") and key.endswith("]") and "[" in key):

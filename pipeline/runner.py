@@ -8,6 +8,7 @@ A partition is skipped when its latest lineage record is completed, has the same
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
@@ -202,8 +203,6 @@ class StagePlan:
 
 
 def _digest(outputs: str) -> str:
-    import hashlib
-
     return hashlib.sha256(outputs.encode()).hexdigest()[:24]
 
 

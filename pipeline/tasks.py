@@ -69,7 +69,7 @@ def root_digest(root: str) -> str:
     return hashlib.sha256(root.encode()).hexdigest()[:10]
 
 
-def _raw_asset(src) -> "RawAsset":
+def _raw_asset(src):
     """catalog SourceAsset -> stages RawAsset (same fields; the layers share no types)."""
     from stages.ingest.raw import RawAsset, RawPart
 

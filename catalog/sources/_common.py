@@ -213,6 +213,21 @@ def make_part(name, vertices, faces, *, material="default", transparent=False, t
                       transparent=bool(transparent), texture=texture, semantic_id=semantic_id)  # fmt: skip
 
 
+def read_json_object(path: str, reason: str, missing_reason: str | None = None) -> dict:
+    """A JSON file whose top level is an object; any failure is a SourceError with ``reason``
+    (``missing_reason`` when the file does not exist)."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = json.load(f)
+    except FileNotFoundError:
+        raise SourceError(missing_reason or reason, f"{path} does not exist") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise SourceError(reason, f"{path}: bad JSON: {e}") from None
+    if not isinstance(doc, dict):
+        raise SourceError(reason, f"{path}: expected a JSON object")
+    return doc
+
+
 def _unreadable(path: str, why: str) -> SourceError:
     return SourceError("unreadable file", f"{path}: {why}")
 
@@ -285,15 +300,7 @@ def check_accessors(path: str, doc: dict) -> None:
 def _gltf_json(path: str) -> dict:
     if ext_of(path) == ".glb":
         return check_glb(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except FileNotFoundError:
-        raise SourceError("missing mesh", f"{path} does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise _unreadable(path, f"bad glTF JSON: {e}") from None
-    if not isinstance(doc, dict):
-        raise _unreadable(path, "glTF JSON is not an object")
+    doc = read_json_object(path, "unreadable file", missing_reason="missing mesh")
     base = os.path.dirname(path)
     for b in doc.get("buffers", []) or []:
         uri = b.get("uri", "") if isinstance(b, dict) else ""

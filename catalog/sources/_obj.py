@@ -74,19 +74,21 @@ def _logical_lines(text: str):
         yield start, buf
 
 
+def _statements(text: str):
+    """(line number, tokens) of every non-empty statement, comments stripped."""
+    for no, line in _logical_lines(text):
+        parts = line.split("#", 1)[0].split()
+        if parts:
+            yield no, parts
+
+
 def parse_obj(text: str) -> ObjData:
     """Parse OBJ text. Raises :class:`ObjError` naming the line of a malformed record."""
     verts: list[tuple[float, float, float]] = []
     groups: dict[tuple[str, str, str], ObjGroup] = {}
     mtllibs: list[str] = []
     obj, grp, mat = "", "", ""
-    for no, line in _logical_lines(text):
-        hash_at = line.find("#")
-        if hash_at >= 0:
-            line = line[:hash_at]
-        parts = line.split()
-        if not parts:
-            continue
+    for no, parts in _statements(text):
         tag = parts[0]
         try:
             if tag == "v":
@@ -166,13 +168,7 @@ def parse_mtl(text: str) -> dict[str, MtlMaterial]:
                 transparent = cur["tr"] is not None and cur["tr"] > 0.0
             out[cur["name"]] = MtlMaterial(cur["name"], transparent, cur["map"])
 
-    for _, line in _logical_lines(text):
-        hash_at = line.find("#")
-        if hash_at >= 0:
-            line = line[:hash_at]
-        parts = line.split()
-        if not parts:
-            continue
+    for _, parts in _statements(text):
         tag = parts[0].lower()
         if tag == "newmtl":
             close()

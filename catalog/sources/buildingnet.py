@@ -54,11 +54,11 @@ Declarations
 
 from __future__ import annotations
 
-import json
 import os
 import re
 
-from catalog.sources._common import check_subclass, compact, make_part, semantic_class, sidecar_files
+from catalog.sources._common import (check_subclass, compact, make_part, read_json_object, semantic_class,
+                                      sidecar_files)
 from catalog.sources._obj import ObjError, obj_materials, read_obj
 from catalog.sources.base import SourceAsset, SourceError, SourceItem
 from schemas.taxonomy import by_name
@@ -169,13 +169,7 @@ class BuildingNetAdapter:
         return items
 
     def _read_labels(self, path: str) -> tuple[dict, dict]:
-        try:
-            with open(path, encoding="utf-8") as f:
-                doc = json.load(f)
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise SourceError("bad metadata", f"{path}: {e}") from None
-        if not isinstance(doc, dict):
-            raise SourceError("bad metadata", f"{path}: expected a JSON object")
+        doc = read_json_object(path, "bad metadata")
         if isinstance(doc.get("labels"), dict):
             labels, meta = doc["labels"], {k: v for k, v in doc.items() if k != "labels"}
         else:

@@ -90,6 +90,7 @@ from catalog.sources._common import (
     compact,
     default_subclass,
     make_part,
+    read_json_object,
     semantic_class,
 )
 from catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
@@ -135,15 +136,7 @@ def _vec(comp: dict, key: str, default: float, where: str) -> list[float]:
 
 
 def _load_object(path: str) -> dict:
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except FileNotFoundError:
-        raise SourceError("bad metadata", f"{path} does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise SourceError("bad metadata", f"{path}: {e}") from None
-    if not isinstance(doc, dict):
-        raise SourceError("bad metadata", f"{path}: expected a JSON object")
+    doc = read_json_object(path, "bad metadata")
     fmt = doc.get("format", FORMAT)
     if fmt != FORMAT:
         raise SourceError("bad metadata", f"{path}: format {fmt!r}, this reader reads {FORMAT!r}")

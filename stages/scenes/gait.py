@@ -290,7 +290,7 @@ def detect_gait_cycles(p: np.ndarray, times: np.ndarray, min_speed: float = 0.5)
     fwd = _horizontal_unit(vel_s)
     moving = speed > max(min_speed, 0.6 * float(np.percentile(speed, 95)))  # steady walking only
     # longest run of moving frames
-    best, start, cur = (0, 0), None, 0
+    best, start = (0, 0), None
     for i, m in enumerate(np.append(moving, False)):
         if m and start is None:
             start = i
