@@ -14,6 +14,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
+from schemas.rig import RigConfig
 
 
 class StageConfig(BaseModel):
@@ -37,21 +38,56 @@ class SourceIngestConfig(StageConfig):
     category_map: str | None = Field(None, description="folder sources: CSV glob,category,subclass[,length_m]")
 
 
+TrafficLevelName = Literal["none", "low", "medium", "high"]
+TownStyle = Literal["downtown", "suburb", "arterial", "opendrive"]
+
+
+class TownSpec(StageConfig):
+    """One town of the dataset: a procedural style built from the seed, or an OpenDRIVE file with
+    buildings and vegetation placed procedurally beside its network; and the traffic sequences
+    driven through it.
+
+    The layout fields (``blocks`` ... ``sidewalk_width``) override the style's defaults for the
+    procedural styles and are ignored for OpenDRIVE towns.
+    """
+
+    style: TownStyle = "downtown"
+    opendrive: str | None = Field(
+        None, description="opendrive style: path of the .xodr file, or builtin:<name> for a file shipped with carlaocc")
+    traffic_levels: tuple[TrafficLevelName, ...] = Field(("medium",), min_length=1)
+    sequences_per_level: int = Field(1, ge=1, le=64)
+    blocks: int | None = Field(None, ge=1, le=12, description="city blocks per side of the road grid")
+    block_size: float | None = Field(None, gt=10.0, le=500.0, description="block edge, m, kerb to kerb")
+    road_width: float | None = Field(None, gt=3.0, le=40.0, description="carriageway width, m")
+    sidewalk_width: float | None = Field(None, gt=0.5, le=10.0, description="sidewalk width, m")
+
+    @model_validator(mode="after")
+    def _opendrive_file(self) -> TownSpec:
+        if (self.style == "opendrive") != (self.opendrive is not None):
+            raise ValueError("a town has an opendrive file exactly when its style is 'opendrive'")
+        if len(set(self.traffic_levels)) != len(self.traffic_levels):
+            raise ValueError(f"traffic_levels repeats a level: {list(self.traffic_levels)}")
+        return self
+
+
+def _default_towns() -> tuple[TownSpec, ...]:
+    return (
+        TownSpec(style="downtown", traffic_levels=("low", "high")),
+        TownSpec(style="opendrive", opendrive="builtin:crossroads.xodr", traffic_levels=("medium",)),
+    )
+
+
 class ScenesConfig(StageConfig):
-    """Procedural towns and ego sequences driven through them."""
+    """Towns, the traffic sequences driven through them and the ego rig."""
 
     seed: int = 11
-    towns: int = Field(1, ge=1, le=16)
-    blocks: int = Field(3, ge=1, le=12, description="city blocks per side of the road grid")
-    block_size: float = Field(60.0, gt=10.0, le=500.0, description="block edge, m, kerb to kerb")
-    road_width: float = Field(10.0, gt=3.0, le=40.0, description="carriageway width, m")
-    sidewalk_width: float = Field(3.0, gt=0.5, le=10.0, description="sidewalk width, m")
+    towns: tuple[TownSpec, ...] = Field(default_factory=_default_towns, min_length=1, max_length=16)
     curb_height: float = Field(0.15, ge=0.0, le=0.5, description="kerb height above the road, m")
-    sequences_per_town: int = Field(1, ge=1, le=64)
-    frame_count: int = Field(20, ge=2, le=10_000)
+    frame_count: int = Field(16, ge=2, le=10_000)
     rate_hz: float = Field(20.0, gt=0.0, le=100.0)
-    traffic_level: Literal["none", "low", "medium", "high"] = "medium"
     ego_speed: float = Field(8.0, ge=0.0, le=40.0, description="ego target speed, m/s")
+    actor_range: float = Field(80.0, gt=0.0, le=1000.0, description="actors within this many m of the ego are recorded")
+    rig: RigConfig = Field(default_factory=RigConfig)
     asset_sources: tuple[str, ...] = Field(
         ("procedural",), min_length=1,
         description="ADMesh sources whose assets towns and traffic draw from (e.g. procedural, folder)")
@@ -124,6 +160,7 @@ __all__ = [
     "ScenesConfig",
     "SourceIngestConfig",
     "StageConfig",
+    "TownSpec",
     "VoxelizeConfig",
     "parse_resolutions",
 ]

@@ -109,11 +109,36 @@ class PlacementRecord(Record):
     semantic_id: int
     instance_id: int  # 0 for stuff
     pose: list[float]  # object-to-world, 4x4 row-major
+    is_thing: bool  # taxonomy thing class (has an instance id) or stuff
+    aabb_min: list[float]  # world-frame axis-aligned bounding box of the placed mesh, m
+    aabb_max: list[float]
 
     @field_validator("pose")
     @classmethod
     def _pose_4x4(cls, v: list[float]) -> list[float]:
         return _check_pose(v)
+
+    @field_validator("aabb_min", "aabb_max")
+    @classmethod
+    def _aabb_vec3(cls, v: list[float]) -> list[float]:
+        return _check_vec3(v)
+
+
+class TownRecord(Record):
+    """One town: how it was made and the size of its road network."""
+
+    TABLE: ClassVar[str] = "towns"
+    town: str
+    style: Literal["downtown", "suburb", "arterial", "opendrive"]
+    source: str  # the OpenDRIVE file for opendrive towns, "" for procedural ones
+    seed: int
+    road_length: float  # m of road centreline, each road once
+    lane_count: int  # lanes of the traffic network (junction connectors included)
+    junction_count: int
+    walkway_length: float  # m of walkways (sidewalks and crosswalks)
+    crosswalk_count: int
+    placement_count: int
+    bounds: list[float]  # xmin, ymin, xmax, ymax of the town ground, m
 
 
 class SequenceRecord(Record):
@@ -127,6 +152,8 @@ class SequenceRecord(Record):
     rate_hz: float
     traffic_level: Literal["none", "low", "medium", "high"]
     ego_asset_id: str
+    parent_sequence_id: str | None = None  # edited sequences (``scenes swap``): the original
+    edit: str = ""  # what the edit changed, e.g. "swap Car seed=3"
 
 
 class FrameRecord(Record):
@@ -159,16 +186,34 @@ class ActorStateRecord(Record):
     box_size: list[float]  # length, width, height, m
     yaw: float  # rad, about world z
     velocity: list[float]  # world frame, m/s
-    gait_phase: float | None = None  # walkers only, [0, 1)
+    angular_velocity: list[float]  # world frame, rad/s
+    gait_phase: float | None = None  # walkers only: simulated phase of the gait cycle, [0, 1)
+    phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
 
     @field_validator("pose")
     @classmethod
     def _pose_4x4(cls, v: list[float]) -> list[float]:
         return _check_pose(v)
-    @field_validator("box_center", "box_size", "velocity")
+    @field_validator("box_center", "box_size", "velocity", "angular_velocity")
     @classmethod
     def _vecs_3(cls, v: list[float]) -> list[float]:
         return _check_vec3(v)
+
+
+class SensorPoseRecord(Record):
+    """A rig sensor's pose in one frame (cameras: OpenCV camera frame, x right, y down, z forward;
+    LiDAR: x forward, y left, z up)."""
+
+    TABLE: ClassVar[str] = "sensor_poses"
+    sequence_id: str
+    frame_index: int
+    sensor: str
+    pose: list[float]  # sensor-to-world, 4x4 row-major
+
+    @field_validator("pose")
+    @classmethod
+    def _pose_4x4(cls, v: list[float]) -> list[float]:
+        return _check_pose(v)
 
 
 class QualityRecord(Record):
@@ -220,8 +265,10 @@ PERSISTED: tuple[type[Record], ...] = (
     PartRecord,
     QuarantineRecord,
     PlacementRecord,
+    TownRecord,
     SequenceRecord,
     FrameRecord,
+    SensorPoseRecord,
     ActorStateRecord,
     QualityRecord,
     ClassQualityRecord,

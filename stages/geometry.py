@@ -46,6 +46,7 @@ class SceneMesh:
     is_stuff: bool
     closed: bool
     name: str = field(default="")
+    transparent: bool = False  # glass and other see-through parts (cameras see past them)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
