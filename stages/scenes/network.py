@@ -42,16 +42,22 @@ def polyline_at(points: np.ndarray, cum: np.ndarray, s) -> tuple[np.ndarray, np.
     """Position (…, 3) and heading yaw (…,) rad at arc length(s) ``s`` (clamped to the line).
 
     ``points`` is (K, 3), ``cum`` its :func:`polyline_lengths`. Positions are linear between
-    vertices; the heading is the segment's direction."""
+    vertices; the heading turns linearly from one vertex tangent to the next (a vertex's tangent
+    bisects its two segments), so it is continuous and its rate follows the curvature."""
     s = np.clip(np.asarray(s, dtype=np.float64), 0.0, cum[-1])
     # 1. the segment holding each s (zero-length segments are never chosen)
     i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2)
     seg = np.maximum(cum[i + 1] - cum[i], 1e-12)
-    # 2. linear interpolation inside it
-    t = ((s - cum[i]) / seg)[..., None]
+    # 2. linear interpolation of the position inside it
+    t = (s - cum[i]) / seg
     p0, p1 = points[i], points[i + 1]
-    d = p1 - p0
-    return p0 + t * d, np.arctan2(d[..., 1], d[..., 0])
+    pos = p0 + t[..., None] * (p1 - p0)
+    # 3. heading: segment headings, vertex tangents bisecting them, blended along the segment
+    d = np.diff(points[:, :2], axis=0)
+    seg_yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    vertex_yaw = np.concatenate([seg_yaw[:1], (seg_yaw[:-1] + seg_yaw[1:]) / 2, seg_yaw[-1:]])
+    yaw = vertex_yaw[i] + t * (vertex_yaw[i + 1] - vertex_yaw[i])
+    return pos, np.remainder(yaw + np.pi, 2 * np.pi) - np.pi
 
 
 @dataclass(frozen=True)
