@@ -38,6 +38,9 @@ app.add_typer(catalog_app, name="catalog")
 admesh_app = typer.Typer(help="Look at the ADMesh library: render assets to PNG (headless).",
                          no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(admesh_app, name="admesh")
+scenes_app = typer.Typer(help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
+                         rich_markup_mode=None)
+app.add_typer(scenes_app, name="scenes")
 
 RootOpt = Annotated[str, typer.Option("--root", help="dataset root: a directory or an fsspec URL (memory://...)")]
 ResOpt = Annotated[str, typer.Option("--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05")]
@@ -86,6 +89,20 @@ def load_config(path: Path | None) -> DatasetConfig:
 
 # a frame is held densely in memory (uint8 semantic + uint32 instance = 5 bytes a voxel)
 MAX_FRAME_VOXELS = 1_000_000_000
+
+
+def check_towns(cfg: DatasetConfig) -> None:
+    """Every OpenDRIVE town's file exists and parses; else a one-line error naming it."""
+    from catalog.opendrive import read_opendrive
+    from catalog.towns import resolve_opendrive
+
+    for i, spec in enumerate(cfg.scenes.towns):
+        if spec.opendrive is None:
+            continue
+        try:
+            read_opendrive(resolve_opendrive(spec.opendrive))
+        except (OSError, ValueError) as exc:
+            fail(f"scenes.towns[{i}].opendrive: {exc}")
 
 
 def _resolutions(res: str, config: DatasetConfig) -> tuple[float, ...]:
@@ -159,6 +176,7 @@ def run(
     from pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
     cfg = load_config(config)
+    check_towns(cfg)
     resolutions = _resolutions(res, cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
@@ -415,6 +433,91 @@ def admesh_sheet(
     labels, images = _render_assets(Store(root), where, None, limit, size)
     _write_png(out, contact_sheet(images, labels, columns=columns))
     typer.echo(f"{len(images)} assets -> {out}")
+
+
+@scenes_app.command("town-mesh")
+def scenes_town_mesh(
+    town: Annotated[str, typer.Argument(help="town name, e.g. town00 (see: carlaocc catalog query 'select * from towns')")],
+    out: Annotated[Path, typer.Option("--out", help="GLB file to write")],
+    root: RootOpt = "data",
+) -> None:
+    """Write the town's unified static mesh (world frame, Z up converted to glTF's Y up) as GLB:
+    one primitive per (class, instance), per-vertex attributes _SEMANTIC and _INSTANCE, and
+    extras naming the class and instance (the city-level reconstruction of the paper)."""
+    from pipeline.scenes import town_mesh_glb
+
+    store = _store(root, writable=False)
+    try:
+        data, triangles, placements = town_mesh_glb(store, town)
+    except StoreError as exc:
+        fail(str(exc))
+    _write_bytes(out, data)
+    typer.echo(f"wrote {out}: {triangles:,} triangles from {placements:,} placements of {town}")
+
+
+@scenes_app.command("frame-mesh")
+def scenes_frame_mesh(
+    sequence: Annotated[str, typer.Argument(help="sequence id, e.g. town00_low_seq000")],
+    frame: Annotated[int, typer.Argument(min=0, help="frame index")],
+    out: Annotated[Path, typer.Option("--out", help="GLB file to write")],
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+    range_m: Annotated[Optional[float], typer.Option("--range", min=1.0, help="cut to a box of +-RANGE m around the LiDAR (default: the occupancy region of the voxelize config)")] = None,
+) -> None:
+    """Write one frame's panoptic scene mesh (LiDAR frame) as GLB, with per-face semantic and
+    instance ids, for inspection."""
+    import numpy as np
+
+    from pipeline.scenes import frame_mesh_glb
+    from stages.scenes.assembly import region_of_grid
+
+    cfg = load_config(config)
+    if range_m is None:
+        region = region_of_grid(cfg.voxelize.grid(0.2))
+    else:
+        region = (np.array([-range_m, -range_m, -5.0]), np.array([range_m, range_m, 20.0]))
+    store = _store(root, writable=False)
+    try:
+        data, triangles = frame_mesh_glb(store, sequence, frame, region)
+    except StoreError as exc:
+        fail(str(exc))
+    _write_bytes(out, data)
+    typer.echo(f"wrote {out}: {triangles:,} triangles of {sequence} frame {frame}")
+
+
+@scenes_app.command("swap")
+def scenes_swap(
+    class_name: Annotated[str, typer.Option("--class", help="thing class whose actors get other assets, e.g. Car")],
+    seed: Annotated[int, typer.Option("--seed", help="seed of the replacement draw")],
+    sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to edit (default: every original sequence)")] = None,
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+) -> None:
+    """Parametric editing: new sequences <id>~swap-<class>-s<seed> in which every actor of the
+    class uses another asset with a compatible footprint; trajectories, rig and timing are
+    unchanged; parent_sequence_id and the runs table record where they came from. Then
+    `carlaocc run --stages voxelize,metrics` voxelizes them."""
+    from pipeline.scenes import swap_class
+
+    cfg = load_config(config)
+    store = _store(root, writable=True)
+    try:
+        results = swap_class(store, class_name, seed, sequence or None, cfg.scenes.asset_sources)
+    except StoreError as exc:
+        fail(str(exc))
+    for r in results:
+        typer.echo(f"{r.sequence_id}: {r.swapped} {class_name} instance(s) swapped, {r.kept} kept (no compatible asset)"
+                   f"; parent {r.parent}")
+
+
+def _write_bytes(out: Path, data: bytes) -> None:
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(out.name + ".tmp")
+        tmp.write_bytes(data)
+        tmp.replace(out)
+    except OSError as exc:
+        fail(f"cannot write {out}: {exc.strerror or exc}")
 
 
 def main() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
+from catalog.store import StoreError
 from pipeline import tasks
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
 from schemas.records import SequenceRecord
@@ -23,9 +24,21 @@ def _town_key(i: int) -> str:
     return f"town{i:02d}"
 
 
+def _town_files(spec) -> tuple[str, ...]:
+    """Input files of a town (its OpenDRIVE file), fingerprinted with the partition."""
+    if spec.opendrive is None:
+        return ()
+    from catalog.towns import resolve_opendrive
+
+    try:
+        return (str(resolve_opendrive(spec.opendrive)),)
+    except (FileNotFoundError, ValueError) as exc:
+        raise StoreError(f"town opendrive file: {exc}") from None
+
+
 def _scenes_partitions(ctx: Context) -> list[Partition]:
     """One per town; each reads the library of the configured asset sources (the procedural
-    partition and every ingested item of the other sources)."""
+    partition and every ingested item of the other sources) and its OpenDRIVE file."""
     sources = ctx.config.scenes.asset_sources
     needs = [("ingest", INGEST_PARTITION)] if "procedural" in sources else []
     others = tuple(s for s in sources if s != "procedural")
@@ -35,11 +48,12 @@ def _scenes_partitions(ctx: Context) -> list[Partition]:
         latest = LineageLog(ctx.store).latest("ingest")
         needs += [("ingest", k) for k, r in sorted(latest.items())
                   if r.status == "completed" and k.split(":")[0] in others]
-    return [Partition(_town_key(i), {"town_index": i}, needs=tuple(needs)) for i in range(ctx.config.scenes.towns)]
+    return [Partition(_town_key(i), {"town_index": i}, needs=tuple(needs), files=_town_files(spec))
+            for i, spec in enumerate(ctx.config.scenes.towns)]
 
 
 def _sequences(ctx: Context) -> list[SequenceRecord]:
-    towns = {_town_key(i) for i in range(ctx.config.scenes.towns)}
+    towns = {_town_key(i) for i in range(len(ctx.config.scenes.towns))}
     seqs = [s for s in ParquetTable(ctx.store, SequenceRecord).load() if s.town in towns]
     if not seqs:
         raise UpstreamMissing("no sequences yet: the scenes stage has not run")
@@ -104,11 +118,12 @@ STAGES: dict[str, StageSpec] = {
         ),
         StageSpec(
             name="scenes",
-            description="procedural towns, traffic and ego sequences (poses, boxes, velocities)",
+            description="towns (procedural styles, OpenDRIVE), traffic, ego sequences, rig poses, actors",
             upstream=("ingest",),
             code_modules=("stages.scenes", *SHARED_CODE),
             reads=("admesh/assets/",),
-            writes=("scenes/meshes/", "scenes/placements/", "scenes/sequences/", "scenes/frames/", "scenes/actors/"),
+            writes=("scenes/meshes/", "scenes/placements/", "scenes/towns/", "scenes/sequences/", "scenes/frames/",
+                    "scenes/sensor_poses/", "scenes/actors/"),
             partitions=_scenes_partitions,
             task=tasks.scenes_task,
         ),

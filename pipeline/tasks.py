@@ -19,7 +19,7 @@ from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
 from catalog.store import Store, StoreError
 from pipeline.registry import Partition
-from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, SourceIngestConfig, VoxelizeConfig
+from schemas.configs import IngestConfig, MetricsConfig, ScenesConfig, SourceIngestConfig, TownSpec, VoxelizeConfig
 from schemas.grid import GridSpec
 from schemas.records import (
     ActorStateRecord,
@@ -30,7 +30,9 @@ from schemas.records import (
     PlacementRecord,
     QualityRecord,
     QuarantineRecord,
+    SensorPoseRecord,
     SequenceRecord,
+    TownRecord,
 )
 from stages.geometry import AssetGeometry, MeshPart, is_watertight
 
@@ -116,16 +118,52 @@ def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -
 
 
 # -- scenes ---------------------------------------------------------------------------------------
-def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
-    """Build one town and its sequences; write stuff meshes, placements, sequences, frames, actors."""
-    from stages.scenes import build_town, simulate_sequences
-
-    # the sources first, then duplicates: an asset also ingested from another source stays in
+def scene_assets(store: Store, cfg: ScenesConfig) -> list[AssetRecord]:
+    """The ADMesh assets towns and traffic draw from: the configured sources, duplicates once."""
     assets = dedupe_assets([a for a in ParquetTable(store, AssetRecord).load() if a.source in cfg.asset_sources])
     if not assets:
         raise StoreError(f"no ADMesh assets from sources {', '.join(cfg.asset_sources)} in {store.url}: "
                          f"run the ingest stage first")
-    town = build_town(cfg, part.params["town_index"], assets)
+    return assets
+
+
+def read_town_network(spec: TownSpec):
+    """The parsed OpenDRIVE network of an opendrive town spec (None for procedural ones), and
+    its file path (str, "" for procedural)."""
+    if spec.style != "opendrive":
+        return None, ""
+    from catalog.opendrive import read_opendrive
+    from catalog.towns import resolve_opendrive
+
+    path = resolve_opendrive(spec.opendrive)
+    return read_opendrive(path), str(path)
+
+
+def build_town_from_spec(store: Store, cfg: ScenesConfig, index: int):
+    """Build town ``index`` of the config from the store's assets."""
+    from stages.scenes import build_town
+
+    spec = cfg.towns[index]
+    network, path = read_town_network(spec)
+    return build_town(spec, cfg, index, scene_assets(store, cfg), network, spec.opendrive or "")
+
+
+def is_edited(sequence_id: str) -> bool:
+    """Edited sequences (``scenes swap``) carry a ``~`` in their id; re-simulating their town
+    does not remove them (their lineage points at the original)."""
+    return "~" in sequence_id
+
+
+def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
+    """Build one town and simulate its sequences; write stuff meshes, placements, the town row,
+    sequences, frames, sensor poses and actors."""
+    from stages.scenes import simulate_town
+    from stages.scenes.pedestrians import match_walker_phases
+
+    index = part.params["town_index"]
+    spec = cfg.towns[index]
+    assets = scene_assets(store, cfg)
+    town = build_town_from_spec(store, cfg, index)
     outputs: dict[str, str] = {}
     meshes = MeshStore(store)
     mesh_paths = {a.asset_id: a.mesh_path for a in assets}
@@ -134,25 +172,38 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         outputs[rel] = meshes.save(rel, geom.parts)
         mesh_paths[stuff_id] = rel
     placements = [p.model_copy(update={"mesh_path": mesh_paths[p.asset_id]}) for p in town.placements]
-    t_place = ParquetTable(store, PlacementRecord)
-    outputs[t_place.path(f"town={town.name}")] = t_place.save(f"town={town.name}", placements)
+    key = f"town={town.name}"
+    t_place, t_town = ParquetTable(store, PlacementRecord), ParquetTable(store, TownRecord)
+    outputs[t_place.path(key)] = t_place.save(key, placements)
+    net = town.network
+    row = TownRecord(
+        town=town.name, style=town.style, source=town.source, seed=cfg.seed, road_length=net.road_length,
+        lane_count=len(net.lanes), junction_count=len(net.junction_ids),
+        walkway_length=float(sum(w.length for w in net.walkways)),
+        crosswalk_count=sum(1 for w in net.walkways if w.crosswalk), placement_count=len(placements),
+        bounds=[float(v) for v in town.bounds],
+    )  # fmt: skip
+    outputs[t_town.path(key)] = t_town.save(key, [row])
 
     tables = {
         "sequence": ParquetTable(store, SequenceRecord),
         "frames": ParquetTable(store, FrameRecord),
+        "sensor_poses": ParquetTable(store, SensorPoseRecord),
         "actors": ParquetTable(store, ActorStateRecord),
     }
     written = set()
-    for seq in simulate_sequences(cfg, town, assets):
-        key = seq.sequence.sequence_id
-        written.add(key)
-        for name, rows in (("sequence", [seq.sequence]), ("frames", seq.frames), ("actors", seq.actors)):
-            outputs[tables[name].path(key)] = tables[name].save(key, rows)
-    # sequences this town no longer has (a smaller sequences_per_town) are removed, not left stale
+    for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases):
+        sid = seq.sequence.sequence_id
+        written.add(sid)
+        rows = {"sequence": [seq.sequence], "frames": seq.frames, "sensor_poses": seq.sensor_poses,
+                "actors": seq.actors}
+        for name, table in tables.items():
+            outputs[table.path(sid)] = table.save(sid, rows[name])
+    # sequences this town no longer has (fewer levels or sequences) are removed, not left stale
     for table in tables.values():
         for rel in table.paths():
-            key = rel[len(table.dir) + 1 : -len(".parquet")]
-            if key.startswith(f"{town.name}_") and key not in written:
+            sid = rel[len(table.dir) + 1 : -len(".parquet")]
+            if sid.startswith(f"{town.name}_") and sid not in written and not is_edited(sid):
                 store.remove(rel)
     return outputs
 
@@ -212,19 +263,55 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
 
 
 # -- voxelize -------------------------------------------------------------------------------------
+_RIG_CACHE: OrderedDict[tuple[str, int], object] = OrderedDict()
+
+
+def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
+    """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
+    (rigs cached per worker by asset and geometry)."""
+    from stages.scenes.pedestrians import rig_pedestrian
+
+    def posed(asset_id: str, phase_index: int) -> AssetGeometry:
+        geom = geometry[asset_id]
+        key = (asset_id, id(geom))
+        rig = _RIG_CACHE.get(key)
+        if rig is None:
+            rig = _RIG_CACHE[key] = rig_pedestrian(geom)
+            if len(_RIG_CACHE) > 256:
+                _RIG_CACHE.popitem(last=False)
+        return rig.posed(phase_index)
+
+    return posed
+
+
+def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
+    """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
+    (lo, hi) in the LiDAR frame."""
+    from stages.scenes.assembly import PlacementIndex, assemble_frame
+
+    t_seq = ParquetTable(store, SequenceRecord)
+    sequences = t_seq.load([seq_id]) if t_seq.exists(seq_id) else []
+    if not sequences:
+        raise StoreError(f"sequence {seq_id!r} is not in {store.url}: run the scenes stage first")
+    (sequence,) = sequences
+    frames = [f for f in ParquetTable(store, FrameRecord).load([seq_id]) if f.frame_index == frame_index]
+    if not frames:
+        raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
+    actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
+    placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
+    geometry = load_geometry(store, {p.asset_id for p in placements} | {a.asset_id for a in actors}, placements)
+    return assemble_frame(frames[0], actors, PlacementIndex(placements), geometry, region,
+                          pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
+
+
 def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
     """Voxelize one frame of one sequence at one resolution into occupancy.zarr."""
-    from stages.scenes import compose_frame_scene
+    from stages.scenes.assembly import region_of_grid
     from stages.voxelize import voxelize_scene
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
-    (sequence,) = ParquetTable(store, SequenceRecord).load([seq_id])
-    frame = next(f for f in ParquetTable(store, FrameRecord).load([seq_id]) if f.frame_index == frame_index)
-    actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
-    placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
-    geometry = load_geometry(store, {p.asset_id for p in placements} | {a.asset_id for a in actors}, placements)
-    scene = compose_frame_scene(frame, actors, placements, geometry, grid, sequence.ego_asset_id)
+    scene = frame_scene(store, seq_id, frame_index, region_of_grid(grid))
     if not cfg.fill_closed:
         scene = [dataclasses.replace(m, closed=False) for m in scene]
     semantic, instance = voxelize_scene(scene, grid)

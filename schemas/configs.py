@@ -83,7 +83,7 @@ class ScenesConfig(StageConfig):
     seed: int = 11
     towns: tuple[TownSpec, ...] = Field(default_factory=_default_towns, min_length=1, max_length=16)
     curb_height: float = Field(0.15, ge=0.0, le=0.5, description="kerb height above the road, m")
-    frame_count: int = Field(16, ge=2, le=10_000)
+    frame_count: int = Field(20, ge=2, le=10_000)
     rate_hz: float = Field(20.0, gt=0.0, le=100.0)
     ego_speed: float = Field(8.0, ge=0.0, le=40.0, description="ego target speed, m/s")
     actor_range: float = Field(80.0, gt=0.0, le=1000.0, description="actors within this many m of the ego are recorded")

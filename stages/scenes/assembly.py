@@ -182,7 +182,7 @@ def _emit(
             vertices=V, faces=F, semantic_id=int(part.semantic_id),
             instance_id=0 if is_stuff else int(instance_id), is_stuff=is_stuff,
             closed=bool(closed) and not is_stuff, name=f"{name}/{part.name}",
-            transparent=False,
+            transparent=bool(part.transparent),
         ))  # fmt: skip
     return out
 

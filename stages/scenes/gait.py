@@ -241,6 +241,61 @@ def window_descriptor(
     return WindowDescriptor(desc, speed, fwd, False)
 
 
+def window_descriptors(
+    windows: np.ndarray, times: np.ndarray, anchor_times: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Batched :func:`window_descriptor` with the anchor at any time (vectorized over windows).
+
+    ``windows`` (N, n, 7, 3) gait joints, ``times`` (N, n), ``anchor_times`` (N,). Returns the
+    descriptors (N, 10) and the mean horizontal pelvis speeds (N,). For ``anchor_times`` at the
+    window centres this equals ``window_descriptor(..., anchor="center")`` (rows with a speed of
+    0 get NaN descriptors; the caller treats them as standing). Needs n >= 3.
+    """
+    w = np.asarray(windows, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
+    N, n = w.shape[:2]
+    if n < 3:
+        raise ValueError("windows need at least 3 frames")
+    tc = t - t.mean(axis=1, keepdims=True)
+    pel = w[:, :, 0]
+    vel = np.einsum("nf,nfi->ni", tc, pel - pel.mean(axis=1, keepdims=True)) / (tc**2).sum(axis=1)[:, None]
+    vel[:, 2] = 0.0
+    speed = np.linalg.norm(vel, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fwd = vel / speed[:, None]
+    seg = np.concatenate(
+        [
+            np.linalg.norm(w[:, :, 2] - w[:, :, 1], axis=-1) + np.linalg.norm(w[:, :, 3] - w[:, :, 2], axis=-1),
+            np.linalg.norm(w[:, :, 5] - w[:, :, 4], axis=-1) + np.linalg.norm(w[:, :, 6] - w[:, :, 5], axis=-1),
+        ],
+        axis=1,
+    )
+    leg = np.median(seg, axis=1)
+    feats = window_frame_features(w, fwd, leg)
+    x = t - np.asarray(anchor_times, dtype=np.float64)[:, None]
+    deg = 2 if n >= 5 else 1
+    V = x[:, :, None] ** np.arange(deg + 1)  # (N, n, deg+1)
+    coef = np.linalg.solve(np.einsum("nfa,nfb->nab", V, V), np.einsum("nfa,nfk->nak", V, feats))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        desc = np.concatenate([coef[:, 0], coef[:, 1] * (leg / speed)[:, None]], axis=1)
+    return desc, speed
+
+
+def window_frame_features(w: np.ndarray, fwd: np.ndarray, leg: np.ndarray) -> np.ndarray:
+    """(N, n, 5) gait.FEATURE_NAMES of windows (N, n, 7, 3), headings (N, 3), leg lengths (N,)."""
+
+    def sagittal(v: np.ndarray) -> np.ndarray:
+        return np.arctan2(np.einsum("nfi,ni->nf", v, fwd), -v[..., 2])
+
+    out = np.empty(w.shape[:2] + (5,))
+    out[..., 0] = np.einsum("nfi,ni->nf", w[:, :, 3] - w[:, :, 6], fwd) / leg[:, None]
+    for k, (h, kn, a) in enumerate(((1, 2, 3), (4, 5, 6))):
+        thigh = sagittal(w[:, :, kn] - w[:, :, h])
+        out[..., 1 + k] = thigh
+        out[..., 3 + k] = thigh - sagittal(w[:, :, a] - w[:, :, kn])
+    return out
+
+
 # --------------------------------------------------------------------------- cycle detection
 
 
@@ -580,19 +635,30 @@ class GaitModel:
         var_floor: float = 1e-4,
     ) -> GaitModel:
         """Calibrate on phase-labelled walks (objects with ``positions, times, phases``): every
-        W-frame window whose anchor frame has a phase contributes its descriptor to bin
+        W-frame window whose anchor frame has a phase (and that is not standing) contributes its
+        descriptor (:func:`window_descriptors`, batched) to bin
         ``round(phase * D) mod D``; ``means`` are the bin means, ``var`` the pooled per-dimension
         variance of descriptors around their bin mean (plus ``var_floor``)."""
         descs, bins = [], []
         for walk in training_walks:
-            for win, tw, ph in _windows(walk, W, anchor):
-                if np.isnan(ph):
-                    continue
-                wd = window_descriptor(win, tw, anchor, standing_speed)
-                if wd.standing:
-                    continue
-                descs.append(wd.descriptor)
-                bins.append(int(np.round(ph * D)) % D)
+            n = len(walk.times)
+            if n < W:
+                continue
+            starts = np.arange(n - W + 1)
+            a = starts + (W - 1 if anchor == "end" else (W - 1) // 2)
+            ph = np.asarray(walk.phases, dtype=np.float64)[a]
+            if W % 2 == 0 and anchor == "center":  # centre between two frames: interpolate the phase
+                p1 = np.asarray(walk.phases, dtype=np.float64)[a + 1]
+                ph = np.mod(ph + 0.5 * (np.mod(p1 - ph + 0.5, 1.0) - 0.5), 1.0)
+            idx = starts[:, None] + np.arange(W)
+            tw = np.asarray(walk.times, dtype=np.float64)[idx]
+            t0 = tw[:, -1] if anchor == "end" else (tw[:, 0] + tw[:, -1]) / 2 if anchor == "center" else None
+            if t0 is None:
+                raise ValueError("anchor must be 'center' or 'end'")
+            desc, speed = window_descriptors(np.asarray(walk.positions, dtype=np.float64)[idx], tw, t0)
+            keep = ~np.isnan(ph) & (speed >= standing_speed) & (tw[:, -1] > tw[:, 0])
+            descs.extend(desc[keep])
+            bins.extend((np.round(ph[keep] * D).astype(np.int64) % D).tolist())
         if not descs:
             raise ValueError("no walking windows in the training walks")
         X, b = np.asarray(descs), np.asarray(bins)

@@ -37,7 +37,10 @@ from stages.scenes.gait import (
     canonical_cycle,
     procedural_walk,
     walker_stride,
+    window_descriptors,
+    window_frame_features,
 )
+
 
 STANDING = -1  # phase index of a pedestrian standing still (rest pose)
 
@@ -97,70 +100,16 @@ def _training_walks(rate_hz: float):
     return walks
 
 
-@lru_cache(maxsize=8)
 def gait_model(D: int = 32, W: int = 11, rate_hz: float = 20.0) -> GaitModel:
     """:class:`GaitModel` (centre anchor) fitted on procedural training walks sampled at ``rate_hz``:
     cadences :data:`TRAIN_CADENCES` x strides :data:`TRAIN_STRIDES` (leg lengths) x joint noise
     :data:`TRAIN_NOISES`, from a fixed seed. Deterministic; cached per ``(D, W, rate_hz)``."""
+    return _gait_model(int(D), int(W), float(rate_hz))
+
+
+@lru_cache(maxsize=8)
+def _gait_model(D: int, W: int, rate_hz: float) -> GaitModel:
     return GaitModel.fit(_training_walks(rate_hz), D=D, W=W, anchor="center")
-
-
-# --------------------------------------------------------------------------- batched descriptors
-
-
-def window_descriptors(
-    windows: np.ndarray, times: np.ndarray, anchor_times: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Batched :func:`stages.scenes.gait.window_descriptor` with the anchor at any time.
-
-    ``windows`` (N, n, 7, 3) gait joints, ``times`` (N, n), ``anchor_times`` (N,). Returns the
-    descriptors (N, 10) and the mean horizontal pelvis speeds (N,). For ``anchor_times`` at the
-    window centres this equals ``window_descriptor(..., anchor="center")`` (rows with a speed of
-    0 get NaN descriptors; the caller treats them as standing). Needs n >= 3.
-    """
-    w = np.asarray(windows, dtype=np.float64)
-    t = np.asarray(times, dtype=np.float64)
-    N, n = w.shape[:2]
-    if n < 3:
-        raise ValueError("windows need at least 3 frames")
-    tc = t - t.mean(axis=1, keepdims=True)
-    pel = w[:, :, 0]
-    vel = np.einsum("nf,nfi->ni", tc, pel - pel.mean(axis=1, keepdims=True)) / (tc**2).sum(axis=1)[:, None]
-    vel[:, 2] = 0.0
-    speed = np.linalg.norm(vel, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        fwd = vel / speed[:, None]
-    seg = np.concatenate(
-        [
-            np.linalg.norm(w[:, :, 2] - w[:, :, 1], axis=-1) + np.linalg.norm(w[:, :, 3] - w[:, :, 2], axis=-1),
-            np.linalg.norm(w[:, :, 5] - w[:, :, 4], axis=-1) + np.linalg.norm(w[:, :, 6] - w[:, :, 5], axis=-1),
-        ],
-        axis=1,
-    )
-    leg = np.median(seg, axis=1)
-    feats = _features(w, fwd, leg)
-    x = t - np.asarray(anchor_times, dtype=np.float64)[:, None]
-    deg = 2 if n >= 5 else 1
-    V = x[:, :, None] ** np.arange(deg + 1)  # (N, n, deg+1)
-    coef = np.linalg.solve(np.einsum("nfa,nfb->nab", V, V), np.einsum("nfa,nfk->nak", V, feats))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        desc = np.concatenate([coef[:, 0], coef[:, 1] * (leg / speed)[:, None]], axis=1)
-    return desc, speed
-
-
-def _features(w: np.ndarray, fwd: np.ndarray, leg: np.ndarray) -> np.ndarray:
-    """(N, n, 5) gait.FEATURE_NAMES of windows (N, n, 7, 3), headings (N, 3), leg lengths (N,)."""
-
-    def sagittal(v: np.ndarray) -> np.ndarray:
-        return np.arctan2(np.einsum("nfi,ni->nf", v, fwd), -v[..., 2])
-
-    out = np.empty(w.shape[:2] + (5,))
-    out[..., 0] = np.einsum("nfi,ni->nf", w[:, :, 3] - w[:, :, 6], fwd) / leg[:, None]
-    for k, (h, kn, a) in enumerate(((1, 2, 3), (4, 5, 6))):
-        thigh = sagittal(w[:, :, kn] - w[:, :, h])
-        out[..., 1 + k] = thigh
-        out[..., 3 + k] = thigh - sagittal(w[:, :, a] - w[:, :, kn])
-    return out
 
 
 # --------------------------------------------------------------------------- matching
@@ -283,7 +232,7 @@ def match_phases(
         seg = np.stack([np.linalg.norm(w[:, 0, 2] - w[:, 0, 1], axis=-1) + np.linalg.norm(w[:, 0, 3] - w[:, 0, 2], axis=-1),
                         np.linalg.norm(w[:, 0, 5] - w[:, 0, 4], axis=-1) + np.linalg.norm(w[:, 0, 6] - w[:, 0, 5], axis=-1)],
                        axis=1)  # fmt: skip
-        feats = _features(w, fwd, seg.mean(axis=1))[:, 0]
+        feats = window_frame_features(w, fwd, seg.mean(axis=1))[:, 0]
         r = (feats[:, None, :] - model.means[None, :, :5]) ** 2 / model.var[:5]
         out[frames] = np.argmin(r.sum(axis=2), axis=1)
     return [int(v) for v in out]

@@ -1,340 +1,459 @@
-"""Procedural towns: a Manhattan road grid with kerbs, sidewalks, grass, road markings and placed
-assets (buildings, trees, street lights, traffic lights and signs, benches, bins, bicycles).
+"""Procedural towns in three styles (``downtown``, ``suburb``, ``arterial``) on the town contract of
+:mod:`stages.scenes.network`.
 
-World frame: metres, right-handed, Z up, the road surface at z = 0, road-grid node (0, 0) at the
-origin. With ``n = blocks``, ``B = block_size``, ``R = road_width``, ``S = sidewalk_width``:
+World frame: metres, right-handed, Z up, the road surface at z = 0. Every style is a road grid:
+``nx + 1`` straight north-south *columns* at ``x = cx[i]`` and ``ny + 1`` east-west *rows* at
+``y = ry[j]``; in the arterial style the middle row is the arterial, shifted sideways between
+junctions by smooth S-curves (sampled at <= :data:`SAMPLE` m, straight for :data:`FLAT` m beyond
+each junction zone), so every junction is axis-aligned. Each road has a cross-section
+(:class:`_Section`): ``lanes`` lanes of :data:`LANE_WIDTH` m each way (right-hand traffic), an
+optional raised median (grass, kerbed, with a guard rail) and an optional parking strip along each
+kerb. ``block_size`` is the kerb-to-kerb distance between neighbouring roads.
 
-* road centrelines run along x and along y at ``c_k = k (B + R)``, k = 0..n; each carriageway is
-  ``c_k +- R/2`` wide and carries ``lanes_per_direction`` lanes each way, right-hand traffic;
-* block (i, j) is the square ``[c_i + R/2, c_(i+1) - R/2] x [c_j + R/2, c_(j+1) - R/2]`` (B by B,
-  kerb to kerb); its outer ring of width S is sidewalk, raised to ``curb_height``, its interior
-  grass (Terrain) at the same height; buildings stand in the interior, set back from the sidewalk;
-* around the outer roads a sidewalk ring of width S and a terrain margin of :data:`TOWN_MARGIN` m.
+Junction zones: the square ``|x - cx| <= Hc + Z``, ``|y - cy| <= Hr + Z`` around a junction centre
+(``Hc``/``Hr`` the column/row half-widths, ``Z`` the zone depth). It holds the crosswalk (zebra) of
+every approach and the stop line at its edge; road lanes end at the zone edge and connector lanes
+(straight, left and right turns, cubic curves sampled <= 1 m, carrying the junction id) cross it.
+The zone's corner squares (``Z`` by ``Z``) are sidewalk. Blocks are bounded by sidewalks of width
+``S`` along every road; their interior is grass (Terrain) at kerb height holding the lots. Around
+the outermost roads runs a sidewalk ring of width ``max(S, Z)`` and a terrain margin of
+:data:`TOWN_MARGIN` m.
 
-Stuff meshes (world frame, pose = identity) are **thin closed slabs** standing for surfaces:
-several disjoint or face-touching boxes per mesh, each closed on its own, :data:`SURFACE` (1 cm)
-thick so that a surface voxelizer sees one layer, not a hollow top-and-bottom pair. The road is
-``[-SURFACE, 0]``; sidewalk and terrain tops are ``[curb_height - SURFACE, curb_height]``; the
-sidewalk mesh also holds the kerb faces, thin walls ``[-SURFACE, curb_height - SURFACE]`` along
-every kerb line (under the sidewalk's edge, touching its top slab); road markings are
-``[-SURFACE / 2, MARKING_TOP]`` (1 cm proud of the road). Slab tops and bottoms are tessellated
-into tiles of at most :data:`STUFF_TILE` m so a frame can cull the triangles outside its region.
+Stuff meshes (world frame, identity pose, keys ``"<town>/<name>"``) are **thin closed slabs**
+(:data:`SURFACE` thick) standing for surfaces, tessellated into pieces of at most
+:data:`STUFF_TILE` m: straight pieces are axis-aligned tiled slabs, curved pieces are extruded
+ribbons (grids along a polyline and across offsets from it). The road is ``[-SURFACE, 0]``;
+sidewalk, terrain and median tops are ``[curb - SURFACE, curb]``; the sidewalk mesh also holds the
+kerb faces (thin walls ``[-SURFACE, curb - SURFACE]`` under every kerb edge); road markings are
+``[0, MARKING_TOP]`` on the road; fences, walls and guard rails stand on the grass. Pieces touch at
+faces or edges only, every piece is closed on its own, so every stuff mesh is watertight.
 
-Things are placed on their support: buildings and sidewalk furniture at ``z = curb_height``.
-Pole-like assets are positioned by their pole axis using the asset-frame conventions documented
-in :mod:`stages.ingest.procedural` (derived from the asset extent; the pole radius is taken as
-:data:`POLE_RADIUS`, within 5 cm of every procedural pole).
+Things and props are placed on their support (kerb height) and never overlap one another: every
+placement registers an oriented footprint (pole-like assets a small square at the pole axis, found
+through the asset-frame conventions of :mod:`stages.ingest.procedural` with :data:`POLE_RADIUS`;
+trees their crown in lots and their trunk on sidewalks). Buildings fill lots along every block
+side, street-facing, choosing the asset whose footprint fits the lot best. Nothing but connector
+and road lanes lies on the carriageway except parked cars, which stay inside the parking strips.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from schemas import taxonomy
-from schemas.configs import ScenesConfig
-from schemas.records import AssetRecord, PlacementRecord
-from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight, pose_matrix, pose_to_list
+from schemas.configs import ScenesConfig, TownSpec
+from schemas.records import AssetRecord
+from stages.geometry import concatenate
+from stages.scenes.network import Lane, RoadNetwork, Town, Walkway, polyline_lengths
+from stages.scenes.placing import (POLE_RADIUS, STUFF_TILE, SURFACE, AssetPools, Placer, rot2, slab, slabs,
+                                   stuff_geometry, yaw_of)  # fmt: skip
 
-__all__ = ["Town", "LaneSegment", "WalkLoop", "build_town", "town_name", "lanes_per_direction"]
+__all__ = ["STYLES", "town_name", "build_procedural_town"]
 
-SURFACE = 0.01  # m: thickness of the thin closed slabs that stand for ground surfaces
-STUFF_TILE = 8.0  # m: largest tile edge of a stuff slab's top and bottom faces
-TOWN_MARGIN = 30.0  # m: terrain beyond the outer sidewalk ring
-MARKING_TOP = 0.01  # m: top of the road-marking slabs (1 cm above the road)
-LANE_WIDTH_MIN = 3.0  # m: a carriageway half gets floor(half / this) lanes (at least one)
-POLE_RADIUS = 0.09  # m: pole radius assumed when placing pole-like assets by their pole axis
-
-_SEM = {name: taxonomy.by_name(name).id for name in (
-    "Road", "Sidewalk", "Terrain", "RoadLine", "Building", "Vegetation", "Pole", "TrafficLight",
-    "TrafficSign", "Static", "Bicycle",
-)}  # fmt: skip
-_THINGS = frozenset(taxonomy.thing_ids())
-_STUFF_NAMES = ("road", "sidewalk", "terrain", "roadline")
-
-
-@dataclass(frozen=True)
-class LaneSegment:
-    """One lane between two intersections, world frame (m). Vehicles drive from ``start`` to
-    ``end`` along ``direction`` (unit xy); ``start``/``end`` lie on the edges of the start/end
-    intersection boxes. ``lane_index`` 0 is next to the centre line."""
-
-    lane_id: int
-    start_node: tuple[int, int]
-    end_node: tuple[int, int]
-    lane_index: int
-    direction: tuple[float, float]
-    start: tuple[float, float]
-    end: tuple[float, float]
-    width: float
-
-    @property
-    def length(self) -> float:
-        """Length of the lane segment (m)."""
-        return math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1])
+STYLES = ("downtown", "suburb", "arterial")
+LANE_WIDTH = 3.5  # m
+TOWN_MARGIN = 20.0  # m of terrain beyond the outer sidewalk ring
+MARKING_TOP = 0.01  # m: road markings stand 1 cm proud of the road
+CROSSWALK_Z = 0.01  # m: crosswalk walkways lie on the zebra
+ZEBRA = 3.0  # m: crosswalk band width along the road
+SAMPLE = 1.0  # m: largest spacing of curve samples (lanes, curved roads)
+FLAT = 6.0  # m: straight road kept beyond each junction zone on a curved row
+MEDIAN = 2.0  # m: arterial median width
+URBAN = 30.0 / 3.6  # m/s
+ARTERIAL = 50.0 / 3.6
+TURN = 25.0 / 3.6
+_AXES = ((1, 0), (0, 1), (-1, 0), (0, -1))  # arm directions E, N, W, S
 
 
 @dataclass(frozen=True)
-class WalkLoop:
-    """A closed walking line on a block's sidewalk, world frame (m): the corners in walking
-    order (the last corner connects back to the first), at height ``z`` (the sidewalk top)."""
+class _Section:
+    """Road cross-section: ``lanes`` each way next to a median (0 = painted centre line), a
+    parking strip at each kerb, ``half`` = centre line to kerb (m)."""
 
-    block: tuple[int, int]
-    corners: tuple[tuple[float, float], ...]
-    z: float
+    lanes: int
+    half: float
+    median: float = 0.0
+    parking: float = 0.0
+    speed: float = URBAN
 
-    @property
-    def length(self) -> float:
-        """Perimeter of the loop (m)."""
-        c = np.asarray(self.corners + self.corners[:1])
-        return float(np.sum(np.hypot(*np.diff(c, axis=0).T)))
+    def lane_offset(self, k: int) -> float:
+        """Distance of lane ``k`` (0 next to the centre) from the centre line."""
+        return self.median / 2 + (k + 0.5) * LANE_WIDTH
 
 
 @dataclass(frozen=True)
-class Town:
-    """A procedural town: static placements (stuff first), its world-frame stuff meshes keyed by
-    ``"<town>/<name>"``, and the road description the traffic simulator uses."""
+class _Style:
+    blocks: int
+    block_size: float
+    road_width: float | None  # None: derived from the lanes
+    sidewalk_width: float
+    lanes: int
+    parking: float
+    median: float
+    buildings: tuple[str, ...]
+    lot: tuple[float, float]  # lot frontage range, m
+    setback: tuple[float, float]  # building setback behind the sidewalk, m
+    max_depth: float  # largest building depth, m
+    light_spacing: tuple[float, float]
+    tree_spacing: tuple[float, float] | None  # street trees on sidewalks
+    lot_trees: tuple[int, int]  # trees per lot
+    signal_share: float  # share of junctions with traffic lights (others get stop signs)
+    furniture: float  # chance of each bench / bin / bicycle / hydrant per sidewalk side
+    frontage: str  # "", "fence" (with hedges) or "wall" (walls on the main road, fences elsewhere)
 
-    name: str
-    index: int
-    placements: list[PlacementRecord]
-    stuff: dict[str, AssetGeometry]
-    lanes: tuple[LaneSegment, ...]
-    intersections: dict[tuple[int, int], tuple[float, float, float, float]]  # node -> xmin, ymin, xmax, ymax
-    walk_loops: tuple[WalkLoop, ...]
-    road_length: float  # m of road centreline (each road once)
-    road_width: float
-    curb_height: float
-    bounds: tuple[float, float, float, float]  # xmin, ymin, xmax, ymax of the ground (m)
-    max_instance_id: int
+
+_STYLES = {
+    "downtown": _Style(3, 70.0, None, 4.0, 2, 0.0, 0.0,
+                       ("office", "tower", "commercial", "residential", "apartment", "public"),
+                       (20.0, 34.0), (0.5, 1.5), 30.0, (22.0, 28.0), (9.0, 14.0), (0, 1), 1.0, 0.7, ""),
+    "suburb": _Style(2, 110.0, None, 2.5, 1, 2.5, 0.0, ("house", "garage", "residential"),
+                     (17.0, 24.0), (4.0, 7.0), 16.0, (34.0, 42.0), (8.0, 12.0), (2, 5), 0.3, 0.3, "fence"),
+    "arterial": _Style(3, 90.0, None, 3.0, 1, 0.0, 0.0,
+                       ("commercial", "industrial", "warehouse", "gas_station", "office", "apartment", "public",
+                        "religious"), (30.0, 48.0), (3.0, 6.0), 40.0, (26.0, 32.0), (14.0, 20.0), (1, 3),
+                       1.0, 0.3, "wall"),
+}  # fmt: skip
 
 
-def town_name(town_index: int) -> str:
+def town_name(index: int) -> str:
     """``0 -> "town00"``."""
-    return f"town{town_index:02d}"
-
-
-def lanes_per_direction(road_width: float) -> int:
-    """Lanes each way on a carriageway of ``road_width`` m (at least one)."""
-    return max(1, int((road_width / 2) // LANE_WIDTH_MIN))
+    return f"town{index:02d}"
 
 
 # --------------------------------------------------------------------------------------------
-# stuff geometry
+# polylines and extruded slabs
 # --------------------------------------------------------------------------------------------
 
 
-def _slab(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, tile: float = STUFF_TILE):
-    """Closed axis-aligned slab ``[x0, x1] x [y0, y1] x [z0, z1]`` (m) whose top and bottom are
-    grids of tiles of at most ``tile`` m and whose sides match the grid edges (watertight,
-    outward normals). Returns (vertices (N, 3), faces (M, 3))."""
-    nx, ny = max(1, math.ceil((x1 - x0) / tile - 1e-9)), max(1, math.ceil((y1 - y0) / tile - 1e-9))
-    xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")  # grid vertex (i, j) -> index i * (ny + 1) + j
-    n = (nx + 1) * (ny + 1)
-    top = np.column_stack([gx.ravel(), gy.ravel(), np.full(n, z1)])
-    bottom = top.copy()
-    bottom[:, 2] = z0
-    idx = np.arange(n).reshape(nx + 1, ny + 1)
-    # cell corners counter-clockwise seen from above: a (i, j), b (i+1, j), c (i+1, j+1), d (i, j+1)
+def _tangents(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vertex tangents of an (K, 2) polyline and the left normals scaled for a constant offset
+    distance (mitred)."""
+    D = np.diff(P, axis=0)
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    T = np.vstack([D[:1], D[:-1] + D[1:], D[-1:]])
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    seg = np.vstack([D[:1], D])  # a segment meeting each vertex
+    scale = 1.0 / np.maximum(np.einsum("ij,ij->i", T, seg), 0.5)
+    return T, np.column_stack([-T[:, 1], T[:, 0]]) * scale[:, None]
+
+
+def _offset(P: np.ndarray, d: float) -> np.ndarray:
+    """The polyline ``P`` moved ``d`` m to its left (negative: right)."""
+    return P + _tangents(P)[1] * d
+
+
+def _densify(P: np.ndarray, step: float) -> np.ndarray:
+    """``P`` with points inserted so that no segment is longer than ``step`` m."""
+    seg = np.diff(P, axis=0)
+    n = np.maximum(1, np.ceil(np.linalg.norm(seg, axis=1) / step - 1e-9).astype(np.int64))
+    if np.all(n == 1):
+        return P
+    k = np.repeat(np.arange(len(seg)), n)
+    t = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + 1) / np.repeat(n, n)
+    return np.vstack([P[:1], P[k] + t[:, None] * seg[k]])
+
+
+def _sub(P: np.ndarray, s0: float, s1: float) -> np.ndarray:
+    """The part of polyline ``P`` between arc lengths ``s0 < s1``."""
+    cum = polyline_lengths(P)
+    s0, s1 = max(0.0, s0), min(float(cum[-1]), s1)
+    inner = P[(cum > s0 + 1e-9) & (cum < s1 - 1e-9)]
+    ends = [np.array([np.interp(s, cum, P[:, k]) for k in range(2)]) for s in (s0, s1)]
+    return np.vstack([ends[0], inner, ends[1]])
+
+
+def _at(P: np.ndarray, cum: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Point and unit tangent of polyline ``P`` at arc length ``s``."""
+    s = min(max(s, 0.0), float(cum[-1]))
+    i = min(max(int(np.searchsorted(cum, s, side="right")) - 1, 0), len(P) - 2)
+    d = P[i + 1] - P[i]
+    L = float(np.linalg.norm(d))
+    return P[i] + d * ((s - cum[i]) / L), d / L
+
+
+def _grid_slab(G: np.ndarray, z0: float, z1: float):
+    """Closed slab ``[z0, z1]`` over the quad grid ``G`` (nx + 1, ny + 1, 2) of xy points, any
+    orientation; the same topology as :func:`stages.scenes.placing.slab` (watertight)."""
+    e0, e1 = G[1, 0] - G[0, 0], G[0, 1] - G[0, 0]
+    if e0[0] * e1[1] - e0[1] * e1[0] < 0:
+        G = G[:, ::-1]
+    nx1, ny1 = G.shape[:2]
+    n = nx1 * ny1
+    flat = G.reshape(n, 2)
+    top = np.column_stack([flat, np.full(n, z1)])
+    bottom = np.column_stack([flat, np.full(n, z0)])
+    idx = np.arange(n).reshape(nx1, ny1)
     a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
     c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    faces = [np.column_stack([a, b, c]), np.column_stack([a, c, d])]  # top, normal +z
-    faces += [np.column_stack([a, c, b]) + n, np.column_stack([a, d, c]) + n]  # bottom, normal -z
-    # boundary ring, counter-clockwise seen from above; each edge p -> q gets an outward quad
+    faces = [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
+    faces += [np.column_stack([a, c, b]) + n, np.column_stack([a, d, c]) + n]
     ring = np.concatenate([idx[:-1, 0], idx[-1, :-1], idx[:0:-1, -1], idx[0, :0:-1]])
     p, q = ring, np.roll(ring, -1)
     faces += [np.column_stack([p + n, q + n, q]), np.column_stack([p + n, q, p])]
     return np.vstack([top, bottom]), np.concatenate(faces).astype(np.int64)
 
 
-def _ring(x0: float, x1: float, y0: float, y1: float, width: float) -> list[tuple[float, float, float, float]]:
-    """Four non-overlapping rectangles (xmin, xmax, ymin, ymax) forming the ring of ``width``
-    just inside the rectangle ``[x0, x1] x [y0, y1]``."""
-    return [
-        (x0, x1, y0, y0 + width),
-        (x0, x1, y1 - width, y1),
-        (x0, x0 + width, y0 + width, y1 - width),
-        (x1 - width, x1, y0 + width, y1 - width),
-    ]
+def _ribbon(P: np.ndarray, o0: float, o1: float, z0: float, z1: float):
+    """Closed slab over the band between left offsets ``o0 < o1`` of polyline ``P``."""
+    P = _densify(P, STUFF_TILE)
+    N = _tangents(P)[1]
+    offs = np.linspace(o0, o1, max(1, math.ceil((o1 - o0) / STUFF_TILE - 1e-9)) + 1)
+    return _grid_slab(P[:, None, :] + N[:, None, :] * offs[None, :, None], z0, z1)
 
 
-def _slabs(rects, z0: float, z1: float):
-    """Tiled slabs ``[z0, z1]`` over ``rects`` (xmin, xmax, ymin, ymax) as one (vertices, faces)."""
-    return concatenate([_slab(r[0], r[1], r[2], r[3], z0, z1) for r in rects])
+def _strip(x: np.ndarray, yb: np.ndarray, yt: np.ndarray, z0: float, z1: float):
+    """Closed slab over the x-monotone region ``yb(x) <= y <= yt(x)`` sampled at ``x``."""
+    m = max(1, math.ceil(float(np.max(yt - yb)) / STUFF_TILE - 1e-9))
+    t = np.linspace(0.0, 1.0, m + 1)[None, :]
+    G = np.stack([np.repeat(x[:, None], m + 1, axis=1), yb[:, None] + (yt - yb)[:, None] * t], axis=-1)
+    return _grid_slab(G, z0, z1)
 
 
-def _stuff_geometry(key: str, mesh, semantic: str, material: str) -> AssetGeometry:
-    """One stuff mesh (a single part) from (vertices, faces)."""
-    V, F = mesh
-    part = MeshPart(name=key.split("/")[-1], vertices=V, faces=F, semantic_id=_SEM[semantic], material=material)
-    return AssetGeometry(asset_id=key, parts=(part,), part_closed=(is_watertight(F),))
+def _rect(cx: float, cy: float, u, a0: float, a1: float, b0: float, b1: float):
+    """Axis-aligned rect (xmin, xmax, ymin, ymax) of ``a0..a1`` along the axis ``u`` and
+    ``b0..b1`` along its left normal, from (cx, cy)."""
+    v = (-u[1], u[0])
+    xs = [cx + u[0] * a + v[0] * b for a in (a0, a1) for b in (b0, b1)]
+    ys = [cy + u[1] * a + v[1] * b for a in (a0, a1) for b in (b0, b1)]
+    return (min(xs), max(xs), min(ys), max(ys))
 
 
-def _marking_rects(lane: LaneSegment, road_width: float, n_lanes: int) -> list[tuple[float, float, float, float]]:
-    """Road markings owned by one lane segment, as axis-aligned rectangles (m): the stop line
-    across its lanes before the end intersection, and -- for the lane next to the centre line --
-    the centre line (drawn once per road, by the +x / +y direction), its edge line and, between
-    lanes, dashed lane lines. Pieces never overlap: lines stop 2 m short of the intersections,
-    the stop line is 1.2-1.6 m short."""
-    d = np.asarray(lane.direction)
-    right = np.array([d[1], -d[0]])
-    # the road centre line point at the lane's start, and the along-road length
-    base = np.asarray(lane.start) - right * (lane.lane_index + 0.5) * lane.width
-    length = lane.length
-    out: list[tuple[float, float, float, float]] = []
+def _ring(x0: float, x1: float, y0: float, y1: float, w: float):
+    """Four non-overlapping rects forming the ring of width ``w`` just inside the rect."""
+    return [(x0, x1, y0, y0 + w), (x0, x1, y1 - w, y1), (x0, x0 + w, y0 + w, y1 - w), (x1 - w, x1, y0 + w, y1 - w)]
 
-    def strip(s0: float, s1: float, off0: float, off1: float) -> None:
-        # rectangle between along-distances s0..s1 and right-offsets off0..off1 from the centre line
-        pts = np.array([base + d * s + right * o for s in (s0, s1) for o in (off0, off1)])
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        out.append((float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])))
 
-    if lane.lane_index == 0:
-        strip(length - 1.6, length - 1.2, 0.15, road_width / 2 - 0.15)  # stop line
-        if d[0] + d[1] > 0:
-            strip(2.0, length - 2.0, -0.075, 0.075)  # centre line, once per road
-        strip(2.0, length - 2.0, road_width / 2 - 0.31, road_width / 2 - 0.19)  # edge line
-        for k in range(1, n_lanes):  # dashed lane lines: 3 m dashes, 6 m gaps
-            s = 2.0
-            while s + 3.0 <= length - 2.0:
-                strip(s, s + 3.0, k * lane.width - 0.06, k * lane.width + 0.06)
-                s += 9.0
-    return out
+def _bezier(p0, h0, p1, h1) -> np.ndarray:
+    """Cubic curve from ``p0`` heading ``h0`` to ``p1`` heading ``h1`` (unit), sampled <= 1 m."""
+    chord = float(np.linalg.norm(p1 - p0))
+    if abs(h0[0] * h1[0] + h0[1] * h1[1] - 1.0) < 1e-9 and abs(h0[0] * (p1 - p0)[1] - h0[1] * (p1 - p0)[0]) < 1e-6:
+        n = max(1, math.ceil(chord / (0.9 * SAMPLE)))
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        return p0 + t * (p1 - p0)
+    k = 0.45 * chord
+    c0, c1 = p0 + h0 * k, p1 - h1 * k
+    n = max(2, math.ceil(1.6 * chord / (0.9 * SAMPLE)))
+    t = np.linspace(0.0, 1.0, n + 1)[:, None]
+    return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t**2 * c1 + t**3 * p1
+
+
+def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test of (M, 2) ``pts`` against the closed (K, 2) ``poly``."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    x, y = pts[:, 0:1], pts[:, 1:2]
+    cond = (a[:, 1] > y) != (b[:, 1] > y)
+    xint = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / np.where(b[:, 1] == a[:, 1], 1e-12, b[:, 1] - a[:, 1])
+    return (np.sum(cond & (x < xint), axis=1) % 2) == 1
+
+
+def _ray(poly: np.ndarray, p, d) -> float:
+    """Distance from ``p`` along unit ``d`` to the nearest edge of the closed ``poly``."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    e = b - a
+    den = d[0] * e[:, 1] - d[1] * e[:, 0]
+    ok = np.abs(den) > 1e-12
+    w = a - p
+    t = np.where(ok, (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / np.where(ok, den, 1.0), np.inf)
+    u = np.where(ok, (w[:, 0] * d[1] - w[:, 1] * d[0]) / np.where(ok, den, 1.0), -1.0)
+    hit = ok & (t > 1e-6) & (u >= 0) & (u <= 1)
+    return float(t[hit].min()) if hit.any() else 0.0
 
 
 # --------------------------------------------------------------------------------------------
-# placement helpers
+# footprints
 # --------------------------------------------------------------------------------------------
 
 
-def _rot(yaw: float, v) -> np.ndarray:
-    """Rotate the xy vector ``v`` by ``yaw`` rad about +Z."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+class _Footprints:
+    """Oriented footprint rectangles (centre, half sizes, yaw) in a spatial hash; separating-axis
+    overlap tests keep placements apart."""
 
-
-def _yaw_of(v) -> float:
-    """Heading (rad) of the xy vector ``v``."""
-    return math.atan2(float(v[1]), float(v[0]))
-
-
-class _Placer:
-    """Accumulates placement records in order: sequential placement ids, per-kind names, and
-    instance ids 1.. for thing classes (taxonomy thing ids), 0 for stuff."""
-
-    def __init__(self, town: str) -> None:
-        self.town = town
-        self.records: list[PlacementRecord] = []
-        self.counts: dict[str, int] = {}
-        self.next_instance = 1
-
-    def add(self, kind: str, asset_id: str, semantic_id: int, pose: np.ndarray, named: str | None = None) -> None:
-        """Record one placement; ``named`` overrides the ``<kind>_<nnn>`` name (stuff)."""
-        k = self.counts.get(kind, 0)
-        self.counts[kind] = k + 1
-        instance = 0
-        if semantic_id in _THINGS:
-            instance, self.next_instance = self.next_instance, self.next_instance + 1
-        self.records.append(PlacementRecord(
-            town=self.town, placement_id=len(self.records), name=named or f"{kind}_{k:03d}",
-            asset_id=asset_id, mesh_path="", semantic_id=semantic_id, instance_id=instance,
-            pose=pose_to_list(pose),
-        ))  # fmt: skip
-
-    def add_asset(self, kind: str, asset: AssetRecord, xy, z: float, yaw: float, anchor=(0.0, 0.0)) -> None:
-        """Place ``asset`` so its asset-frame point ``anchor`` (xy, m) lands on world ``xy``."""
-        origin = np.asarray(xy, dtype=np.float64) - _rot(yaw, anchor)
-        self.add(kind, asset.asset_id, asset.category_id, pose_matrix(origin[0], origin[1], z, yaw))
-
-
-_KIND = {"Building": "building", "Pole": "street_light", "TrafficLight": "traffic_light",
-         "TrafficSign": "traffic_sign", "Bicycle": "bicycle"}  # fmt: skip
-
-
-def _kind(asset: AssetRecord) -> str:
-    """Placement-name stem of an asset: its category, or its sub-class for vegetation/props."""
-    return _KIND.get(asset.category, asset.subclass)
-
-
-class _Pools:
-    """Assets by category (and sub-class), sorted by (sub-class, asset id) so the town does not
-    depend on the order the assets arrive in."""
-
-    def __init__(self, assets: Sequence[AssetRecord]) -> None:
-        self.by_cat: dict[str, list[AssetRecord]] = {}
-        for a in sorted(assets, key=lambda a: (a.category_id, a.subclass, a.asset_id)):
-            self.by_cat.setdefault(a.category, []).append(a)
-
-    def get(self, category: str, subclasses: Sequence[str] | None = None) -> list[AssetRecord]:
-        """Assets of ``category`` (restricted to ``subclasses`` when given)."""
-        pool = self.by_cat.get(category, [])
-        return [a for a in pool if subclasses is None or a.subclass in subclasses]
-
-    def pick(
-        self, rng: np.random.Generator, category: str, subclasses: Sequence[str] | None = None
-    ) -> AssetRecord | None:
-        """A uniformly drawn asset of ``category`` (and ``subclasses``), falling back to any asset
-        of the category when no sub-class matches; None when the category is empty."""
-        pool = self.get(category, subclasses) or self.get(category)
-        return pool[int(rng.integers(len(pool)))] if pool else None
-
-
-def _rects_overlap(a, b, gap: float = 0.0) -> bool:
-    """Whether rectangles (xmin, xmax, ymin, ymax) overlap once ``a`` is grown by ``gap``."""
-    return a[0] - gap < b[1] and b[0] < a[1] + gap and a[2] - gap < b[3] and b[2] < a[3] + gap
-
-
-@dataclass(frozen=True)
-class _Side:
-    """One kerb line of a sidewalk: from ``start`` along unit ``along`` for ``length`` m; ``out``
-    is the unit normal pointing at the road, the sidewalk lies on the ``-out`` side."""
-
-    start: np.ndarray
-    along: np.ndarray
-    out: np.ndarray
-    length: float
-
-    def point(self, a: float, depth: float) -> np.ndarray:
-        """World xy at ``a`` m along the kerb and ``depth`` m into the sidewalk (or beyond)."""
-        return self.start + self.along * a - self.out * depth
-
-
-def _block_sides(x0: float, x1: float, y0: float, y1: float) -> list[_Side]:
-    """The four kerb lines of a block, counter-clockwise: south, east, north, west."""
-    return [
-        _Side(np.array([x0, y0]), np.array([1.0, 0.0]), np.array([0.0, -1.0]), x1 - x0),
-        _Side(np.array([x1, y0]), np.array([0.0, 1.0]), np.array([1.0, 0.0]), y1 - y0),
-        _Side(np.array([x1, y1]), np.array([-1.0, 0.0]), np.array([0.0, 1.0]), x1 - x0),
-        _Side(np.array([x0, y1]), np.array([0.0, -1.0]), np.array([-1.0, 0.0]), y1 - y0),
-    ]
-
-
-def _outer_sides(X0: float, X1: float) -> list[_Side]:
-    """The kerb lines of the outer sidewalk ring, facing the outer roads (the square ``X0..X1``)."""
-    return [
-        _Side(np.array([X1, X0]), np.array([-1.0, 0.0]), np.array([0.0, 1.0]), X1 - X0),
-        _Side(np.array([X1, X1]), np.array([0.0, -1.0]), np.array([-1.0, 0.0]), X1 - X0),
-        _Side(np.array([X0, X1]), np.array([1.0, 0.0]), np.array([0.0, -1.0]), X1 - X0),
-        _Side(np.array([X0, X0]), np.array([0.0, 1.0]), np.array([1.0, 0.0]), X1 - X0),
-    ]
-
-
-class _Obstacles:
-    """Sidewalk furniture footprints as discs (centre xy, radius), for spacing checks."""
+    CELL = 16.0
 
     def __init__(self) -> None:
-        self.items: list[tuple[float, float, float]] = []
+        self.items: list[tuple[np.ndarray, np.ndarray]] = []  # corners (4, 2), axes (2, 2)
+        self.grid: dict[tuple[int, int], list[int]] = {}
 
-    def free(self, xy, radius: float, clearance: float = 0.8) -> bool:
-        """True when a disc at ``xy`` keeps ``clearance`` m from every disc placed so far."""
-        return all(math.hypot(xy[0] - x, xy[1] - y) >= radius + r + clearance for x, y, r in self.items)
+    @staticmethod
+    def corners(c, half, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        u = np.array([math.cos(yaw), math.sin(yaw)])
+        v = np.array([-u[1], u[0]])
+        k = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64)
+        pts = np.asarray(c, dtype=np.float64)[:2] + (k[:, :1] * half[0]) * u + (k[:, 1:] * half[1]) * v
+        return pts, np.stack([u, v])
 
-    def add(self, xy, radius: float) -> None:
-        self.items.append((float(xy[0]), float(xy[1]), radius))
+    def _cells(self, pts: np.ndarray):
+        lo, hi = np.floor(pts.min(axis=0) / self.CELL).astype(int), np.floor(pts.max(axis=0) / self.CELL).astype(int)
+        return [(i, j) for i in range(lo[0], hi[0] + 1) for j in range(lo[1], hi[1] + 1)]
+
+    def free(self, c, half, yaw: float, gap: float = 0.3) -> bool:
+        pts, ax = self.corners(c, (half[0] + gap / 2, half[1] + gap / 2), yaw)
+        seen: set[int] = set()
+        for cell in self._cells(pts):
+            for k in self.grid.get(cell, ()):
+                if k in seen:
+                    continue
+                seen.add(k)
+                q, bx = self.items[k]
+                if not any(self._apart(pts, q, a) for a in (*ax, *bx)):
+                    return False
+        return True
+
+    @staticmethod
+    def _apart(p: np.ndarray, q: np.ndarray, a: np.ndarray) -> bool:
+        pa, qa = p @ a, q @ a
+        return pa.max() <= qa.min() or qa.max() <= pa.min()
+
+    def add(self, c, half, yaw: float, gap: float = 0.3) -> None:
+        pts, ax = self.corners(c, (half[0] + gap / 2, half[1] + gap / 2), yaw)
+        self.items.append((pts, ax))
+        for cell in self._cells(pts):
+            self.grid.setdefault(cell, []).append(len(self.items) - 1)
+
+
+# --------------------------------------------------------------------------------------------
+# layout
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Segment:
+    """A road between two junction zones: centreline ``P`` (K, 2) from zone edge to zone edge, the
+    junctions at either end with the arm directions (outward from each junction), and the regions
+    (``("block", i, j)`` or ``("outer",)``) on its left and right."""
+
+    name: str
+    P: np.ndarray
+    sec: _Section
+    ja: tuple[int, int]
+    jb: tuple[int, int]
+    ua: tuple[int, int]
+    ub: tuple[int, int]
+    left: tuple
+    right: tuple
+    cum: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.cum = polyline_lengths(self.P)
+
+    @property
+    def length(self) -> float:
+        return float(self.cum[-1])
+
+
+class _Layout:
+    """Grid positions, cross-sections, junctions and road segments of one town."""
+
+    def __init__(self, style: str, st: _Style, spec: TownSpec, rng: np.random.Generator) -> None:
+        B = spec.block_size if spec.block_size is not None else st.block_size
+        S = spec.sidewalk_width if spec.sidewalk_width is not None else st.sidewalk_width
+        n = spec.blocks if spec.blocks is not None else st.blocks
+        self.B, self.S = B, S
+        self.nx, self.ny = n, (2 if style == "arterial" else n)
+        self.zc = max(2.0, S / 2 + 0.6)  # crosswalk centre beyond the cross road's kerb
+        self.Z = max(S, self.zc + ZEBRA / 2 + 1.0)  # junction zone depth beyond the cross road's kerb
+        if B - 2 * self.Z < 6.0:
+            raise ValueError(
+                f"block_size {B:g} m is too small for sidewalks of {S:g} m: the junction corners take "
+                f"{self.Z:g} m at each end and at least 6 m of block interior must remain"
+            )
+        main = _section(spec.road_width, st.lanes, st.parking, st.median, URBAN)
+        if style == "arterial":
+            lanes = int(rng.integers(2, 4))
+            art = _section(spec.road_width, lanes, 0.0, MEDIAN, ARTERIAL, shoulder=0.5)
+            local = _section(None, 1, 0.0, 0.0, URBAN)
+            self.cols = [local] * (self.nx + 1)
+            self.rows = [local, art, local]
+        else:
+            self.cols = [main] * (self.nx + 1)
+            self.rows = [main] * (self.ny + 1)
+        Hc = [s.half for s in self.cols]
+        Hr = [s.half for s in self.rows]
+        self.cx = [0.0]
+        for i in range(self.nx):
+            self.cx.append(self.cx[-1] + Hc[i] + B + Hc[i + 1])
+        self.ry = [0.0]
+        for j in range(self.ny):
+            self.ry.append(self.ry[-1] + Hr[j] + B + Hr[j + 1])
+        # lateral shifts of each row at each column (the arterial's S-curves)
+        self.shift = [[0.0] * (self.nx + 1) for _ in range(self.ny + 1)]
+        self.curved = [False] * (self.ny + 1)
+        if style == "arterial":
+            amp = min(12.0, 0.15 * B, (B - 2 * self.Z - 30.0) / 2)
+            runs = [self.cx[i + 1] - self.cx[i] - Hc[i] - Hc[i + 1] - 2 * (self.Z + FLAT) for i in range(self.nx)]
+            if amp > 1.0 and min(runs) >= 30.0:
+                amp = min(amp, 0.2 * min(runs))
+                self.shift[1] = [float(rng.uniform(-amp, amp)) for _ in range(self.nx + 1)]
+                self.curved[1] = True
+        self.X0, self.X1 = self.cx[0] - Hc[0], self.cx[-1] + Hc[-1]
+        self.Y0, self.Y1 = self.ry[0] - Hr[0], self.ry[-1] + Hr[-1]
+        self.ring = max(S, self.Z)
+        self.segments = self._segments()
+
+    def centre(self, i: int, j: int) -> np.ndarray:
+        return np.array([self.cx[i], self.ry[j] + self.shift[j][i]])
+
+    def jid(self, i: int, j: int) -> int:
+        return j * (self.nx + 1) + i
+
+    def arms(self, i: int, j: int) -> list[tuple[int, int]]:
+        ok = {(1, 0): i < self.nx, (0, 1): j < self.ny, (-1, 0): i > 0, (0, -1): j > 0}
+        return [u for u in _AXES if ok[u]]
+
+    def cross_half(self, i: int, j: int, u) -> float:
+        """Half-width of the road crossing arm ``u`` at junction (i, j)."""
+        return self.cols[i].half if u[0] else self.rows[j].half
+
+    def arm_section(self, i: int, j: int, u) -> _Section:
+        return self.rows[j] if u[0] else self.cols[i]
+
+    def block(self, i: int, j: int) -> tuple:
+        return ("block", i, j) if 0 <= i < self.nx and 0 <= j < self.ny else ("outer",)
+
+    def _segments(self) -> list[_Segment]:
+        segs: list[_Segment] = []
+        Z = self.Z
+        for j in range(self.ny + 1):
+            sec = self.rows[j]
+            for i in range(self.nx):
+                x0 = self.cx[i] + self.cols[i].half + Z
+                x1 = self.cx[i + 1] - self.cols[i + 1].half - Z
+                y0, y1 = self.ry[j] + self.shift[j][i], self.ry[j] + self.shift[j][i + 1]
+                if self.curved[j] and y0 != y1:
+                    xa, xb = x0 + FLAT, x1 - FLAT
+                    xs = np.concatenate([[x0], np.linspace(xa, xb, math.ceil((xb - xa) / (0.9 * SAMPLE)) + 1), [x1]])
+                    t = np.clip((xs - xa) / (xb - xa), 0.0, 1.0)
+                    P = np.column_stack([xs, y0 + (y1 - y0) * (1 - np.cos(math.pi * t)) / 2])
+                else:
+                    P = np.array([[x0, y0], [x1, y1]])
+                segs.append(_Segment(f"row{j}_{i}", P, sec, (i, j), (i + 1, j), (1, 0), (-1, 0),
+                                     self.block(i, j), self.block(i, j - 1)))  # fmt: skip
+        for i in range(self.nx + 1):
+            sec = self.cols[i]
+            for j in range(self.ny):
+                a, b = self.centre(i, j), self.centre(i, j + 1)
+                P = np.array([[a[0], a[1] + self.rows[j].half + Z], [b[0], b[1] - self.rows[j + 1].half - Z]])
+                segs.append(_Segment(f"col{i}_{j}", P, sec, (i, j), (i, j + 1), (0, 1), (0, -1),
+                                     self.block(i - 1, j), self.block(i, j)))  # fmt: skip
+        return segs
+
+
+def _section(road_width: float | None, lanes: int, parking: float, median: float, speed: float,
+             shoulder: float = 0.0) -> _Section:  # fmt: skip
+    """Cross-section from a lane count, or from an overriding carriageway width."""
+    if road_width is None:
+        return _Section(lanes, median / 2 + lanes * LANE_WIDTH + shoulder + parking, median, parking, speed)
+    half = road_width / 2
+    n = int((half - median / 2 - parking) // LANE_WIDTH)
+    if n < 1:
+        raise ValueError(
+            f"road_width {road_width:g} m leaves no {LANE_WIDTH:g} m lane each way "
+            f"(median {median:g} m, parking strips {parking:g} m)"
+        )
+    return _Section(n, half, median, parking, speed)
 
 
 # --------------------------------------------------------------------------------------------
@@ -342,243 +461,610 @@ class _Obstacles:
 # --------------------------------------------------------------------------------------------
 
 
-def _check_config(config: ScenesConfig) -> None:
-    """Refuse layouts with no room for a block interior or a walking line."""
-    interior = config.block_size - 2 * config.sidewalk_width
-    if interior < 4.0:
-        raise ValueError(
-            f"block_size {config.block_size:g} m minus two sidewalks of {config.sidewalk_width:g} m leaves "
-            f"{interior:g} m of block interior; at least 4 m is needed (raise block_size or lower sidewalk_width)"
-        )
+def build_procedural_town(spec: TownSpec, scenes: ScenesConfig, index: int, assets: Sequence[AssetRecord]) -> Town:
+    """Build procedural town ``index`` in ``spec.style`` from the ADMesh ``assets``.
 
-
-def build_town(config: ScenesConfig, town_index: int, assets: Sequence[AssetRecord]) -> Town:
-    """Build town ``town_index`` (named ``"town%02d"``) from the ADMesh ``assets``.
-
-    Deterministic from ``config.seed`` and ``town_index`` (and the set of assets, whatever their
-    order). Needs at least one Building asset; other categories are placed when present
-    (Vegetation, Pole, TrafficLight, TrafficSign, Static, Bicycle). Returns the placements (stuff
-    first, then buildings, vegetation, traffic lights, street furniture), the world-frame stuff
-    meshes and the lane/intersection/walk-loop description of the road network.
+    Deterministic from ``(scenes.seed, index, spec.style)`` and the set of assets (whatever their
+    order). ``spec.blocks / block_size / road_width / sidewalk_width`` override the style's
+    defaults. Needs at least one Building asset; other categories are placed when present (Car
+    only as parked cars in the suburb). Raises ``ValueError`` for other styles or layouts without
+    room for sidewalks and lanes.
     """
-    _check_config(config)
-    pools = _Pools(assets)
+    if spec.style not in _STYLES:
+        raise ValueError(f"build_procedural_town builds the styles {list(STYLES)}, not {spec.style!r}")
+    pools = AssetPools(assets)
     if not pools.get("Building"):
-        cats = sorted(pools.by_cat)
-        raise ValueError(f"build_town needs at least one asset of category Building; got categories {cats}")
-    name = town_name(town_index)
-    rng = np.random.default_rng(np.random.SeedSequence([config.seed, town_index, 0x70776E]))
-    n, B, R, S = config.blocks, config.block_size, config.road_width, config.sidewalk_width
-    curb = config.curb_height
-    P = B + R
-    c = [k * P for k in range(n + 1)]
-    X0, X1 = c[0] - R / 2, c[-1] + R / 2  # the square covered by the road grid
-    n_lanes = lanes_per_direction(R)
-    lane_w = (R / 2) / n_lanes
+        raise ValueError(f"a procedural town needs at least one asset of category Building; got {sorted(pools.by_cat)}")
+    st = _STYLES[spec.style]
+    code = STYLES.index(spec.style)
+    rng = np.random.default_rng(np.random.SeedSequence([scenes.seed, index, code, 0x70776E]))
+    lay = _Layout(spec.style, st, spec, rng)
+    name = town_name(index)
+    return _Builder(name, index, spec.style, st, lay, pools, scenes.curb_height, rng).build()
 
-    # 1. lanes: every edge of the node grid, both directions, n_lanes each (right-hand traffic)
-    lanes: list[LaneSegment] = []
-    edges = [((i, j), (i + 1, j)) for j in range(n + 1) for i in range(n)]
-    edges += [((i, j), (i, j + 1)) for i in range(n + 1) for j in range(n)]
-    for u, v in edges:
-        for a, b in ((u, v), (v, u)):
-            ca, cb = np.array([c[a[0]], c[a[1]]]), np.array([c[b[0]], c[b[1]]])
-            d = (cb - ca) / np.linalg.norm(cb - ca)
-            right = np.array([d[1], -d[0]])
-            for k in range(n_lanes):
-                off = right * (k + 0.5) * lane_w
-                start, end = ca + d * R / 2 + off, cb - d * R / 2 + off
-                lanes.append(LaneSegment(
-                    lane_id=len(lanes), start_node=a, end_node=b, lane_index=k,
-                    direction=(float(d[0]), float(d[1])), start=(float(start[0]), float(start[1])),
-                    end=(float(end[0]), float(end[1])), width=lane_w,
-                ))  # fmt: skip
-    intersections = {
-        (i, j): (c[i] - R / 2, c[j] - R / 2, c[i] + R / 2, c[j] + R / 2) for i in range(n + 1) for j in range(n + 1)
-    }
 
-    # 2. stuff: road strips (x roads whole, y roads between the x roads), sidewalk rings, terrain
-    road_rects = [(X0, X1, cj - R / 2, cj + R / 2) for cj in c]
-    road_rects += [(ci - R / 2, ci + R / 2, c[j] + R / 2, c[j + 1] - R / 2) for ci in c for j in range(n)]
-    blocks = [(i, j) for j in range(n) for i in range(n)]
-    block_rect = {(i, j): (c[i] + R / 2, c[i + 1] - R / 2, c[j] + R / 2, c[j + 1] - R / 2) for i, j in blocks}
-    sidewalk_rects = [r for bij in blocks for r in _ring(*block_rect[bij], S)]
-    sidewalk_rects += _ring(X0 - S, X1 + S, X0 - S, X1 + S, S)
-    # kerb faces: a thin wall under the edge of every sidewalk that borders a road
-    kerb_rects = [r for bij in blocks for r in _ring(*block_rect[bij], SURFACE)]
-    kerb_rects += _ring(X0 - SURFACE, X1 + SURFACE, X0 - SURFACE, X1 + SURFACE, SURFACE)
-    interiors = {bij: (r[0] + S, r[1] - S, r[2] + S, r[3] - S) for bij, r in block_rect.items()}
-    g_lo, g_hi = X0 - S - TOWN_MARGIN, X1 + S + TOWN_MARGIN  # the whole ground square
-    terrain_rects = list(interiors.values()) + _ring(g_lo, g_hi, g_lo, g_hi, TOWN_MARGIN)
-    marking_rects = [r for lane in lanes for r in _marking_rects(lane, R, n_lanes)]
-    top = curb - SURFACE
-    sidewalk = _slabs(sidewalk_rects, top, curb)
-    if top > 0.0:  # no kerb faces on a flush sidewalk
-        sidewalk = concatenate([sidewalk, _slabs(kerb_rects, -SURFACE, top)])
-    stuff = {
-        f"{name}/road": _stuff_geometry(f"{name}/road", _slabs(road_rects, -SURFACE, 0.0), "Road", "asphalt"),
-        f"{name}/sidewalk": _stuff_geometry(f"{name}/sidewalk", sidewalk, "Sidewalk", "paving"),
-        f"{name}/terrain": _stuff_geometry(f"{name}/terrain", _slabs(terrain_rects, top, curb), "Terrain", "grass"),
-        f"{name}/roadline": _stuff_geometry(
-            f"{name}/roadline", _slabs(marking_rects, -SURFACE / 2, MARKING_TOP), "RoadLine", "paint"
-        ),
-    }
-    placer = _Placer(name)
-    for key in _STUFF_NAMES:
-        geom = stuff[f"{name}/{key}"]
-        placer.add(key, geom.asset_id, geom.parts[0].semantic_id, np.eye(4), named=key)
+class _Builder:
+    def __init__(self, name, index, style, st: _Style, lay: _Layout, pools: AssetPools, curb: float, rng) -> None:
+        self.name, self.index, self.style, self.st, self.lay = name, index, style, st, lay
+        self.pools, self.curb, self.rng = pools, curb, rng
+        self.pieces: dict[str, list] = {k: [] for k in ("road", "sidewalk", "terrain", "roadline", "guardrail",
+                                                         "fence", "wall")}  # fmt: skip
+        self.feet = _Footprints()
+        self.lots: dict[tuple, np.ndarray] = {}  # block -> lot polygon (closed, CCW)
+        self.loops: dict[tuple, np.ndarray] = {}  # region -> closed walk loop (K, 2)
+        self.signal: dict[tuple[int, int], bool] = {}
+        self.placements: list = []  # deferred asset placements (kind, asset, xy, yaw, anchor)
 
-    # 3. buildings: walk every block side, street-facing (+X towards the road), set back
-    footprints: dict[tuple[int, int], list[tuple[float, float, float, float]]] = {b: [] for b in blocks}
-    for bij in blocks:
-        downtown = rng.uniform() < 0.35
-        weights = (("office", 0.55), ("residential", 0.45)) if downtown else (("house", 0.65), ("residential", 0.35))
-        inner = interiors[bij]
-        for side in _block_sides(*block_rect[bij]):
-            a = S + float(rng.uniform(0.5, 2.0))
-            while a < side.length - S - 4.0:
-                placed = False
-                for _ in range(4):  # a few draws; a smaller building may fit where a large did not
-                    sub = weights[0][0] if rng.uniform() < weights[0][1] else weights[1][0]
-                    asset = pools.pick(rng, "Building", [sub])
-                    depth, front = asset.extent[0], asset.extent[1]
-                    setback = float(rng.uniform(1.0, 3.0))
-                    centre = side.point(a + front / 2, S + setback + depth / 2)
-                    half = np.abs(side.out) * depth / 2 + np.abs(side.along) * front / 2
-                    rect = (centre[0] - half[0], centre[0] + half[0], centre[1] - half[1], centre[1] + half[1])
-                    inside = (rect[0] >= inner[0] + 0.5 and rect[1] <= inner[1] - 0.5
-                              and rect[2] >= inner[2] + 0.5 and rect[3] <= inner[3] - 0.5)  # fmt: skip
-                    if inside and not any(_rects_overlap(rect, f, 1.5) for f in footprints[bij]):
-                        footprints[bij].append(rect)
-                        placer.add_asset("building", asset, centre, curb, _yaw_of(side.out))
-                        a += front + float(rng.uniform(1.5, 4.0))
-                        placed = True
-                        break
-                if not placed:
-                    a += 2.0
+    # ---------------------------------------------------------------- stuff
+    def build(self) -> Town:
+        lay = self.lay
+        for i in range(lay.nx + 1):
+            for j in range(lay.ny + 1):
+                self.signal[(i, j)] = self._signalised(i, j)
+        for seg in lay.segments:
+            self._segment_stuff(seg)
+        for j in range(lay.ny + 1):
+            for i in range(lay.nx + 1):
+                self._junction_stuff(i, j)
+        for bj in range(lay.ny):
+            for bi in range(lay.nx):
+                self._block(bi, bj)
+        self._outer()
+        network = self._network()
+        self._things()  # before the stuff meshes: lot frontages add fences and walls
+        stuff = {}
+        semantic = {"road": ("Road", "asphalt"), "sidewalk": ("Sidewalk", "paving"), "terrain": ("Terrain", "grass"),
+                    "roadline": ("RoadLine", "paint"), "guardrail": ("GuardRail", "metal"),
+                    "fence": ("Fence", "wood"), "wall": ("Wall", "concrete")}  # fmt: skip
+        placer = Placer(self.name)
+        for key, parts in self.pieces.items():
+            if not parts:
+                continue
+            k = f"{self.name}/{key}"
+            stuff[k] = stuff_geometry(k, concatenate(parts), *semantic[key])
+            placer.add_stuff(stuff[k])
+        for kind, asset, xy, yaw, anchor in self.placements:
+            placer.add_asset(kind, asset, xy, self.curb, yaw, anchor)
+        g = TOWN_MARGIN + lay.ring
+        bounds = (lay.X0 - g, lay.Y0 - g, lay.X1 + g, lay.Y1 + g)
+        return Town(
+            name=self.name, index=self.index, style=self.style, source="", placements=placer.records, stuff=stuff,
+            network=network, bounds=tuple(float(b) for b in bounds), max_instance_id=placer.next_instance - 1,
+            curb_height=self.curb,
+        )  # fmt: skip
 
-    # 4. vegetation inside blocks and in the outer margin, clear of buildings and of each other
-    plants: list[tuple[float, float, float]] = []
+    def _signalised(self, i: int, j: int) -> bool:
+        lay = self.lay
+        if self.style == "arterial":
+            return j == 1
+        if len(lay.arms(i, j)) < 3:
+            return False if self.style == "suburb" else True
+        return bool(self.rng.uniform() < self.st.signal_share)
 
-    def plant_at(xy, asset: AssetRecord, rects) -> bool:
-        radius = max(asset.extent[0], asset.extent[1]) / 2
-        box = (xy[0] - radius, xy[0] + radius, xy[1] - radius, xy[1] + radius)
-        if any(_rects_overlap(box, f, 0.5) for f in rects):
+    def _segment_stuff(self, seg: _Segment) -> None:
+        lay, sec, curb, S = self.lay, seg.sec, self.curb, self.lay.S
+        P, H, m = seg.P, sec.half, sec.median
+        top = curb - SURFACE
+        if m > 0:
+            self.pieces["road"] += [_ribbon(P, -H, -m / 2, -SURFACE, 0.0), _ribbon(P, m / 2, H, -SURFACE, 0.0)]
+            self.pieces["terrain"].append(_ribbon(P, -m / 2 + SURFACE, m / 2 - SURFACE, top, curb))
+            kerbs = [_ribbon(P, -m / 2, -m / 2 + SURFACE, -SURFACE, curb), _ribbon(P, m / 2 - SURFACE, m / 2, -SURFACE, curb)]
+            L = seg.length
+            for s0, s1 in ((0.0, SURFACE), (L - SURFACE, L)):  # noses
+                kerbs.append(_ribbon(_sub(P, s0, s1), -m / 2 + SURFACE, m / 2 - SURFACE, -SURFACE, top))
+            if top > 0:
+                self.pieces["sidewalk"] += kerbs
+            else:
+                self.pieces["terrain"] += kerbs
+            rail = _sub(P, 1.0, L - 1.0)
+            self.pieces["guardrail"].append(_ribbon(rail, -0.15, 0.15, curb, curb + 0.8))
+        else:
+            self.pieces["road"].append(_ribbon(P, -H, H, -SURFACE, 0.0))
+        for sgn, region in ((1, seg.left), (-1, seg.right)):
+            if region[0] == "outer":
+                continue  # the outer ring holds that sidewalk
+            lo, hi = sorted((sgn * H, sgn * (H + S)))
+            self.pieces["sidewalk"].append(_ribbon(P, lo, hi, top, curb))
+            if top > 0:
+                klo, khi = sorted((sgn * H, sgn * (H + SURFACE)))
+                self.pieces["sidewalk"].append(_ribbon(P, klo, khi, -SURFACE, top))
+        # markings: centre line, lane lines (dashed), edge / parking lines
+        L = seg.length
+        lines = []
+        if m == 0:
+            lines += [(-0.2, -0.08), (0.08, 0.2)]  # double centre line
+        edge = m / 2 + sec.lanes * LANE_WIDTH
+        for sgn in (1, -1):
+            o = sorted((sgn * (edge - 0.15), sgn * edge)) if sec.parking or edge < H else sorted(
+                (sgn * (H - 0.3), sgn * (H - 0.15)))
+            lines.append(tuple(o))
+        for a, b in lines:
+            self.pieces["roadline"].append(_ribbon(_sub(P, 0.5, L - 0.5), a, b, 0.0, MARKING_TOP))
+        for k in range(1, sec.lanes):
+            o = m / 2 + k * LANE_WIDTH
+            s = 2.0
+            while s + 3.0 <= L - 1.0:
+                for sgn in (1, -1):
+                    a, b = sorted((sgn * (o - 0.06), sgn * (o + 0.06)))
+                    self.pieces["roadline"].append(_ribbon(_sub(P, s, s + 3.0), a, b, 0.0, MARKING_TOP))
+                s += 9.0
+
+    def _junction_stuff(self, i: int, j: int) -> None:
+        lay, curb, Z = self.lay, self.curb, self.lay.Z
+        c = lay.centre(i, j)
+        Hc, Hr = lay.cols[i].half, lay.rows[j].half
+        arms = lay.arms(i, j)
+        road = [(c[0] - Hc, c[0] + Hc, c[1] - Hr, c[1] + Hr)]
+        marks = []
+        for u in arms:
+            Hx, sec = lay.cross_half(i, j, u), lay.arm_section(i, j, u)
+            H = sec.half
+            road.append(_rect(c[0], c[1], u, Hx, Hx + Z, -H, H))
+            # zebra: stripes 0.5 m wide every 1 m across the carriageway, along the road
+            n = int((2 * H - 0.6) // 1.0)
+            b0 = -n / 2.0 + 0.25
+            for k in range(n):
+                marks.append(_rect(c[0], c[1], u, Hx + self.lay.zc - ZEBRA / 2, Hx + self.lay.zc + ZEBRA / 2,
+                                   b0 + k, b0 + k + 0.5))  # fmt: skip
+            # stop line at the zone edge, across the incoming lanes (on the arm's left = +v side)
+            marks.append(_rect(c[0], c[1], u, Hx + Z - 0.5, Hx + Z - 0.1, sec.median / 2 + 0.1,
+                               sec.median / 2 + sec.lanes * LANE_WIDTH - 0.1))  # fmt: skip
+        self.pieces["road"].append(slabs(road, -SURFACE, 0.0))
+        self.pieces["roadline"].append(slabs(marks, 0.0, MARKING_TOP))
+        # corner squares where two arms bound a block
+        top = curb - SURFACE
+        side, kerb = [], []
+        for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1)):
+            if lay.block(i if sx > 0 else i - 1, j if sy > 0 else j - 1)[0] != "block":
+                continue
+            x0, x1 = sorted((c[0] + sx * Hc, c[0] + sx * (Hc + Z)))
+            y0, y1 = sorted((c[1] + sy * Hr, c[1] + sy * (Hr + Z)))
+            side.append((x0, x1, y0, y1))
+            kx0, kx1 = sorted((c[0] + sx * Hc, c[0] + sx * (Hc + SURFACE)))
+            ky0, ky1 = sorted((c[1] + sy * Hr, c[1] + sy * (Hr + SURFACE)))
+            kerb.append((x0, x1, ky0, ky1))
+            ky0b, ky1b = sorted((c[1] + sy * (Hr + SURFACE), c[1] + sy * (Hr + Z)))
+            kerb.append((kx0, kx1, ky0b, ky1b))
+        if side:
+            self.pieces["sidewalk"].append(slabs(side, top, curb))
+            if top > 0:
+                self.pieces["sidewalk"].append(slabs(kerb, -SURFACE, top))
+
+    def _seg(self, name: str) -> _Segment:
+        return self._by_name[name]
+
+    def _block(self, bi: int, bj: int) -> None:
+        """Terrain of block (bi, bj), its lot polygon and walk loop."""
+        lay, S, Z, curb = self.lay, self.lay.S, self.lay.Z, self.curb
+        if not hasattr(self, "_by_name"):
+            self._by_name = {s.name: s for s in lay.segments}
+        bot, top_ = self._seg(f"row{bj}_{bi}"), self._seg(f"row{bj + 1}_{bi}")
+        Hb, Ht = lay.rows[bj].half, lay.rows[bj + 1].half
+        Hl, Hr_ = lay.cols[bi].half, lay.cols[bi + 1].half
+        cl, cr = lay.cx[bi], lay.cx[bi + 1]
+        yLb = lay.centre(bi, bj)[1] + Hb + Z
+        yLt = lay.centre(bi, bj + 1)[1] - Ht - Z
+        yRb = lay.centre(bi + 1, bj)[1] + Hb + Z
+        yRt = lay.centre(bi + 1, bj + 1)[1] - Ht - Z
+        xL, xR = cl + Hl + S, cr - Hr_ - S
+        xm0, xm1 = cl + Hl + Z, cr - Hr_ - Z
+        b = _offset(bot.P, Hb + S)
+        t = _offset(top_.P, -(Ht + S))
+        xs = np.unique(np.concatenate([b[:, 0], t[:, 0]]))
+        xs = _densify(np.column_stack([xs, np.zeros_like(xs)]), STUFF_TILE)[:, 0]
+        xs = xs[np.concatenate([[True], np.diff(xs) > 1e-6])]
+        yb, yt = np.interp(xs, b[:, 0], b[:, 1]), np.interp(xs, t[:, 0], t[:, 1])
+        low, high = curb - SURFACE, curb
+        ter = [_strip(xs, yb, yt, low, high)]
+        if xm0 - xL > 1e-6:
+            ter.append(slab(xL, xm0, yLb, yLt, low, high))
+            ter.append(slab(xm1, xR, yRb, yRt, low, high))
+        self.pieces["terrain"] += ter
+        poly = [(xL, yLb), (xm0, yLb), *zip(xs, yb), (xm1, yRb), (xR, yRb), (xR, yRt), (xm1, yRt),
+                *zip(xs[::-1], yt[::-1]), (xm0, yLt), (xL, yLt)]  # fmt: skip
+        poly = np.array(poly, dtype=np.float64)
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(poly, axis=0), axis=1) > 1e-6])
+        self.lots[("block", bi, bj)] = poly[keep]
+        # walk loop: S/2 from the kerbs, counter-clockwise
+        wb = _offset(bot.P, Hb + S / 2)
+        wt = _offset(top_.P, -(Ht + S / 2))
+        loop = np.vstack([
+            [[cl + Hl + S / 2, wb[0, 1]]], wb, [[cr - Hr_ - S / 2, wb[-1, 1]]],
+            [[cr - Hr_ - S / 2, wt[-1, 1]]], wt[::-1], [[cl + Hl + S / 2, wt[0, 1]]],
+        ])  # fmt: skip
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(loop, axis=0), axis=1) > 1e-6])
+        self.loops[("block", bi, bj)] = loop[keep]
+
+    def _outer(self) -> None:
+        lay, curb = self.lay, self.curb
+        w = lay.ring
+        X0, X1, Y0, Y1 = lay.X0, lay.X1, lay.Y0, lay.Y1
+        top = curb - SURFACE
+        self.pieces["sidewalk"].append(slabs(_ring(X0 - w, X1 + w, Y0 - w, Y1 + w, w), top, curb))
+        if top > 0:
+            self.pieces["sidewalk"].append(
+                slabs(_ring(X0 - SURFACE, X1 + SURFACE, Y0 - SURFACE, Y1 + SURFACE, SURFACE), -SURFACE, top))
+        g = TOWN_MARGIN
+        self.pieces["terrain"].append(slabs(_ring(X0 - w - g, X1 + w + g, Y0 - w - g, Y1 + w + g, g), top, curb))
+        o = lay.S / 2
+        self.loops[("outer",)] = np.array([[X0 - o, Y0 - o], [X1 + o, Y0 - o], [X1 + o, Y1 + o], [X0 - o, Y1 + o]])
+
+    # ---------------------------------------------------------------- network
+    def _network(self) -> RoadNetwork:
+        lay = self.lay
+        lanes: list[dict] = []
+        ins: dict[tuple, list[int]] = {}  # (i, j, arm) -> in-lane ids by index
+        outs: dict[tuple, list[int]] = {}
+        for seg in lay.segments:
+            sec = seg.sec
+            for forward in (True, False):
+                ids = []
+                for k in range(sec.lanes):
+                    off = sec.lane_offset(k)
+                    pts = _offset(seg.P, -off) if forward else _offset(seg.P, off)[::-1]
+                    pts = _densify(pts, SAMPLE)
+                    ids.append(len(lanes))
+                    lanes.append(dict(points=pts, road=seg.name, speed=sec.speed, junction=-1, succ=[]))
+                for k, lid in enumerate(ids):
+                    lanes[lid]["left"] = ids[k - 1] if k > 0 else -1
+                    lanes[lid]["right"] = ids[k + 1] if k + 1 < len(ids) else -1
+                ja, ua, jb, ub = (seg.ja, seg.ua, seg.jb, seg.ub) if forward else (seg.jb, seg.ub, seg.ja, seg.ua)
+                outs[(*ja, ua)] = ids
+                ins[(*jb, ub)] = ids
+        for j in range(lay.ny + 1):
+            for i in range(lay.nx + 1):
+                jid = lay.jid(i, j)
+                arms = lay.arms(i, j)
+                for u in arms:
+                    d = (-u[0], -u[1])
+                    left, right = (-d[1], d[0]), (d[1], -d[0])
+                    in_ids = ins[(i, j, u)]
+                    n = len(in_ids)
+                    moves: dict[int, list[tuple]] = {k: [] for k in range(n)}
+                    for w in arms:
+                        if w == u:
+                            continue  # no U-turns: the grid has no dead ends
+                        out_ids = outs[(i, j, w)]
+                        if w == d:
+                            for k in range(n):
+                                moves[k].append((w, [out_ids[min(k, len(out_ids) - 1)]]))
+                        elif w == right:
+                            moves[n - 1].append((w, out_ids))
+                        elif w == left:
+                            moves[0].append((w, out_ids))
+                    for k in range(n):
+                        if not moves[k]:  # a middle lane with no way straight on: turn
+                            for w in (right, left):
+                                if w in arms:
+                                    moves[k].append((w, outs[(i, j, w)]))
+                                    break
+                        src = lanes[in_ids[k]]
+                        p0 = src["points"][-1]
+                        for w, targets in moves[k]:
+                            for t in targets:
+                                dst = lanes[t]
+                                p1 = dst["points"][0]
+                                pts = _bezier(p0, np.array(d, float), p1, np.array(w, float))
+                                speed = min(src["speed"], dst["speed"]) if w == d else min(TURN, src["speed"])
+                                src["succ"].append(len(lanes))
+                                lanes.append(dict(points=pts, road=f"junction{jid}", speed=speed, junction=jid,
+                                                  succ=[t], left=-1, right=-1))  # fmt: skip
+        out = tuple(
+            Lane(lane_id=k, points=np.column_stack([ln["points"], np.zeros(len(ln["points"]))]), width=LANE_WIDTH,
+                 successors=tuple(ln["succ"]), left=ln["left"], right=ln["right"], junction=ln["junction"],
+                 speed_limit=float(ln["speed"]), road=ln["road"])
+            for k, ln in enumerate(lanes)
+        )  # fmt: skip
+        road_length = sum(s.length for s in lay.segments)
+        for j in range(lay.ny + 1):
+            for i in range(lay.nx + 1):
+                road_length += sum(lay.cross_half(i, j, u) + lay.Z for u in lay.arms(i, j))
+        return RoadNetwork(lanes=out, walkways=self._walkways(), road_length=float(road_length))
+
+    def _walkways(self) -> tuple[Walkway, ...]:
+        lay, S, curb = self.lay, self.lay.S, self.curb
+        nodes: dict[tuple, int] = {}
+        on_loop: dict[tuple, list[tuple[np.ndarray, int]]] = {r: [] for r in self.loops}
+        walks: list[Walkway] = []
+        crossings = []
+        for j in range(lay.ny + 1):
+            for i in range(lay.nx + 1):
+                c = lay.centre(i, j)
+                for u in lay.arms(i, j):
+                    Hx, H = lay.cross_half(i, j, u), lay.arm_section(i, j, u).half
+                    v = np.array([-u[1], u[0]], dtype=float)
+                    base = c + np.array(u, float) * (Hx + lay.zc)
+                    ends = []
+                    for sgn in (1, -1):
+                        key = (i, j, u, sgn)
+                        nodes[key] = len(nodes)
+                        p = base + v * sgn * (H + S / 2)
+                        # the quadrant between u and its left (sgn 1) or right (sgn -1) neighbour arm
+                        q = (u[0] - sgn * u[1], u[1] + sgn * u[0])
+                        region = lay.block(i if q[0] > 0 else i - 1, j if q[1] > 0 else j - 1)
+                        on_loop[region].append((p, nodes[key]))
+                        ends.append((p, nodes[key]))
+                    crossings.append((ends, lay.jid(i, j)))
+        width = max(1.0, S - min(1.2, 0.45 * S))
+        for region, loop in self.loops.items():
+            closed = np.vstack([loop, loop[:1]])
+            cum = polyline_lengths(closed)
+            total = float(cum[-1])
+            marks = sorted((_project(closed, cum, p), n) for p, n in on_loop[region])
+            for k, (s0, n0) in enumerate(marks):
+                s1, n1 = marks[(k + 1) % len(marks)]
+                if k + 1 == len(marks):
+                    s1 += total
+                twice = np.vstack([closed, closed[1:]])
+                pts = _sub(twice, s0, s1)
+                walks.append(Walkway(walkway_id=len(walks), points=np.column_stack([pts, np.full(len(pts), curb)]),
+                                     start_node=n0, end_node=n1, width=width))  # fmt: skip
+        for ends, jid in crossings:
+            (p0, n0), (p1, n1) = ends[1], ends[0]
+            pts = np.array([[p0[0], p0[1], CROSSWALK_Z], [p1[0], p1[1], CROSSWALK_Z]])
+            walks.append(Walkway(walkway_id=len(walks), points=pts, start_node=n0, end_node=n1, width=ZEBRA,
+                                 crosswalk=True, junction=jid))  # fmt: skip
+        return tuple(walks)
+
+    # ---------------------------------------------------------------- things
+    def _put(self, kind: str, asset: AssetRecord, xy, yaw: float, anchor=(0.0, 0.0), half=None, at=None,
+             gap: float = 0.3) -> bool:  # fmt: skip
+        """Place ``asset`` (deferred) when its footprint is free; ``half``/``at`` override the
+        footprint (default: the asset box)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        centre = xy - rot2(yaw, anchor)
+        if half is None:
+            half, at = (asset.extent[0] / 2, asset.extent[1] / 2), centre
+        at = centre if at is None else at
+        if not self.feet.free(at, half, yaw, gap):
             return False
-        if any(math.hypot(xy[0] - x, xy[1] - y) < radius + r for x, y, r in plants):
-            return False
-        plants.append((float(xy[0]), float(xy[1]), radius))
-        placer.add_asset(_kind(asset), asset, xy, curb, float(rng.uniform(-math.pi, math.pi)))
+        self.feet.add(at, half, yaw, gap)
+        self.placements.append((kind, asset, xy, yaw, anchor))
         return True
 
-    if pools.get("Vegetation"):
-        for bij in blocks:
-            inner = interiors[bij]
-            for _ in range(int(rng.integers(3, 8))):
-                asset = pools.pick(rng, "Vegetation")
-                r = max(asset.extent[0], asset.extent[1]) / 2
-                if inner[1] - inner[0] <= 2 * r + 1 or inner[3] - inner[2] <= 2 * r + 1:
-                    continue
-                for _attempt in range(10):
-                    xy = (rng.uniform(inner[0] + r + 0.5, inner[1] - r - 0.5),
-                          rng.uniform(inner[2] + r + 0.5, inner[3] - r - 0.5))  # fmt: skip
-                    if plant_at(xy, asset, footprints[bij]):
-                        break
-        # margin: a loose band of trees, one try per ~12 m of perimeter
-        lo, hi = X0 - S, X1 + S
-        for _ in range(int(4 * (hi - lo) / 12)):
-            asset = pools.pick(rng, "Vegetation")
-            t, depth = float(rng.uniform(lo, hi)), float(rng.uniform(2.0, TOWN_MARGIN - 3.0))
-            side = int(rng.integers(4))
-            xy = [(t, lo - depth), (hi + depth, t), (t, hi + depth), (lo - depth, t)][side]
-            plant_at(xy, asset, [])
+    def _pole(self, kind: str, asset: AssetRecord, xy, yaw: float) -> bool:
+        """Place a pole-like asset by its pole axis (asset-frame conventions of the procedural source)."""
+        ext = asset.extent
+        pole_y = ext[1] / 2 - POLE_RADIUS if asset.subclass == "overhead_signal" else 0.0
+        anchor = (-ext[0] / 2 + POLE_RADIUS, pole_y)
+        return self._put(kind, asset, xy, yaw, anchor, half=(0.25, 0.25), at=np.asarray(xy, float))
 
-    # 5. traffic lights: one per intersection approach, on the kerb corner at the approach's right
-    furniture = _Obstacles()
-    pole_depth = min(0.5, 0.4 * S)
-    overhead = R / 2 >= 3.0
-    if pools.get("TrafficLight"):
-        for (i, j) in sorted(intersections):
-            centre = np.array([c[i], c[j]])
-            for d in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)):
-                prev = (i - int(d[0]), j - int(d[1]))
-                if prev not in intersections:
-                    continue  # no road arrives from that side
-                d_ = np.array(d)
-                right = np.array([d_[1], -d_[0]])
-                pole = centre - d_ * (R / 2 + pole_depth) + right * (R / 2 + pole_depth)
-                asset = pools.pick(rng, "TrafficLight", ["overhead_signal"] if overhead else ["vehicle_signal"])
-                ext = asset.extent
-                # the pole axis in the asset frame (mast-arm signals have it at the +Y end)
-                pole_y = ext[1] / 2 - POLE_RADIUS if asset.subclass == "overhead_signal" else 0.0
-                anchor = (-ext[0] / 2 + POLE_RADIUS, pole_y)
-                placer.add_asset("traffic_light", asset, pole, curb, _yaw_of(-d_), anchor)
-                furniture.add(pole, 0.3)
+    def _things(self) -> None:
+        self._buildings()
+        self._junction_furniture()
+        self._sidewalk_furniture()
+        if self.style == "suburb":
+            self._parked_cars()
+        self._lot_trees()
+        self._margin_trees()
 
-    # 6. sidewalk furniture along every kerb: street lights, street trees, a sign, bench, bin, bike
-    street_trees = pools.get("Vegetation", ["tree"])
-    fz = min(1.2, 0.45 * S)  # furniture zone next to the kerb; walkers use the rest
-    sides = [s for bij in blocks for s in _block_sides(*block_rect[bij])] + _outer_sides(X0, X1)
-    for side in sides:
-        a_lo, a_hi = S + 1.0, side.length - S - 1.0
-        if a_hi <= a_lo:
-            continue
-        # street lights every 24-30 m, arm over the road
-        light = pools.pick(rng, "Pole", ["street_light"])
-        a = a_lo + float(rng.uniform(2.0, 8.0))
-        while light is not None and a < a_hi:
-            xy = side.point(a, pole_depth)
-            if furniture.free(xy, 0.3):
-                anchor = (-light.extent[0] / 2 + POLE_RADIUS, 0.0)
-                placer.add_asset("street_light", light, xy, curb, _yaw_of(side.out), anchor)
-                furniture.add(xy, 0.3)
-            a += float(rng.uniform(24.0, 30.0))
-        # street trees every 10-16 m (high crowns only), trunk in the furniture zone
-        a = a_lo + float(rng.uniform(4.0, 10.0))
-        while street_trees and a < a_hi:
-            xy = side.point(a, max(fz / 2, pole_depth))
-            tree = street_trees[int(rng.integers(len(street_trees)))]
-            if furniture.free(xy, 0.5, 1.5):
-                placer.add_asset(_kind(tree), tree, xy, curb, float(rng.uniform(-math.pi, math.pi)))
-                furniture.add(xy, 0.5)
-            a += float(rng.uniform(10.0, 16.0))
-        # one traffic sign, facing the traffic that drives along this kerb
-        sign = pools.pick(rng, "TrafficSign")
-        if sign is not None and rng.uniform() < 0.8:
-            xy = side.point(float(rng.uniform(a_lo, a_hi)), pole_depth)
-            if furniture.free(xy, 0.4):
-                facing = np.array([-side.out[1], side.out[0]])  # against the kerb-side lane's travel
-                anchor = (-sign.extent[0] / 2 + POLE_RADIUS, 0.0)
-                placer.add_asset("traffic_sign", sign, xy, curb, _yaw_of(facing), anchor)
-                furniture.add(xy, 0.4)
-        # a bench (facing the buildings), a bin and a parked bicycle, when the zone is wide enough
-        if fz < 0.6:
-            continue
-        for category, subclass, p_place, yaw_dir in (
-            ("Static", "bench", 0.5, -side.out), ("Static", "bin", 0.5, -side.out), ("Bicycle", None, 0.3, side.along),
-        ):  # fmt: skip
-            asset = pools.pick(rng, category, [subclass] if subclass else None)
-            if asset is None or rng.uniform() >= p_place:
+    def _sides(self):
+        """(segment, sgn, region) of every road side bordering a block or the outer ring."""
+        for seg in self.lay.segments:
+            for sgn, region in ((1, seg.left), (-1, seg.right)):
+                yield seg, sgn, region
+
+    def _buildings(self) -> None:
+        st, rng, lay, S = self.st, self.rng, self.lay, self.lay.S
+        pool = self.pools.get("Building", list(st.buildings)) or self.pools.get("Building")
+        ext = np.array([a.extent[:2] for a in pool])
+        main = lay.rows[1] if self.style == "arterial" else None
+        for seg, sgn, region in self._sides():
+            if region[0] != "block":
                 continue
-            radius = max(asset.extent[0], asset.extent[1]) / 2
-            xy = side.point(float(rng.uniform(a_lo, a_hi)), fz / 2)
-            if furniture.free(xy, radius):
-                placer.add_asset(_kind(asset), asset, xy, curb, _yaw_of(yaw_dir))
-                furniture.add(xy, radius)
+            poly, H = self.lots[region], seg.sec.half
+            L = seg.length
+            a = float(rng.uniform(0.0, 2.0))
+            while a < L - 8.0:
+                w = min(float(rng.uniform(*st.lot)), L - a)
+                s = a + w / 2
+                p, tng = _at(seg.P, seg.cum, s)
+                nrm = np.array([-tng[1], tng[0]]) * sgn  # into the block
+                front = p + nrm * (H + S)
+                setback = float(rng.uniform(*st.setback)) + (0.8 if st.frontage else 0.0)
+                room = _ray(poly, front + nrm * 0.05, nrm) / 2 - setback - 0.5
+                depth_max = min(room, st.max_depth)
+                fits = np.flatnonzero((ext[:, 1] <= w - 1.5) & (ext[:, 0] <= depth_max))
+                placed = None
+                if fits.size:
+                    order = fits[np.argsort(-(ext[fits, 0] * ext[fits, 1]), kind="stable")]
+                    first = int(rng.integers(min(3, order.size)))  # one of the three best fits
+                    for k in [*order[first:], *order[:first]][:6]:
+                        asset = pool[int(k)]
+                        d0, d1 = asset.extent[0], asset.extent[1]
+                        c = front + nrm * (setback + d0 / 2)
+                        yaw = yaw_of(-nrm)
+                        pts, _ = _Footprints.corners(c, (d0 / 2 + 0.3, d1 / 2 + 0.3), yaw)
+                        if not _inside(poly, pts).all() or _inside(pts, poly).any():
+                            continue
+                        if self._put("building", asset, c, yaw, gap=1.0):
+                            placed = (asset, c, d1)
+                            break
+                if placed is not None:
+                    self._frontage(seg, sgn, a, w, s, seg.sec is main)
+                a += w
 
-    # 7. walking lines: per block, one loop each way on the walker part of the sidewalk
-    loops: list[WalkLoop] = []
-    for bij in blocks:
-        x0, x1, y0, y1 = block_rect[bij]
-        for frac, ccw in ((0.3, True), (0.75, False)):
-            o = fz + frac * (S - fz)
-            corners = [(x0 + o, y0 + o), (x1 - o, y0 + o), (x1 - o, y1 - o), (x0 + o, y1 - o)]
-            loops.append(WalkLoop(block=bij, corners=tuple(corners if ccw else corners[::-1]), z=curb))
+    def _frontage(self, seg: _Segment, sgn: int, a: float, w: float, s_gate: float, on_main: bool) -> None:
+        """Front fence / hedge / wall of a lot (``a .. a + w`` along ``seg``) with a 3 m gate."""
+        st, rng = self.st, self.rng
+        if not st.frontage:
+            return
+        H, S, curb = seg.sec.half, self.lay.S, self.curb
+        off = H + S + 0.4
+        hedges = self.pools.get("Vegetation", ["hedge"])
+        if st.frontage == "fence" and hedges and rng.uniform() < 0.4:
+            s = a + 0.8
+            while s < a + w - 0.8:
+                hedge = hedges[int(rng.integers(len(hedges)))]
+                ln = hedge.extent[0]
+                if s + ln > a + w - 0.8:
+                    break
+                if abs(s + ln / 2 - s_gate) > ln / 2 + 1.5:
+                    p, tng = _at(seg.P, seg.cum, s + ln / 2)
+                    nrm = np.array([-tng[1], tng[0]]) * sgn
+                    self._put("hedge", hedge, p + nrm * (off + hedge.extent[1] / 2), yaw_of(tng), gap=0.1)
+                s += ln + 0.2
+            return
+        kind, half_t, height = ("wall", 0.12, 1.8) if (st.frontage == "wall" and on_main) else ("fence", 0.03, 1.1)
+        for s0, s1 in ((a + 0.5, s_gate - 1.5), (s_gate + 1.5, a + w - 0.5)):
+            if s1 - s0 < 1.0:
+                continue
+            P = _sub(seg.P, s0, s1)
+            lo, hi = sorted((sgn * (off - half_t), sgn * (off + half_t)))
+            self.pieces[kind].append(_ribbon(P, lo, hi, curb, curb + height))
+            # register the line so trees and hedges keep off it
+            for q0, q1 in zip(_offset(P, sgn * off)[:-1], _offset(P, sgn * off)[1:]):
+                self.feet.add((q0 + q1) / 2, (float(np.linalg.norm(q1 - q0)) / 2, half_t), yaw_of(q1 - q0), 0.1)
 
-    road_length = 2 * (n + 1) * (X1 - X0)
-    return Town(
-        name=name, index=town_index, placements=placer.records, stuff=stuff, lanes=tuple(lanes),
-        intersections=intersections, walk_loops=tuple(loops), road_length=float(road_length),
-        road_width=R, curb_height=curb, bounds=(g_lo, g_lo, g_hi, g_hi),
-        max_instance_id=placer.next_instance - 1,
-    )  # fmt: skip
+    def _junction_furniture(self) -> None:
+        lay, rng = self.lay, self.rng
+        pd = min(0.5, 0.4 * lay.S)
+        for j in range(lay.ny + 1):
+            for i in range(lay.nx + 1):
+                c = lay.centre(i, j)
+                signal = self.signal[(i, j)]
+                for u in lay.arms(i, j):
+                    Hx, sec = lay.cross_half(i, j, u), lay.arm_section(i, j, u)
+                    uu = np.array(u, float)
+                    v = np.array([-u[1], u[0]], float)
+                    # near-side corner on the right of the incoming traffic (+v of the arm)
+                    pole = c + uu * (Hx + pd) + v * (sec.half + pd)
+                    if signal:
+                        wide = sec.half - sec.parking >= 6.0
+                        asset = self.pools.pick(rng, "TrafficLight", ["overhead_signal"] if wide else ["vehicle_signal"])
+                        if asset is not None and asset.subclass == "pedestrian_signal":
+                            asset = None
+                        if asset is not None:
+                            self._pole("traffic_light", asset, pole, yaw_of(uu))
+                    else:
+                        sign = self.pools.get("TrafficSign", ["stop"]) or self.pools.get("TrafficSign", ["yield"])
+                        if sign:
+                            self._pole("traffic_sign", sign[int(rng.integers(len(sign)))], pole, yaw_of(uu))
+
+    def _sidewalk_furniture(self) -> None:
+        st, rng, lay = self.st, self.rng, self.lay
+        S = lay.S
+        pd = min(0.5, 0.4 * S)
+        fz = min(1.2, 0.45 * S)
+        street_trees = self.pools.get("Vegetation", ["tree"]) if st.tree_spacing else []
+        light = self.pools.pick(rng, "Pole", ["street_light"])
+        if light is not None and light.subclass != "street_light":
+            light = None
+        for seg, sgn, region in self._sides():
+            H, L = seg.sec.half, seg.length
+
+            def at(s: float, depth: float):
+                p, tng = _at(seg.P, seg.cum, s)
+                nrm = np.array([-tng[1], tng[0]]) * sgn  # away from the road
+                return p + nrm * (H + depth), tng, nrm
+
+            if light is not None:
+                s = float(rng.uniform(2.0, 8.0))
+                while s < L - 2.0:
+                    xy, _, nrm = at(s, pd)
+                    self._pole("street_light", light, xy, yaw_of(-nrm))
+                    s += float(rng.uniform(*st.light_spacing))
+            if street_trees and S >= 2.0:
+                s = float(rng.uniform(4.0, 10.0))
+                while s < L - 3.0:
+                    tree = street_trees[int(rng.integers(len(street_trees)))]
+                    xy, _, _ = at(s, max(fz / 2, pd))
+                    self._put("tree", tree, xy, float(rng.uniform(-math.pi, math.pi)), half=(0.45, 0.45), at=xy,
+                              gap=1.0)  # fmt: skip
+                    s += float(rng.uniform(*st.tree_spacing))
+            sign = self.pools.pick(rng, "TrafficSign", ["speed_limit", "parking", "no_entry", "one_way", "direction",
+                                                        "warning", "pedestrian_crossing"])  # fmt: skip
+            if sign is not None and rng.uniform() < 0.6 and L > 8.0:
+                xy, tng, _ = at(float(rng.uniform(3.0, L - 3.0)), pd)
+                # the kerb-side lane on this side travels -sgn * tangent: face it
+                self._pole("traffic_sign", sign, xy, yaw_of(tng * sgn))
+            if fz < 0.6 or L < 8.0:
+                continue
+            for category, sub, kind in (("Static", "bench", "bench"), ("Static", "bin", "bin"),
+                                        ("Static", "hydrant", "hydrant"), ("Bicycle", None, "bicycle")):  # fmt: skip
+                asset = self.pools.pick(rng, category, [sub] if sub else None)
+                if asset is None or rng.uniform() >= st.furniture:
+                    continue
+                if sub and asset.subclass != sub:
+                    continue
+                depth = fz / 2 if kind != "bicycle" else min(fz, S) / 2
+                xy, tng, nrm = at(float(rng.uniform(3.0, L - 3.0)), depth)
+                e = asset.extent
+                if kind == "bicycle":
+                    yaw = yaw_of(tng)
+                    if e[1] / 2 > depth - 0.05:
+                        continue
+                else:
+                    yaw = yaw_of(nrm)  # seat / opening away from the road
+                    if e[0] / 2 > depth - 0.05:
+                        continue
+                self._put(kind, asset, xy, yaw)
+
+    def _parked_cars(self) -> None:
+        rng = self.rng
+        for seg, sgn, region in self._sides():
+            sec = seg.sec
+            if sec.parking <= 0:
+                continue
+            cars = [a for a in self.pools.get("Car") if a.extent[1] <= sec.parking - 0.3]
+            if not cars:
+                return
+            L = seg.length
+            s = float(rng.uniform(1.0, 6.0))
+            while s < L - 3.0:
+                car = cars[int(rng.integers(len(cars)))]
+                ln = car.extent[0]
+                if s + ln > L - 1.0:
+                    break
+                if rng.uniform() < 0.6:
+                    p, tng = _at(seg.P, seg.cum, s + ln / 2)
+                    nrm = np.array([-tng[1], tng[0]]) * sgn
+                    xy = p + nrm * (sec.half - sec.parking / 2)
+                    self._put("parked_car", car, xy, yaw_of(-sgn * tng), gap=0.5)
+                s += ln + float(rng.uniform(1.0, 4.0))
+
+    def _lot_trees(self) -> None:
+        rng, st = self.rng, self.st
+        trees = self.pools.get("Vegetation", ["tree", "conifer", "bush", "palm"])
+        if not trees:
+            return
+        for region, poly in self.lots.items():
+            lo, hi = poly.min(axis=0), poly.max(axis=0)
+            area = float((hi - lo).prod())
+            tries = int(area / 600.0 * rng.integers(st.lot_trees[0], st.lot_trees[1] + 1)) + 1
+            for _ in range(tries):
+                tree = trees[int(rng.integers(len(trees)))]
+                r = max(tree.extent[0], tree.extent[1]) / 2
+                xy = lo + rng.uniform(size=2) * (hi - lo)
+                pts, _ = _Footprints.corners(xy, (r + 0.3, r + 0.3), 0.0)
+                if not _inside(poly, pts).all() or _inside(pts, poly).any():
+                    continue
+                self._put(tree.subclass, tree, xy, float(rng.uniform(-math.pi, math.pi)), half=(r, r), at=xy)
+
+    def _margin_trees(self) -> None:
+        rng, lay = self.rng, self.lay
+        trees = self.pools.get("Vegetation", ["tree", "conifer"])
+        if not trees:
+            return
+        w = lay.ring
+        x0, x1, y0, y1 = lay.X0 - w, lay.X1 + w, lay.Y0 - w, lay.Y1 + w
+        perimeter = 2 * ((x1 - x0) + (y1 - y0))
+        for _ in range(int(perimeter / 10.0)):
+            tree = trees[int(rng.integers(len(trees)))]
+            r = max(tree.extent[0], tree.extent[1]) / 2
+            depth = float(rng.uniform(r + 0.5, TOWN_MARGIN - r - 0.5))
+            side = int(rng.integers(4))
+            t = float(rng.uniform(0.0, 1.0))
+            xy = [(x0 + t * (x1 - x0), y0 - depth), (x1 + depth, y0 + t * (y1 - y0)),
+                  (x0 + t * (x1 - x0), y1 + depth), (x0 - depth, y0 + t * (y1 - y0))][side]  # fmt: skip
+            self._put(tree.subclass, tree, xy, float(rng.uniform(-math.pi, math.pi)), half=(r, r), at=np.array(xy))
+
+
+def _project(closed: np.ndarray, cum: np.ndarray, p) -> float:
+    """Arc length along the closed polyline of the point nearest to ``p``."""
+    a, b = closed[:-1], closed[1:]
+    e = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-12), 0.0, 1.0)
+    d = np.linalg.norm(a + e * t[:, None] - p, axis=1)
+    k = int(np.argmin(d))
+    return float(cum[k] + t[k] * np.linalg.norm(e[k]))

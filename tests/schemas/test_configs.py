@@ -37,3 +37,27 @@ def test_parse_resolutions_rejects(text):
 def test_region_must_be_ordered():
     with pytest.raises(ValidationError, match="max > min"):
         DatasetConfig.model_validate({"voxelize": {"region_min": [0, 0, 0], "region_max": [1, -1, 1]}})
+
+
+def test_default_dataset_has_a_procedural_and_an_opendrive_town_at_several_levels():
+    towns = DatasetConfig().scenes.towns
+    styles = [t.style for t in towns]
+    assert "opendrive" in styles and any(s != "opendrive" for s in styles)
+    assert len({lvl for t in towns for lvl in t.traffic_levels}) >= 2
+
+
+def test_town_spec_checks():
+    from schemas.configs import TownSpec
+
+    with pytest.raises(ValidationError, match="opendrive file exactly"):
+        TownSpec(style="opendrive")
+    with pytest.raises(ValidationError, match="opendrive file exactly"):
+        TownSpec(style="suburb", opendrive="x.xodr")
+    with pytest.raises(ValidationError, match="repeats"):
+        TownSpec(traffic_levels=("low", "low"))
+    with pytest.raises(ValidationError):
+        TownSpec(style="village")
+    with pytest.raises(ValidationError, match="extra"):
+        DatasetConfig.model_validate({"scenes": {"towns": [{"style": "suburb", "blockz": 3}]}})
+    cfg = DatasetConfig.model_validate({"scenes": {"towns": [{"style": "arterial", "traffic_levels": ["high"]}]}})
+    assert cfg.scenes.towns[0].style == "arterial" and cfg.scenes.rig.lidar.channels == 32
