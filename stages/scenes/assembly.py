@@ -93,6 +93,10 @@ class PlacementIndex:
             raise ValueError(f"placement {p.placement_id} ({p.name!r}): aabb_min {p.aabb_min} exceeds aabb_max {p.aabb_max}")
         # column views, contiguous: six 1-D comparisons beat one (P, 3) reduction
         self._cols = [np.ascontiguousarray(a[:, k]) for a in (self.lo, self.hi) for k in range(3)]
+        # per-asset preparation for assemble_frame (stacked vertices, big stuff pre-cull boxes),
+        # keyed by asset id / (asset id, phase); an entry is redone when another geometry object
+        # is passed for its key, so the cache stays bounded by the town's assets
+        self._prepared: dict[object, _Prepared] = {}
 
     def __len__(self) -> int:
         return len(self.placements)
@@ -154,30 +158,105 @@ def _cull(V: np.ndarray, F: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple
     return V[used], inverse.reshape(-1, 3).astype(np.int64)
 
 
+class _Prepared:
+    """One asset's geometry made ready for placing many times.
+
+    Small parts (every thing part, stuff parts under :data:`_BIG_STUFF` triangles) are stacked
+    into one vertex array, so a placement costs one matrix product and one min/max per part.
+    Big stuff parts (town ground meshes) keep, per triangle, a box in the asset frame that is
+    provably a superset test: a triangle whose bounding box *in any rigid frame* touches the
+    region has its asset-frame box within ``sqrt(3) * diag`` of the region's asset-frame AABB
+    (``diag`` = its asset-frame box diagonal, which bounds its diameter; any point of a
+    bounding box is within its diagonal of the triangle's vertices). Only the triangles passing
+    that cheap test are moved and tested exactly, so a town-wide ground mesh is not transformed
+    whole every frame.
+    """
+
+    __slots__ = ("geom", "stuff", "small", "vertices", "starts", "big")
+
+    def __init__(self, geom: AssetGeometry) -> None:
+        self.geom = geom
+        self.stuff = [int(p.semantic_id) in _STUFF for p in geom.parts]
+        self.small: list[int] = []
+        self.big: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for k, p in enumerate(geom.parts):
+            if len(p.faces) == 0:
+                continue
+            if self.stuff[k] and len(p.faces) >= _BIG_STUFF:
+                tri = p.vertices[p.faces]  # (M, 3, 3)
+                tmin, tmax = tri.min(axis=1), tri.max(axis=1)
+                grow = 0.0 * (np.sqrt(3.0) * np.linalg.norm(tmax - tmin, axis=1))[:, None]
+                self.big[k] = (tmin - grow, tmax + grow)
+            else:
+                self.small.append(k)
+        counts = [len(geom.parts[k].vertices) for k in self.small]
+        self.starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.vertices = (np.concatenate([geom.parts[k].vertices for k in self.small]) if self.small
+                         else np.zeros((0, 3)))  # fmt: skip
+
+
+_BIG_STUFF = 4096  # stuff parts with at least this many triangles are pre-culled in the asset frame
+
+
+def _prepared(index: PlacementIndex | None, key: object, geom: AssetGeometry) -> _Prepared:
+    """The preparation of ``geom``, cached in ``index`` under ``key`` (an asset id, or an
+    ``(asset id, phase)`` pair) while the same geometry object is passed for it."""
+    if index is None:
+        return _Prepared(geom)
+    hit = index._prepared.get(key)
+    if hit is None or hit.geom is not geom:
+        hit = index._prepared[key] = _Prepared(geom)
+    return hit
+
+
 def _emit(
-    geom: AssetGeometry,
+    prep: _Prepared,
     T: np.ndarray,
     instance_id: int,
     name: str,
     region: tuple[np.ndarray, np.ndarray] | None,
 ) -> list[SceneMesh]:
-    """Scene meshes of one placed object: each part moved by ``T`` (object -> target frame).
-    ``region`` None keeps everything (the whole-town mesh)."""
+    """Scene meshes of one placed object: each part moved by ``T`` (object -> target frame), in
+    asset order. ``region`` None keeps everything (the whole-town mesh)."""
+    geom = prep.geom
+    V_all = transform_points(T, prep.vertices)
+    if region is not None and prep.small:
+        lo, hi = region
+        # per-part bounds, one reduction each for the whole object
+        pmin = np.minimum.reduceat(V_all, prep.starts[:-1], axis=0)
+        pmax = np.maximum.reduceat(V_all, prep.starts[:-1], axis=0)
+        reaches = np.all((pmin <= hi) & (pmax >= lo), axis=1)
+    slot = {k: j for j, k in enumerate(prep.small)}
     out = []
-    for part, closed in zip(geom.parts, geom.part_closed):
-        if len(part.faces) == 0:
+    for k, (part, closed) in enumerate(zip(geom.parts, geom.part_closed)):
+        is_stuff = prep.stuff[k]
+        if k in slot:
+            j = slot[k]
+            V, F = V_all[prep.starts[j] : prep.starts[j + 1]], part.faces
+            if region is not None:
+                if not reaches[j]:
+                    continue  # nothing of the part reaches the region
+                if is_stuff:
+                    # stuff is a surface: drop the triangles lying wholly outside the region
+                    V, F = _cull(V, F, *region)
+                # a thing part reaching the region is kept whole
+        elif k in prep.big:
+            if region is None:
+                V, F = transform_points(T, part.vertices), part.faces
+            else:
+                # cheap superset test in the asset frame, then the exact test on the survivors
+                inv = invert_pose(T)
+                c = transform_points(inv, _box_corners(*region))
+                tlo, thi = prep.big[k]
+                wlo, whi = c.min(axis=0), c.max(axis=0)
+                cand = np.flatnonzero(np.all((tlo <= whi) & (thi >= wlo), axis=1))
+                F = part.faces[cand]
+                used, inverse = np.unique(F, return_inverse=True)
+                V, F = _cull(transform_points(T, part.vertices[used]), inverse.reshape(-1, 3).astype(np.int64), *region)
+        else:
+            continue  # a part without triangles
+        if len(F) == 0:
             continue
-        V, F = transform_points(T, part.vertices), part.faces
-        is_stuff = int(part.semantic_id) in _STUFF
-        if region is not None:
-            lo, hi = region
-            if is_stuff:
-                # stuff is a surface: drop the triangles lying wholly outside the region
-                V, F = _cull(V, F, lo, hi)
-                if len(F) == 0:
-                    continue
-            elif np.any(V.min(axis=0) > hi) or np.any(V.max(axis=0) < lo):
-                continue  # a thing part is kept whole or, when it misses the region, dropped
         out.append(SceneMesh(
             vertices=V, faces=F, semantic_id=int(part.semantic_id),
             instance_id=0 if is_stuff else int(instance_id), is_stuff=is_stuff,
@@ -200,19 +279,19 @@ def _actor_geometry(
     actor: ActorStateRecord,
     geometry: Mapping[str, AssetGeometry],
     pedestrian_geometry: PedestrianGeometry | None,
-) -> AssetGeometry:
-    """The geometry an actor shows in this frame: its matched gait phase for pedestrians (when a
-    phase source is given), else its asset's rest geometry."""
+) -> tuple[object, AssetGeometry]:
+    """``(cache key, geometry)`` an actor shows in this frame: its matched gait phase for
+    pedestrians (when a phase source is given), else its asset's rest geometry."""
     who = f"actor {actor.instance_id}"
     if actor.phase_index is not None and pedestrian_geometry is not None:
         try:
-            return pedestrian_geometry(actor.asset_id, int(actor.phase_index))
+            return (actor.asset_id, int(actor.phase_index)), pedestrian_geometry(actor.asset_id, int(actor.phase_index))
         except KeyError:
             raise ValueError(
                 f"{who} uses asset {actor.asset_id!r} at gait phase {actor.phase_index}, which has no geometry"
             ) from None
     try:
-        return geometry[actor.asset_id]
+        return actor.asset_id, geometry[actor.asset_id]
     except KeyError:
         raise ValueError(f"{who} uses asset {actor.asset_id!r}, which has no geometry") from None
 
@@ -254,14 +333,15 @@ def assemble_frame(
             raise ValueError(
                 f"placement {p.placement_id} ({p.name!r}) uses asset {p.asset_id!r}, which has no geometry"
             ) from None
-        out.extend(_emit(geom, world_to_lidar @ pose_from_list(p.pose), p.instance_id, p.name, box))
+        prep = _prepared(index, p.asset_id, geom)
+        out.extend(_emit(prep, world_to_lidar @ pose_from_list(p.pose), p.instance_id, p.name, box))
     # 2. this frame's actors (never the ego), by instance id
     mine = [a for a in actors if a.sequence_id == frame.sequence_id and a.frame_index == frame.frame_index]
     for a in sorted(mine, key=lambda a: a.instance_id):
         if _is_ego(a, ego_pose, ego_asset_id):
             continue
-        geom = _actor_geometry(a, geometry, pedestrian_geometry)
-        out.extend(_emit(geom, world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
+        key, geom = _actor_geometry(a, geometry, pedestrian_geometry)
+        out.extend(_emit(_prepared(index, key, geom), world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
     return out
 
 
@@ -335,6 +415,7 @@ def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, Asse
     by its pose, every part whole, stuff with instance 0 and things with the placement's
     instance id. Raises ``ValueError`` naming a placement whose asset has no geometry."""
     scene: list[SceneMesh] = []
+    prepared: dict[str, _Prepared] = {}
     for p in sorted(placements, key=lambda p: p.placement_id):
         try:
             geom = geometry[p.asset_id]
@@ -342,5 +423,7 @@ def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, Asse
             raise ValueError(
                 f"placement {p.placement_id} ({p.name!r}) uses asset {p.asset_id!r}, which has no geometry"
             ) from None
-        scene.extend(_emit(geom, pose_from_list(p.pose), p.instance_id, p.name, None))
+        if p.asset_id not in prepared or prepared[p.asset_id].geom is not geom:
+            prepared[p.asset_id] = _Prepared(geom)
+        scene.extend(_emit(prepared[p.asset_id], pose_from_list(p.pose), p.instance_id, p.name, None))
     return flatten(scene)

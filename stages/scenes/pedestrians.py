@@ -34,7 +34,7 @@ from stages.scenes.gait import (
     GaitModel,
     add_joint_noise,
     articulated_pose,
-    canonical_cycle,
+    frame_features,
     procedural_walk,
     walker_stride,
     window_descriptors,
@@ -52,6 +52,7 @@ ARM_GAIN = 0.7  # arm swing = -ARM_GAIN x the same-side thigh angle (arms swing 
 KNEE_BLEND = 0.06  # half-width of the thigh/shin blend zone, fraction of the leg length
 HIP_BLEND = 0.08  # half-width of the body/thigh blend zone (proximity-bound meshes only)
 _KNEE_FRACTION = THIGH / (THIGH + SHIN)  # knee position along hip -> ankle
+NOMINAL_SPEED = 1.2  # m/s, the speed assumed for a one-frame track
 MIN_PROPAGATION = 5  # centred matches needed to extrapolate the phase to a run's edge frames
 
 # bones of the pedestrian rig
@@ -69,10 +70,16 @@ _LIMB = re.compile(r"^(leg|arm)[_\- ]?(l|left|r|right)$")
 
 @lru_cache(maxsize=8)
 def walk_cycle(D: int = 32) -> CanonicalCycle:
-    """Canonical walk cycle of D phases of the procedural walker (1.2 m/s, default proportions):
-    :func:`stages.scenes.gait.canonical_cycle` of an 8 s walk sampled at 200 Hz. Cached."""
-    walk = procedural_walk(1.2, 8.0, rate=200.0)
-    return canonical_cycle(walk.positions, walk.times, D)
+    """Canonical walk cycle of D phases of the procedural walker at 1.2 m/s (default proportions):
+    phase d is :func:`stages.scenes.gait.articulated_pose` at the walker's own phase ``d / D`` --
+    the phase the training walks of :func:`gait_model` are labelled with and the traffic
+    simulation's ``gait_phase`` -- in the heading frame, pelvis horizontally at the origin. Phase 0
+    is the left thigh's maximum flexion, which is also (within a phase) the left ankle's maximum
+    lead. Cached."""
+    stride = float(walker_stride(1.2, THIGH + SHIN))
+    poses = articulated_pose(np.arange(D) / D, stride, THIGH, SHIN, HIP_WIDTH)
+    features = frame_features(poses, np.array([1.0, 0.0, 0.0]))
+    return CanonicalCycle(poses, features, stride / 1.2, 1.2, stride, 1)
 
 
 # training walks of gait_model: cadences (cycles/s) x strides (one cycle, in leg lengths) x joint
@@ -121,7 +128,8 @@ def synthesize_skeleton(
     """(T, 7, 3) world gait joints an observer sees of one simulated walker (see
     :func:`match_walker_phases`): the procedural walker scaled by ``height / WALKER_HEIGHT``,
     posed at the simulated phase with the stride the simulation implies (horizontal speed over the
-    phase rate; the walker's own speed-stride law where that is undefined or implausible), standing
+    phase rate; the walker's own speed-stride law where that is undefined or implausible, at
+    :data:`NOMINAL_SPEED` for a single frame), standing
     (rest pose) where the phase is NaN, placed at the positions/yaws, plus
     :data:`OBSERVATION_NOISE` Gaussian noise drawn from ``seed``."""
     t = np.asarray(times, dtype=np.float64)
@@ -134,7 +142,7 @@ def synthesize_skeleton(
     s = float(height) / WALKER_HEIGHT
     leg = (THIGH + SHIN) * s
     walking = np.isfinite(ph)
-    speed = np.zeros(T)
+    speed = np.full(T, NOMINAL_SPEED)  # a single frame has no measurable speed
     if T >= 2:
         speed = np.linalg.norm(np.gradient(pos[:, :2], t, axis=0), axis=1)
     stride = walker_stride(speed, leg)

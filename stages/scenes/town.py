@@ -233,7 +233,8 @@ def _bezier(p0, h0, p1, h1) -> np.ndarray:
         n = max(1, math.ceil(chord / (0.9 * SAMPLE)))
         t = np.linspace(0.0, 1.0, n + 1)[:, None]
         return p0 + t * (p1 - p0)
-    k = 0.45 * chord
+    turn = h0[0] * h1[1] - h0[1] * h1[0]  # > 0: left turn
+    k = (0.45 if turn > 0.5 else 0.25) * chord  # right turns: short handles keep off the kerb corner
     c0, c1 = p0 + h0 * k, p1 - h1 * k
     n = max(2, math.ceil(1.6 * chord / (0.9 * SAMPLE)))
     t = np.linspace(0.0, 1.0, n + 1)[:, None]
@@ -728,16 +729,17 @@ class _Builder:
                         if w == d:
                             for k in range(n):
                                 moves[k].append((w, [out_ids[min(k, len(out_ids) - 1)]]))
-                        elif w == right:
-                            moves[n - 1].append((w, out_ids))
-                        elif w == left:
+                        elif w == right:  # kerb lane to kerb lane: keeps clear of the kerb corner
+                            moves[n - 1].append((w, out_ids[-1:]))
+                        elif w == left:  # innermost lane into any lane (the wide arc)
                             moves[0].append((w, out_ids))
                     for k in range(n):
                         if not moves[k]:  # a middle lane with no way straight on: turn
-                            for w in (right, left):
-                                if w in arms:
-                                    moves[k].append((w, outs[(i, j, w)]))
-                                    break
+                            if right in arms:  # into the lane of the same rank: a wide arc
+                                o = outs[(i, j, right)]
+                                moves[k].append((right, [o[min(k, len(o) - 1)]]))
+                            elif left in arms:
+                                moves[k].append((left, outs[(i, j, left)]))
                         src = lanes[in_ids[k]]
                         p0 = src["points"][-1]
                         for w, targets in moves[k]:
@@ -927,8 +929,8 @@ class _Builder:
                     Hx, sec = lay.cross_half(i, j, u), lay.arm_section(i, j, u)
                     uu = np.array(u, float)
                     v = np.array([-u[1], u[0]], float)
-                    # near-side corner on the right of the incoming traffic (+v of the arm)
-                    pole = c + uu * (Hx + pd) + v * (sec.half + pd)
+                    # beside the stop line, on the right of the incoming traffic (+v of the arm)
+                    pole = c + uu * (Hx + lay.Z + 0.6) + v * (sec.half + pd)
                     if signal:
                         wide = sec.half - sec.parking >= 6.0
                         asset = self.pools.pick(rng, "TrafficLight", ["overhead_signal"] if wide else ["vehicle_signal"])

@@ -13,6 +13,7 @@ from schemas import taxonomy
 from schemas.grid import GridSpec
 from schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
 from stages.geometry import AssetGeometry, MeshPart, invert_pose, pose_matrix, pose_to_list, transform_points
+from stages.scenes import assembly
 from stages.scenes.assembly import (
     PanopticMesh,
     PlacementIndex,
@@ -182,7 +183,12 @@ def test_vertices_moved_into_lidar_frame():
     assert (m.semantic_id, m.instance_id, m.is_stuff, m.closed) == (BUILDING, 3, False, True)
 
 
-def test_stuff_culled_per_triangle_and_things_whole():
+@pytest.mark.parametrize("big_stuff", [True, False], ids=["precull-big-stuff", "direct"])
+def test_stuff_culled_per_triangle_and_things_whole(big_stuff, monkeypatch):
+    # the road (12 800 triangles) goes through the asset-frame pre-cull or, with the threshold
+    # raised, through the direct per-triangle test: both give exactly the touching triangles
+    if not big_stuff:
+        monkeypatch.setattr(assembly, "_BIG_STUFF", 10**9)
     f = frame(x=3.0, y=-2.0, yaw=0.3)
     index = PlacementIndex([
         place(0, ROAD_G, name="road"),
@@ -277,8 +283,8 @@ def test_order_is_deterministic_and_only_this_frames_actors():
 
 
 @settings(max_examples=25, deadline=None)
-@given(x=st.floats(-150, 150), y=st.floats(-150, 150), yaw=st.floats(-np.pi, np.pi))
-def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw):
+@given(x=st.floats(-150, 150), y=st.floats(-150, 150), yaw=st.floats(-np.pi, np.pi), precull=st.booleans())
+def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw, precull):
     """Every emitted stuff triangle touches the region, every thing part kept reaches it, and every
     placed triangle lying inside the region is emitted."""
     rng = np.random.default_rng(0)
@@ -287,7 +293,11 @@ def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw):
         g = (HOUSE_G, POLE_G, CAR_G)[pid % 3]
         placements.append(place(pid, g, *rng.uniform(-180, 180, 2), yaw=float(rng.uniform(-np.pi, np.pi))))
     f = frame(x, y, yaw)
-    out = assemble_frame(f, [], PlacementIndex(placements), GEOMETRY, REGION)
+    old, assembly._BIG_STUFF = assembly._BIG_STUFF, (4096 if precull else 10**9)
+    try:
+        out = assemble_frame(f, [], PlacementIndex(placements), GEOMETRY, REGION)
+    finally:
+        assembly._BIG_STUFF = old
     lo, hi = REGION
     emitted = set()
     for m in out:
@@ -383,3 +393,52 @@ def test_frame_export_round_trip():
     np.testing.assert_array_equal(i, pm.instance)
     np.testing.assert_array_equal(t, pm.transparent)
     np.testing.assert_allclose(V[F], pm.vertices[pm.faces], atol=1e-4)
+
+
+def _rotation(q) -> np.ndarray:
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])  # fmt: skip
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), q=st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1),
+       frame_q=st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1))  # fmt: skip
+def test_big_stuff_precull_equals_direct_cull(seed, q, frame_q):
+    """The asset-frame pre-cull of big stuff meshes never loses a triangle: for triangle soups of
+    every size under arbitrary rigid placement and LiDAR poses, it matches the direct test."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-60, 60, (600, 3))
+    V = (centres[:, None, :] + rng.uniform(-1, 1, (600, 3, 3)) * rng.uniform(0.1, 25, (600, 1, 1))).reshape(-1, 3)
+    g = geom("T/soup", ("soup", (V, np.arange(len(V)).reshape(-1, 3)), ROAD, False, False))
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = _rotation(q), rng.uniform(-20, 20, 3)
+    W = transform_points(T, V)
+    p = PlacementRecord(town="T", placement_id=0, name="soup", asset_id="T/soup", mesh_path="", semantic_id=ROAD,
+                        instance_id=0, pose=pose_to_list(T), is_thing=False,
+                        aabb_min=W.min(axis=0).tolist(), aabb_max=W.max(axis=0).tolist())  # fmt: skip
+    L = np.eye(4)
+    L[:3, :3], L[:3, 3] = _rotation(frame_q), rng.uniform(-10, 10, 3)
+    f = FrameRecord(sequence_id="s", frame_index=0, timestamp=0.0, ego_pose=pose_to_list(np.eye(4)), lidar_pose=pose_to_list(L))
+    region = (np.array([-20.0, -15.0, -5.0]), np.array([25.0, 15.0, 8.0]))
+    old = assembly._BIG_STUFF
+    try:
+        assembly._BIG_STUFF = 1
+        a = assemble_frame(f, [], PlacementIndex([p]), {"T/soup": g}, region)
+        assembly._BIG_STUFF = 10**9
+        b = assemble_frame(f, [], PlacementIndex([p]), {"T/soup": g}, region)
+    finally:
+        assembly._BIG_STUFF = old
+    assert len(a) == len(b) <= 1
+    if a:
+        np.testing.assert_array_equal(a[0].vertices[a[0].faces], b[0].vertices[b[0].faces])
+
+
+def test_prepared_cache_follows_new_geometry():
+    index = PlacementIndex([place(0, POLE_G, x=5.0)])
+    first = assemble_frame(frame(), [], index, GEOMETRY, REGION)
+    taller = geom("pole", ("pole", box([-0.1, -0.1, 0], [0.1, 0.1, 9]), POLE, True, False))
+    second = assemble_frame(frame(), [], index, GEOMETRY | {"pole": taller}, REGION)
+    assert first[0].vertices[:, 2].max() == pytest.approx(5 - 1.73)
+    assert second[0].vertices[:, 2].max() == pytest.approx(9 - 1.73)

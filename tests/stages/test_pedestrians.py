@@ -24,6 +24,8 @@ GAIT_STEP = 0.415  # the traffic simulation's step length / body height (cycle =
 def _track(speed, T=200, height=1.75, yaw0=0.3, phase0=0.2, stops=(), rate=RATE):
     """A walker track as the traffic simulation produces it: gently curving path, gait phase
     advancing by walked distance over the cycle length 2 x 0.415 x height, NaN while stopped."""
+    if T == 0:
+        return np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros(0)
     t = np.arange(T) / rate
     v = np.full(T, float(speed))
     for a, b in stops:
@@ -57,12 +59,16 @@ def _pedestrian_geometry(subclass: str, seed: int) -> AssetGeometry:
 def test_walk_cycle_is_the_procedural_walker_cached():
     cc = P.walk_cycle(D)
     assert P.walk_cycle(D) is cc
-    assert cc.poses.shape == (D, 7, 3) and cc.n_cycles >= 3
-    assert cc.features[0, 0] == cc.features[:, 0].max()  # phase 0: left ankle furthest ahead
-    assert cc.features[D // 2, 0] < -0.5
-    # the canonical poses are the analytic walker at phase d / D (stride of 1.2 m/s)
-    ref = G.articulated_pose(np.arange(D) / D, G.walker_stride(1.2))
-    np.testing.assert_allclose(cc.poses[:, 1:] - cc.poses[:, :1], ref[:, 1:] - ref[:, :1], atol=0.01)
+    assert cc.poses.shape == (D, 7, 3) and cc.features.shape == (D, 5)
+    np.testing.assert_allclose(cc.poses[:, 0, :2], 0.0)  # pelvis at the origin
+    # phase 0: the left ankle furthest ahead (within a phase), the right one half a cycle later
+    assert (int(np.argmax(cc.features[:, 0])) + 1) % D <= 2
+    assert (int(np.argmin(cc.features[:, 0])) - D // 2 + 1) % D <= 2
+    # it agrees with the cycle detected from a long procedural walk (the paper's construction)
+    walk = G.procedural_walk(1.2, 8.0, rate=200.0)
+    det = G.canonical_cycle(walk.positions, walk.times, D)
+    assert det.period == pytest.approx(cc.period, rel=0.03) and det.speed == pytest.approx(1.2, rel=0.03)
+    np.testing.assert_allclose(det.poses, cc.poses, atol=0.08)  # detection jitter: ~2 % period, 7 cm
 
 
 def test_gait_model_deterministic_and_cached():
@@ -148,12 +154,21 @@ def test_synthesized_skeleton_sits_on_the_track():
 
 @pytest.mark.parametrize("T", [0, 1, 2, 3, 7, 12])
 def test_short_sequences_get_a_phase(T):
-    for seed in range(5):
-        t, pos, yaw, ph = _track(1.2, T=T, phase0=0.13 * seed + 0.05)
-        pred = P.match_walker_phases(t, pos, yaw, ph, 1.7, seed)
+    errs = []
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        t, pos, yaw, ph = _track(rng.uniform(0.8, 1.6), T=T, phase0=rng.uniform(), yaw0=rng.uniform(-3, 3))
+        pred = P.match_walker_phases(t, pos, yaw, ph, 1.75, seed)
         assert len(pred) == T and all(0 <= d < D for d in pred)
-        if T:
-            assert np.all(_errors(pred, ph) <= 2), (T, seed, pred, np.round(ph * D))
+        errs.append(_errors(pred, ph))
+    if T == 0:
+        return
+    e = np.concatenate(errs)
+    print(f"\nT={T}: within +-1 {np.mean(e <= 1):.3f}, within +-2 {np.mean(e <= 2):.3f}, max {e.max()}")
+    if T <= 2:  # per-frame features only (measured: ~95 % within +-2, max 4)
+        assert np.mean(e <= 2) >= 0.9 and e.max() <= 5
+    else:  # a shorter or shifted window (measured: >= 99 % within +-2, max 3)
+        assert np.mean(e <= 1) >= 0.85 and np.mean(e <= 2) >= 0.97 and e.max() <= 4
 
 
 def test_match_speed_64_walkers_200_frames():
@@ -254,16 +269,24 @@ def test_posed_limbs_follow_the_canonical_skeleton(rigged):
             sl = slice(offs[part], offs[part + 1])
             V = q.parts[part].vertices
             for bone, (j0, j1) in ((P.SHIN_L + 2 * side, (k, a)), (P.THIGH_L + 2 * side, (h, k))):
-                sel = (rig.bones[sl, 0] == bone) & (rig.weights[sl, 0] == 1.0)
+                w = rig.weights[sl]
+                sole = np.where(w[:, 0] == 1.0, rig.bones[sl, 0], np.where(w[:, 1] == 1.0, rig.bones[sl, 1], -1))
+                sel = sole == bone
                 assert sel.sum() >= 10
                 X = V[sel]
                 seg = J[j1] - J[j0]
                 c = X.mean(axis=0)
                 tpar = (c - J[j0]) @ seg / (seg @ seg)
                 assert -0.3 < tpar < 1.3
-                assert np.linalg.norm(c - (J[j0] + tpar * seg)) < 0.01  # on the bone axis
-                axis = np.linalg.eigh(np.cov((X - c).T))[1][:, -1]
-                assert abs(axis @ seg) / np.linalg.norm(seg) > 0.99
+                assert np.linalg.norm(c - (J[j0] + tpar * seg)) < 0.01  # on the posed bone's axis
+                # the capsule ends: hip-end vertices around the hip, foot-end ones around the ankle
+                end = j0 if bone == P.THIGH_L + 2 * side else j1
+                radius = np.linalg.norm(X - J[end], axis=1).max()
+                assert np.linalg.norm(c - J[end]) < 0.75 * radius  # a hemisphere shell: ~0.5 r
+                # rigid: distances to the joint as at rest
+                X0 = geom.parts[part].vertices[sel]
+                np.testing.assert_allclose(np.linalg.norm(X - J[end], axis=1), np.linalg.norm(X0 - R[end], axis=1),
+                                           atol=1e-9)  # fmt: skip
 
 
 def test_arms_swing_against_their_legs():
