@@ -120,7 +120,7 @@ class _Buffer:
         self.blob.extend(b"\0" * (-len(self.blob) % 4))  # every view starts 4-byte aligned
         self.views.append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": data.nbytes, "target": target})
         self.blob.extend(data.tobytes())
-        acc = {"bufferView": len(self.views) - 1, "componentType": component, "count": int(len(data)), "type": kind}
+        acc = {"bufferView": len(self.views) - 1, "componentType": component, "count": len(data), "type": kind}
         if minmax:
             flat = data.reshape(len(data), -1)
             acc["min"] = [float(v) for v in flat.min(axis=0)]
@@ -181,7 +181,7 @@ def panoptic_glb_bytes(
         nodes.append({"name": name, "mesh": len(meshes) - 1, "extras": extras})
 
     scene: dict = {"name": FORMAT, "extras": {
-        "format": FORMAT, "version": FORMAT_VERSION, "taxonomy_version": taxonomy.TAXONOMY_VERSION, "faces": int(len(F)),
+        "format": FORMAT, "version": FORMAT_VERSION, "taxonomy_version": taxonomy.TAXONOMY_VERSION, "faces": len(F),
     }}  # fmt: skip
     gltf: dict = {"asset": {"version": "2.0", "generator": "carlaocc catalog.panoptic"}, "scene": 0, "scenes": [scene]}
     if nodes:  # glTF arrays, when present, must not be empty

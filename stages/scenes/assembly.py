@@ -80,6 +80,12 @@ class PlacementIndex:
     ``placements`` are kept sorted by placement id (stable for equal ids), so selected indices in
     ascending order are placements in ascending id. ``lo`` / ``hi`` are the (P, 3) float64 world
     AABB corners of the placed meshes, in the same order.
+
+    :func:`assemble_frame` also keeps here, per asset id (and per pedestrian phase), the asset
+    prepared for placing (parts stacked; per-triangle pre-cull boxes of big stuff meshes). An
+    entry is redone when another geometry object comes for its key, so reusing one index across
+    frames is fast and passing fresh geometry is still correct. Share an index between threads
+    freely: a race only prepares an asset twice.
     """
 
     def __init__(self, placements: Sequence[PlacementRecord]) -> None:
@@ -172,21 +178,22 @@ class _Prepared:
     whole every frame.
     """
 
-    __slots__ = ("geom", "stuff", "small", "vertices", "starts", "big")
+    __slots__ = ("big", "geom", "small", "starts", "stuff", "vertices")
 
     def __init__(self, geom: AssetGeometry) -> None:
         self.geom = geom
         self.stuff = [int(p.semantic_id) in _STUFF for p in geom.parts]
         self.small: list[int] = []
-        self.big: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.big: dict[int, tuple[np.ndarray, ...]] = {}
         for k, p in enumerate(geom.parts):
             if len(p.faces) == 0:
                 continue
             if self.stuff[k] and len(p.faces) >= _BIG_STUFF:
                 tri = p.vertices[p.faces]  # (M, 3, 3)
                 tmin, tmax = tri.min(axis=1), tri.max(axis=1)
-                grow = 0.0 * (np.sqrt(3.0) * np.linalg.norm(tmax - tmin, axis=1))[:, None]
-                self.big[k] = (tmin - grow, tmax + grow)
+                grow = (np.sqrt(3.0) * np.linalg.norm(tmax - tmin, axis=1))[:, None]
+                lo, hi = tmin - grow, tmax + grow
+                self.big[k] = tuple(np.ascontiguousarray(a[:, j]) for a in (lo, hi) for j in range(3))
             else:
                 self.small.append(k)
         counts = [len(geom.parts[k].vertices) for k in self.small]
@@ -228,7 +235,7 @@ def _emit(
         reaches = np.all((pmin <= hi) & (pmax >= lo), axis=1)
     slot = {k: j for j, k in enumerate(prep.small)}
     out = []
-    for k, (part, closed) in enumerate(zip(geom.parts, geom.part_closed)):
+    for k, (part, closed) in enumerate(zip(geom.parts, geom.part_closed, strict=True)):
         is_stuff = prep.stuff[k]
         if k in slot:
             j = slot[k]
@@ -247,9 +254,14 @@ def _emit(
                 # cheap superset test in the asset frame, then the exact test on the survivors
                 inv = invert_pose(T)
                 c = transform_points(inv, _box_corners(*region))
-                tlo, thi = prep.big[k]
                 wlo, whi = c.min(axis=0), c.max(axis=0)
-                cand = np.flatnonzero(np.all((tlo <= whi) & (thi >= wlo), axis=1))
+                cols = prep.big[k]  # lo x, y, z then hi x, y, z: six 1-D comparisons
+                keep = cols[0] <= whi[0]
+                for j in range(3):
+                    if j:
+                        keep &= cols[j] <= whi[j]
+                    keep &= cols[3 + j] >= wlo[j]
+                cand = np.flatnonzero(keep)
                 F = part.faces[cand]
                 used, inverse = np.unique(F, return_inverse=True)
                 V, F = _cull(transform_points(T, part.vertices[used]), inverse.reshape(-1, 3).astype(np.int64), *region)

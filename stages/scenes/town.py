@@ -48,10 +48,20 @@ from schemas.configs import ScenesConfig, TownSpec
 from schemas.records import AssetRecord
 from stages.geometry import concatenate
 from stages.scenes.network import Lane, RoadNetwork, Town, Walkway, polyline_lengths
-from stages.scenes.placing import (POLE_RADIUS, STUFF_TILE, SURFACE, AssetPools, Placer, rot2, slab, slabs,
-                                   stuff_geometry, yaw_of)  # fmt: skip
+from stages.scenes.placing import (
+    POLE_RADIUS,
+    STUFF_TILE,
+    SURFACE,
+    AssetPools,
+    Placer,
+    rot2,
+    slab,
+    slabs,
+    stuff_geometry,  # fmt: skip
+    yaw_of,
+)
 
-__all__ = ["STYLES", "town_name", "build_procedural_town"]
+__all__ = ["STYLES", "build_procedural_town", "town_name"]
 
 STYLES = ("downtown", "suburb", "arterial")
 LANE_WIDTH = 3.5  # m
@@ -234,11 +244,15 @@ def _bezier(p0, h0, p1, h1) -> np.ndarray:
         t = np.linspace(0.0, 1.0, n + 1)[:, None]
         return p0 + t * (p1 - p0)
     turn = h0[0] * h1[1] - h0[1] * h1[0]  # > 0: left turn
-    k = (0.45 if turn > 0.5 else 0.25) * chord  # right turns: short handles keep off the kerb corner
+    k = (0.45 if turn > 0.5 else 0.85) * chord  # right turns: long handles swing wide of the kerb corner
     c0, c1 = p0 + h0 * k, p1 - h1 * k
-    n = max(2, math.ceil(1.6 * chord / (0.9 * SAMPLE)))
-    t = np.linspace(0.0, 1.0, n + 1)[:, None]
-    return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t**2 * c1 + t**3 * p1
+    t = np.linspace(0.0, 1.0, 257)[:, None]
+    dense = (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t**2 * c1 + t**3 * p1
+    cum = polyline_lengths(dense)
+    s = np.linspace(0.0, cum[-1], max(2, math.ceil(cum[-1] / (0.9 * SAMPLE))) + 1)  # even arc-length steps
+    out = np.column_stack([np.interp(s, cum, dense[:, 0]), np.interp(s, cum, dense[:, 1])])
+    out[0], out[-1] = p0, p1
+    return out
 
 
 def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -365,7 +379,7 @@ class _Layout:
         if style == "arterial":
             lanes = int(rng.integers(2, 4))
             art = _section(spec.road_width, lanes, 0.0, MEDIAN, ARTERIAL, shoulder=0.5)
-            local = _section(None, 1, 0.0, 0.0, URBAN)
+            local = _section(None, 1, 0.0, 0.0, URBAN, shoulder=1.0)  # room for turns off the arterial
             self.cols = [local] * (self.nx + 1)
             self.rows = [local, art, local]
         else:
@@ -539,11 +553,11 @@ class _Builder:
         if self.style == "arterial":
             return j == 1
         if len(lay.arms(i, j)) < 3:
-            return False if self.style == "suburb" else True
+            return self.style != "suburb"
         return bool(self.rng.uniform() < self.st.signal_share)
 
     def _segment_stuff(self, seg: _Segment) -> None:
-        lay, sec, curb, S = self.lay, seg.sec, self.curb, self.lay.S
+        sec, curb, S = seg.sec, self.curb, self.lay.S
         P, H, m = seg.P, sec.half, sec.median
         top = curb - SURFACE
         if m > 0:
@@ -705,7 +719,7 @@ class _Builder:
                     pts = _offset(seg.P, -off) if forward else _offset(seg.P, off)[::-1]
                     pts = _densify(pts, SAMPLE)
                     ids.append(len(lanes))
-                    lanes.append(dict(points=pts, road=seg.name, speed=sec.speed, junction=-1, succ=[]))
+                    lanes.append({"points": pts, "road": seg.name, "speed": sec.speed, "junction": -1, "succ": []})
                 for k, lid in enumerate(ids):
                     lanes[lid]["left"] = ids[k - 1] if k > 0 else -1
                     lanes[lid]["right"] = ids[k + 1] if k + 1 < len(ids) else -1
@@ -727,8 +741,9 @@ class _Builder:
                             continue  # no U-turns: the grid has no dead ends
                         out_ids = outs[(i, j, w)]
                         if w == d:
-                            for k in range(n):
-                                moves[k].append((w, [out_ids[min(k, len(out_ids) - 1)]]))
+                            for k in range(n):  # on into the same lane or a neighbour (a lane change)
+                                near = {min(k + dk, len(out_ids) - 1) for dk in (-1, 0, 1) if k + dk >= 0}
+                                moves[k].append((w, [out_ids[x] for x in sorted(near)]))
                         elif w == right:  # kerb lane to kerb lane: keeps clear of the kerb corner
                             moves[n - 1].append((w, out_ids[-1:]))
                         elif w == left:  # innermost lane into any lane (the wide arc)
@@ -749,8 +764,8 @@ class _Builder:
                                 pts = _bezier(p0, np.array(d, float), p1, np.array(w, float))
                                 speed = min(src["speed"], dst["speed"]) if w == d else min(TURN, src["speed"])
                                 src["succ"].append(len(lanes))
-                                lanes.append(dict(points=pts, road=f"junction{jid}", speed=speed, junction=jid,
-                                                  succ=[t], left=-1, right=-1))  # fmt: skip
+                                lanes.append({"points": pts, "road": f"junction{jid}", "speed": speed, "junction": jid,
+                                              "succ": [t], "left": -1, "right": -1})  # fmt: skip
         out = tuple(
             Lane(lane_id=k, points=np.column_stack([ln["points"], np.zeros(len(ln["points"]))]), width=LANE_WIDTH,
                  successors=tuple(ln["succ"]), left=ln["left"], right=ln["right"], junction=ln["junction"],
@@ -955,7 +970,7 @@ class _Builder:
         for seg, sgn, region in self._sides():
             H, L = seg.sec.half, seg.length
 
-            def at(s: float, depth: float):
+            def at(s: float, depth: float, seg=seg, sgn=sgn, H=H):
                 p, tng = _at(seg.P, seg.cum, s)
                 nrm = np.array([-tng[1], tng[0]]) * sgn  # away from the road
                 return p + nrm * (H + depth), tng, nrm
@@ -1030,7 +1045,7 @@ class _Builder:
         trees = self.pools.get("Vegetation", ["tree", "conifer", "bush", "palm"])
         if not trees:
             return
-        for region, poly in self.lots.items():
+        for poly in self.lots.values():
             lo, hi = poly.min(axis=0), poly.max(axis=0)
             area = float((hi - lo).prod())
             tries = int(area / 600.0 * rng.integers(st.lot_trees[0], st.lot_trees[1] + 1)) + 1

@@ -118,7 +118,7 @@ def test_select_agrees_with_brute_force(aabbs, query, seed):
     placements = [
         PlacementRecord(town="T", placement_id=pid, name=f"p{pid}", asset_id="a", mesh_path="", semantic_id=ROAD,
                         instance_id=0, pose=pose_to_list(np.eye(4)), is_thing=False,
-                        aabb_min=lo.tolist(), aabb_max=hi.tolist())  # fmt: skip
+                        aabb_min=lo.tolist(), aabb_max=hi.tolist())
         for pid, (lo, hi) in zip(ids, aabbs)
     ]
     index = PlacementIndex(placements)

@@ -159,7 +159,7 @@ def test_lane_graph(towns, style):
 
 
 def test_right_hand_traffic_and_speeds(towns):
-    for style, town in towns.items():
+    for town in towns.values():
         road = [ln for ln in town.network.lanes if ln.junction < 0]
         by_road = collections.defaultdict(list)
         for ln in road:
@@ -313,17 +313,13 @@ def test_stuff_meshes(towns, style):
     assert top["road"].max() == pytest.approx(0.0) and top["road"].min() == pytest.approx(-0.01)
     assert top["sidewalk"].max() == pytest.approx(CURB) and top["terrain"].max() == pytest.approx(CURB)
     assert top["roadline"].min() == pytest.approx(0.0) and top["roadline"].max() == pytest.approx(0.01)
-    # sidewalks keep off the lanes: no sidewalk-top vertex inside a road lane's corridor, and the
-    # kerb corners of the junctions clear a 2 m wide vehicle on every turning connector (the 3.5 m
-    # corridor of a right turn from the kerb lane may graze the sharp corner)
+    # sidewalks keep off the lanes: no sidewalk-top vertex inside a lane corridor (turning
+    # connectors included: right turns swing wide of the sharp kerb corners)
     V = town.stuff[f"{town.name}/sidewalk"].parts[0].vertices
     tops = V[np.isclose(V[:, 2], CURB)][:, :2]
-    lane_pts, half = _lane_points(town.network, 0.5, connectors=False)
+    lane_pts, half = _lane_points(town.network, 0.25)
     d, k = cKDTree(lane_pts).query(tops)
-    assert np.all(d >= half[k] - 1e-6)
-    turn_pts = np.vstack([ln.at(np.arange(0.0, ln.length, 0.25))[0][:, :2] for ln in town.network.lanes
-                          if ln.junction >= 0])  # fmt: skip
-    assert cKDTree(turn_pts).query(tops)[0].min() >= 1.0
+    assert np.all(d >= half[k] - 1e-3)
 
 
 def test_style_features(towns, assets):
@@ -344,7 +340,7 @@ def test_style_features(towns, assets):
     suburb = towns["suburb"]
     cars = [p for p in suburb.placements if p.name.startswith("parked_car")]
     assert len(cars) >= 10 and all(p.semantic_id == taxonomy.by_name("Car").id and p.is_thing for p in cars)
-    lane_pts, half = _lane_points(suburb.network)
+    lane_pts, _ = _lane_points(suburb.network)
     d, _ = cKDTree(lane_pts).query(np.array([pose_from_list(p.pose)[:2, 3] for p in cars]))
     assert np.all((d > LANE_WIDTH / 2 + 0.5) & (d < LANE_WIDTH + 1.5))  # in the strip next to the lane
     assert any(assets[p.asset_id].subclass == "stop" for p in suburb.placements if p.name.startswith("traffic_sign"))
