@@ -287,7 +287,7 @@ def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
 def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
     """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
     (lo, hi) in the LiDAR frame."""
-    from stages.scenes.assembly import PlacementIndex, assemble_frame
+    from stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
 
     t_seq = ParquetTable(store, SequenceRecord)
     sequences = t_seq.load([seq_id]) if t_seq.exists(seq_id) else []
@@ -299,8 +299,12 @@ def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
         raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
     actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
     placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
-    geometry = load_geometry(store, {p.asset_id for p in placements} | {a.asset_id for a in actors}, placements)
-    return assemble_frame(frames[0], actors, PlacementIndex(placements), geometry, region,
+    index = PlacementIndex(placements)
+    # geometry of the placements whose world AABB meets the frame's region, and of the actors
+    selected = index.select(*frame_region(frames[0], *region))
+    needed = {index.placements[i].asset_id for i in selected} | {a.asset_id for a in actors}
+    geometry = load_geometry(store, needed, placements)
+    return assemble_frame(frames[0], actors, index, geometry, region,
                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
 
 

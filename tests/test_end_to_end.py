@@ -39,7 +39,7 @@ def _snapshot(store: Store) -> dict[str, tuple[int, bytes]]:
 
 def test_occupancy_arrays(built):
     grid = GridSpec(voxel_size=RES)
-    (seq,) = [r[0] for r in query(built, "SELECT sequence_id FROM sequences")[1]]
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     occ = OccupancyStore(built)
     sem_arr = occ.open(seq, grid, "semantic")
     inst_arr = occ.open(seq, grid, "instance")
@@ -76,7 +76,7 @@ def test_occupancy_arrays(built):
 
 def test_instances_are_stable_across_frames(built):
     grid = GridSpec(voxel_size=RES)
-    (seq,) = [r[0] for r in query(built, "SELECT sequence_id FROM sequences")[1]]
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     occ = OccupancyStore(built)
     a, b = occ.read_frame(seq, grid, 0), occ.read_frame(seq, grid, 5)
     # an instance seen in both frames keeps its class
@@ -91,14 +91,60 @@ def test_catalog_tables_and_metrics(built):
     _, rows = query(built, "SELECT count(*), count(DISTINCT category) FROM assets")
     n_assets, n_categories = rows[0]
     assert n_assets >= 50 and n_categories >= 9
+    scenes = DatasetConfig().scenes
+    n_seq = sum(len(t.traffic_levels) * t.sequences_per_level for t in scenes.towns)
     _, rows = query(built, "SELECT count(*) FROM frames")
-    assert rows[0][0] == DatasetConfig().scenes.frame_count
+    assert rows[0][0] == scenes.frame_count * n_seq
     _, rows = query(built, "SELECT value FROM quality WHERE frame_index IS NULL AND metric = 'spatial_continuity'")
-    assert len(rows) == 1 and 0.9 < rows[0][0] <= 1.0
+    assert len(rows) == n_seq and all(0.9 < r[0] <= 1.0 for r in rows)
     _, rows = query(built, "SELECT DISTINCT stage FROM runs WHERE status = 'completed' ORDER BY 1")
     assert [r[0] for r in rows] == ["ingest", "metrics", "scenes", "voxelize"]
     _, rows = query(built, "SELECT count(*) FROM quality_classes q JOIN classes c ON q.semantic_id = c.id WHERE c.name = 'Car'")
     assert rows[0][0] > 0
+
+
+def test_scene_tables(built):
+    """Two towns (a procedural style and the builtin OpenDRIVE town), several traffic levels,
+    rig poses every frame, actors with angular velocity and matched gait phases."""
+    _, rows = query(built, "SELECT town, style, lane_count, crosswalk_count, placement_count FROM towns ORDER BY 1")
+    assert [r[:2] for r in rows] == [("town00", "downtown"), ("town01", "opendrive")]
+    assert all(r[2] > 10 and r[3] > 0 and r[4] > 50 for r in rows)
+    _, rows = query(built, "SELECT DISTINCT traffic_level FROM sequences")
+    assert len(rows) >= 2
+    _, rows = query(built, "SELECT count(*) FROM sensor_poses")
+    assert rows[0][0] == 7 * query(built, "SELECT count(*) FROM frames")[1][0][0]
+    _, rows = query(built, "SELECT count(*) FILTER (WHERE is_thing), count(*) FILTER (WHERE aabb_max[3] < aabb_min[3]) "
+                           "FROM placements")
+    assert rows[0][0] > 50 and rows[0][1] == 0
+    _, rows = query(built, "SELECT count(*), count(phase_index), min(phase_index), max(phase_index) FROM actors a "
+                           "JOIN classes c ON a.semantic_id = c.id WHERE c.name = 'Pedestrian'")
+    n, with_phase, lo, hi = rows[0]
+    assert n > 0 and with_phase == n and -1 <= lo and hi < 32
+    _, rows = query(built, "SELECT max(abs(angular_velocity[3])) FROM actors")
+    assert rows[0][0] > 0.05  # somebody turns
+
+
+def test_town_and_frame_mesh_exports(built, tmp_path):
+    from catalog.panoptic import load_panoptic_glb
+
+    out = tmp_path / "town00.glb"
+    r = cli.invoke(app, ["scenes", "town-mesh", "town00", "--out", str(out), "--root", built.url])
+    assert r.exit_code == 0, r.output
+    V, F, sem, inst, transparent = load_panoptic_glb(out.read_bytes())
+    present = {taxonomy.by_id(int(c)).name for c in np.unique(sem)}
+    assert {"Road", "Sidewalk", "Building", "RoadLine", "Terrain"} <= present
+    assert (inst[np.isin(sem, taxonomy.stuff_ids())] == 0).all() and len(np.unique(inst)) > 50
+    r = cli.invoke(app, ["scenes", "town-mesh", "town99", "--out", str(out), "--root", built.url])
+    assert r.exit_code == 2 and "town99" in r.output
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    out = tmp_path / "frame.glb"
+    r = cli.invoke(app, ["scenes", "frame-mesh", seq, "3", "--out", str(out), "--root", built.url])
+    assert r.exit_code == 0, r.output
+    V, F, sem, inst, transparent = load_panoptic_glb(out.read_bytes())
+    assert (np.isin(sem, taxonomy.thing_ids()) == (inst > 0)).all() and transparent.any()
+    assert np.abs(V[:, :2]).max() < 60.0  # LiDAR frame, cut to the occupancy region
+    r = cli.invoke(app, ["scenes", "frame-mesh", seq, "999", "--out", str(out), "--root", built.url])
+    assert r.exit_code == 2 and "no frame 999" in r.output
 
 
 def test_rerun_with_nothing_changed_writes_nothing(built):
@@ -129,7 +175,7 @@ def test_tampered_frame_is_detected_and_rebuilt(built, tmp_path):
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)
     grid = GridSpec(voxel_size=RES)
-    (seq,) = [r[0] for r in query(copy, "SELECT sequence_id FROM sequences")[1]]
+    seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     chunk_dir = f"{copy.root}/occupancy.zarr/{seq}/{grid.key}/semantic/c/3"
     victim = sorted(copy.fs.find(chunk_dir))[0]
     copy.fs.rm(victim)
@@ -137,6 +183,28 @@ def test_tampered_frame_is_detected_and_rebuilt(built, tmp_path):
     assert "voxelize  stale 1/" in r.output and f"{seq}/{grid.key}/0003: outputs missing or modified" in r.output
     r = cli.invoke(app, ["run", "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
     # the rebuilt frame is byte-identical, so what metrics read is unchanged: it stays up to date
-    assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "metrics: 1 up to date" in r.output
+    assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "metrics: 3 up to date" in r.output
     np.testing.assert_array_equal(OccupancyStore(copy).read_frame(seq, grid, 3)["semantic"],
                                   OccupancyStore(built).read_frame(seq, grid, 3)["semantic"])
+
+
+def test_swap_makes_a_sequence_that_voxelizes(built, tmp_path):
+    """``scenes swap`` on a copy: the edited sequence keeps the trajectories (same instances in
+    the same places) with other car models, and the pipeline voxelizes it."""
+    import shutil
+
+    copy = Store(str(tmp_path / "copy"))
+    shutil.copytree(built.root, copy.root)
+    seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    r = cli.invoke(app, ["scenes", "swap", "--class", "Car", "--seed", "5", "--sequence", seq, "--root", copy.url])
+    assert r.exit_code == 0 and "Car instance(s) swapped" in r.output, r.output
+    new = query(copy, f"SELECT sequence_id FROM sequences WHERE parent_sequence_id = '{seq}'")[1][0][0]
+    r = cli.invoke(app, ["run", "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
+    assert r.exit_code == 0, r.output
+    grid = GridSpec(voxel_size=RES)
+    a, b = OccupancyStore(copy).read_frame(seq, grid, 0), OccupancyStore(copy).read_frame(new, grid, 0)
+    car = taxonomy.by_name("Car").id
+    cars_a = set(np.unique(a["instance"][a["semantic"] == car]))
+    cars_b = set(np.unique(b["instance"][b["semantic"] == car]))
+    assert cars_a and cars_a == cars_b
+    assert not np.array_equal(a["semantic"], b["semantic"])  # other models, other voxels

@@ -10,7 +10,8 @@ in sub-steps of at most :data:`MAX_SUBSTEP`.
   ground at the vehicle's bottom centre, +X forward) and the sensor poses follow from the rig.
 * **Vehicles** (Car 80 %, Truck 10 %, Bus 10 % of the assets narrow enough for the lanes) spawn
   on road lanes at the traffic level's density per km of road (DESIGN table, at most 128). A few
-  *escorts* spawn ahead of the ego on its lane and on a nearby opposite lane, so the occupancy
+  *escorts* spawn along the ego's route ahead of and behind it, beside it on a parallel lane and
+  ahead of it on a nearby lane running the other way, so the occupancy
   region holds traffic from the first frame. Each vehicle's target speed is its lane's speed limit
   times ``1 + spread u`` (u uniform in [-1, 1]). Vehicles drive random routes over the lane graph
   with the Intelligent Driver Model (the level's "gap to leader" is the IDM standstill gap);
@@ -55,6 +56,7 @@ __all__ = [
 ]  # fmt: skip
 
 MAX_VEHICLES, MAX_WALKERS = 128, 64
+MAX_ESCORTS = 6  # cars spawned around the ego (counted in the level's vehicles)
 VEHICLE_MIX = (("Car", 0.8), ("Truck", 0.1), ("Bus", 0.1))
 MAX_SUBSTEP = 0.05  # s, longest integration step
 # Intelligent Driver Model parameters (vehicles)
@@ -662,16 +664,39 @@ def simulate_sequence(
     if n_walkers and not pedestrians:
         raise ValueError(f"traffic level {level_name!r} needs Pedestrian assets for walkers; none given")
 
-    # 2. escorts: cars ahead of the ego on its lane and on a nearby lane running the other way
+    # 2. escorts: cars ahead of and behind the ego along its route, beside it on a parallel lane,
+    #    and ahead of it on a nearby lane running the other way
+    sim.plan(ego)
+    route = [ego_lane, *ego.route]
+
+    def along(d: float) -> tuple[int, float] | None:
+        # the point d m along the ego's route from its centre (behind: on its own lane only)
+        s = ego.s + d
+        if s < 0:
+            return None
+        for ln in route:
+            if s <= lanes[ln].length:
+                return ln, s
+            s -= lanes[ln].length
+        return None
+
+    # candidate spots in order of preference; the first MAX_ESCORTS that fit are taken
+    escorts = [along(d) for d in (18.0, 36.0, -15.0, 26.0, 46.0, 12.0, -22.0)]
+    side = lanes[ego_lane].left if lanes[ego_lane].left >= 0 else lanes[ego_lane].right
+    if side >= 0:
+        f = lanes[side].length / lanes[ego_lane].length
+        escorts += [(side, (ego.s + d) * f) for d in (8.0, -10.0, 16.0)]
     opposite = _opposite_lane(net, lanes[ego_lane], ego.s)
-    escorts = [(ego_lane, ego.s + 20.0), (ego_lane, ego.s + 38.0)]
     if opposite >= 0:
-        # the point of the opposite lane beside the ego, then a little ahead of it (seen from the ego)
+        # the point of the opposite lane beside the ego, then ahead of it (seen from the ego)
         op = lanes[opposite]
         beside = float(op.cum[np.argmin(np.hypot(*(op.points[:, :2] - lanes[ego_lane].at(ego.s)[0][:2]).T))])
-        escorts += [(opposite, beside - 8.0), (opposite, beside - 30.0)]
-    for lane_id, s in escorts[: min(4, n_vehicles)]:
-        try_spawn(lane_id, s, pools["Car"][int(rng.integers(len(pools["Car"])))])
+        escorts += [(opposite, beside - d) for d in (8.0, 30.0, 0.0, 18.0, -10.0)]
+    taken = 0
+    for spot in escorts:
+        if spot is None or taken >= min(MAX_ESCORTS, n_vehicles):
+            continue
+        taken += try_spawn(spot[0], spot[1], pools["Car"][int(rng.integers(len(pools["Car"])))])
 
     # 3. the other vehicles on random road lanes (weighted by length), a bounded number of tries
     road = _road_lanes(net)
