@@ -123,7 +123,32 @@ def test_no_two_actors_interpenetrate_and_traffic_moves(lib, dense):
     moved = [np.hypot(*(np.array(v[-1].box_center) - np.array(v[0].box_center))[:2]) for v in by_id.values()
              if v[0].semantic_id != 12]
     assert np.median(moved) > 5.0
-    assert res.lane_changes > 0
+
+
+def test_a_held_up_vehicle_changes_lanes_and_the_follower_waits(lib):
+    """A fast car behind a slow one on the kerb lane moves to the free neighbour lane and passes;
+    with a car alongside in that lane it stays behind instead."""
+    net = ring_network()
+    cars = sorted((a for a in lib.assets if a.category == "Car"), key=lambda a: a.asset_id)
+
+    def run(blocker: bool):
+        sim = traffic._Sim(net, np.random.default_rng(0), TrafficLevel(0, 0, 2.0, 0.0), traffic.EGO_GAP)
+        slow = traffic._Vehicle(cars[0], 2, 60.0, 3.0, 1.0, v_fixed=3.0)
+        fast = traffic._Vehicle(cars[1], 2, 40.0, 10.0, 1.0, v_fixed=12.0)
+        sim.vehicles += [slow, fast]
+        if blocker:  # a car beside the fast one on the neighbour lane, at the same speed
+            sim.vehicles.append(traffic._Vehicle(cars[2], 0, 40.0 * net.lanes[0].length / net.lanes[2].length,
+                                                 10.0, 1.0, v_fixed=10.0))
+        for v in sim.vehicles:
+            sim.plan(v)
+        for _ in range(60):
+            sim.step(0.05)
+        return fast
+
+    fast = run(blocker=False)
+    assert fast.lane_changes == 1 and fast.lane == 0 and fast.s > 60.0
+    fast = run(blocker=True)
+    assert fast.lane_changes == 0 and fast.lane == 2
 
 
 def test_walkers_cross_only_when_the_junction_is_theirs(lib, monkeypatch):
