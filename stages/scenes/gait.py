@@ -253,7 +253,7 @@ def window_descriptors(
     """
     w = np.asarray(windows, dtype=np.float64)
     t = np.asarray(times, dtype=np.float64)
-    N, n = w.shape[:2]
+    n = w.shape[1]
     if n < 3:
         raise ValueError("windows need at least 3 frames")
     tc = t - t.mean(axis=1, keepdims=True)

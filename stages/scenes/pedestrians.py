@@ -41,7 +41,6 @@ from stages.scenes.gait import (
     window_frame_features,
 )
 
-
 STANDING = -1  # phase index of a pedestrian standing still (rest pose)
 
 # The procedural walker's proportions (gait.procedural_walk defaults) belong to a body this tall.

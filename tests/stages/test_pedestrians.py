@@ -12,7 +12,10 @@ import numpy as np
 import pytest
 
 from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight
-from stages.ingest.procedural import _pedestrian, _records  # tests may reach into the builders
+from stages.ingest.procedural import (  # tests may reach into the builders
+    _pedestrian,
+    _records,
+)
 from stages.scenes import gait as G
 from stages.scenes import pedestrians as P
 
@@ -232,7 +235,7 @@ def _lowest(q: AssetGeometry, name: str) -> np.ndarray:
 
 
 def test_legs_swing_across_half_a_cycle(rigged):
-    geom, rig = rigged
+    _, rig = rigged
     for d in range(D // 2):
         a, b = rig.posed(d), rig.posed(d + D // 2)
         moved = max(np.abs(pa.vertices - pb.vertices).max() for pa, pb in zip(a.parts, b.parts))
