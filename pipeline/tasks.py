@@ -284,6 +284,16 @@ def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
     return posed
 
 
+def _frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
+    """The rows of one frame of a per-sequence table (filtered in Arrow before validation)."""
+    import pyarrow.compute as pc
+
+    from catalog.parquet import from_table
+
+    table = ParquetTable(store, model).load_arrow([seq_id])
+    return from_table(model, table.filter(pc.equal(table["frame_index"], frame_index)))
+
+
 def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
     """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
     (lo, hi) in the LiDAR frame."""
@@ -294,10 +304,10 @@ def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
     if not sequences:
         raise StoreError(f"sequence {seq_id!r} is not in {store.url}: run the scenes stage first")
     (sequence,) = sequences
-    frames = [f for f in ParquetTable(store, FrameRecord).load([seq_id]) if f.frame_index == frame_index]
+    frames = _frame_rows(store, FrameRecord, seq_id, frame_index)
     if not frames:
         raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
-    actors = [a for a in ParquetTable(store, ActorStateRecord).load([seq_id]) if a.frame_index == frame_index]
+    actors = _frame_rows(store, ActorStateRecord, seq_id, frame_index)
     placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
     index = PlacementIndex(placements)
     # geometry of the placements whose world AABB meets the frame's region, and of the actors
