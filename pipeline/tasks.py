@@ -150,7 +150,7 @@ def build_town_from_spec(store: Store, cfg: ScenesConfig, index: int):
 
 def is_edited(sequence_id: str) -> bool:
     """Edited sequences (``scenes swap``) carry a ``~`` in their id; re-simulating their town
-    does not remove them (their lineage points at the original)."""
+    removes them, since their trajectories are copies of the old simulation."""
     return "~" in sequence_id
 
 
@@ -203,7 +203,11 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
     for table in tables.values():
         for rel in table.paths():
             sid = rel[len(table.dir) + 1 : -len(".parquet")]
-            if sid.startswith(f"{town.name}_") and sid not in written and not is_edited(sid):
+            if not sid.startswith(f"{town.name}_"):
+                continue
+            # edited sequences (scenes swap) copied trajectories that were just re-simulated or
+            # removed: they are stale, so they go too (run swap again)
+            if sid not in written or is_edited(sid):
                 store.remove(rel)
     return outputs
 
@@ -263,7 +267,7 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
 
 
 # -- voxelize -------------------------------------------------------------------------------------
-_RIG_CACHE: OrderedDict[tuple[str, int], object] = OrderedDict()
+_RIG_CACHE: OrderedDict[tuple[str, str], object] = OrderedDict()
 
 
 def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
@@ -273,7 +277,8 @@ def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
 
     def posed(asset_id: str, phase_index: int) -> AssetGeometry:
         geom = geometry[asset_id]
-        key = (asset_id, id(geom))
+        digest = hashlib.sha256(b"".join(p.vertices.tobytes() + p.faces.tobytes() for p in geom.parts)).hexdigest()
+        key = (asset_id, digest)
         rig = _RIG_CACHE.get(key)
         if rig is None:
             rig = _RIG_CACHE[key] = rig_pedestrian(geom)

@@ -70,6 +70,7 @@ LANE_CHANGE_EVERY = 1.0  # s, how often a vehicle considers a lane change
 LOOKAHEAD = 80.0  # m, how far along its route a vehicle looks for a leader
 WALKER_CLEAR = 0.15  # m, walkers keep this much space between their boxes
 WALKER_STEER = 1.5  # walkers move towards their path point at most this many times their speed
+ASIDE_RATE = 0.4  # m/s: how fast a yielding walker steps aside (and back)
 GAIT_STEP = 0.415  # step length / body height
 STAND_SPEED = 0.1  # m/s: slower walkers stand (no gait phase)
 
@@ -160,6 +161,7 @@ class _Walker:
     phase: float = 0.0
     plan: tuple[int, int] | None = None  # the walkway (and direction) taken at the next node
     walked: float = 0.0
+    aside: float = 0.0  # m stepped aside (to the right) to let an oncoming walker pass
 
     @property
     def radius(self) -> float:
@@ -299,6 +301,10 @@ class _Sim:
         self.step_no = 0
         self.time = 0.0
         self.ego_gap = ego_gap
+        self.preds: dict[int, list[int]] = {}
+        for ln in self.lanes:
+            for nxt in ln.successors:
+                self.preds.setdefault(nxt, []).append(ln.lane_id)
         # walk graph: node -> [(walkway, sign of travel when leaving the node along it)]
         self.node_ways: dict[int, list[tuple[int, int]]] = {}
         for w in self.ways:
@@ -322,19 +328,23 @@ class _Sim:
         return a.v_fixed if a.v_fixed is not None else self.lanes[a.lane].speed_limit * a.v_factor
 
 
-    def junctions_wanted(self, a: _Vehicle) -> tuple[set[int], int]:
-        """Junctions vehicle ``a`` is in (its lane, or the lane its rear overhangs) and the one it
-        approaches next (the first connector on its route right after its road lane, else -1)."""
+    def junctions_wanted(self, a: _Vehicle) -> tuple[set[int], int, float]:
+        """Junctions vehicle ``a`` is in (its lane, or the lane its rear overhangs), and the next
+        junction on its route with the distance (m) from its front bumper to that junction's first
+        connector (-1, inf when none within :data:`LOOKAHEAD`)."""
         lanes = self.lanes
         inside = {lanes[a.lane].junction} - {-1}
         if a.prev >= 0 and a.s - a.length / 2 < 0 and lanes[a.prev].junction >= 0:
             inside.add(lanes[a.prev].junction)
-        approach = -1
-        if a.route:
-            j = lanes[a.route[0]].junction
+        dist = lanes[a.lane].length - a.s - a.length / 2
+        for ln in a.route:
+            j = lanes[ln].junction
             if j >= 0 and j not in inside:
-                approach = j
-        return inside, approach
+                return inside, j, dist
+            dist += lanes[ln].length
+            if dist > LOOKAHEAD:
+                break
+        return inside, -1, math.inf
 
     def step_vehicles(self, dt: float) -> None:
         """Advance every vehicle by ``dt`` s: junction reservations, lane-based leaders, lane
@@ -347,22 +357,29 @@ class _Sim:
         gaps, lead_v = np.full(n, np.inf), np.zeros(n)
         for i, a in enumerate(V):
             g, j = occ.leader(lanes, V, i, a.lane, a.s, a.route)
+            if a.lc_from >= 0:
+                # changing lanes: still partly in the old lane, so its leader there counts too
+                src = lanes[a.lc_from]
+                g2, j2 = occ.leader(lanes, V, i, a.lc_from, a.s * src.length / lanes[a.lane].length, ())
+                if g2 < g:
+                    g, j = g2, j2
             gaps[i], lead_v[i] = g, (V[j].v if j >= 0 else 0.0)
-        # 1. junctions: claim the one we are in, request the one ahead when close and first in line
+        # 1. junctions: claim the one we are in, request the next one when close and first in line
         approach = np.full(n, -1)
-        to_end = np.array([lanes[a.lane].length - a.s - a.length / 2 for a in V])  # front bumper to lane end
+        to_junction = np.full(n, np.inf)  # front bumper to the next junction's first connector
         for i, a in enumerate(V):
-            inside, approach[i] = self.junctions_wanted(a)
+            inside, approach[i], to_junction[i] = self.junctions_wanted(a)
             for j in inside:
                 if not J.holds(j, "vehicle", i) and J.free_for(j, "vehicle"):
                     J.vehicle[j] = i  # inside without a grant (spawned there): claim the free box
-            if approach[i] >= 0 and to_end[i] < a.v * a.v / (2 * IDM_DECEL) + 15.0 and gaps[i] > to_end[i] - 1.0:
+            near = a.v * a.v / (2 * IDM_DECEL) + 15.0
+            if approach[i] >= 0 and to_junction[i] < near and gaps[i] > to_junction[i] - 1.0:
                 J.request(int(approach[i]), "vehicle", i, self.step_no)
         J.grant()
         stop = np.full(n, np.inf)
         for i in range(n):
             if approach[i] >= 0 and not J.holds(int(approach[i]), "vehicle", i):
-                stop[i] = to_end[i] - STOP_BACK
+                stop[i] = to_junction[i] - STOP_BACK
         use_stop = stop < gaps
         gap = np.where(use_stop, stop, gaps)
         v_lead = np.where(use_stop, 0.0, lead_v)
@@ -379,7 +396,10 @@ class _Sim:
         v_new = np.maximum(0.0, v + acc * dt)
         v_new[v0 <= 0] = 0.0
         for i, (a, vn) in enumerate(zip(V, v_new)):
-            a.s += 0.5 * (a.v + float(vn)) * dt
+            step = 0.5 * (a.v + float(vn)) * dt
+            if approach[i] >= 0 and not J.holds(int(approach[i]), "vehicle", i) and step > to_junction[i]:
+                step, vn = max(0.0, float(to_junction[i])), 0.0  # never enter a junction that is not ours
+            a.s += step
             a.v = float(vn)
             if a.lc_from >= 0:
                 a.lc_t += dt
@@ -392,7 +412,7 @@ class _Sim:
             self.plan(a)
         # 4. release what each vehicle no longer needs (held or queued)
         for i, a in enumerate(V):
-            inside, ahead = self.junctions_wanted(a)
+            inside, ahead, _ = self.junctions_wanted(a)
             keep = inside | ({ahead} - {-1})
             for j in [j for j, holder in J.vehicle.items() if holder == i and j not in keep]:
                 J.release(j, "vehicle", i)
@@ -402,11 +422,15 @@ class _Sim:
 
     def consider_lane_change(self, i: int, acc_now: float, occ: _Occupancy, s0: float) -> None:
         """MOBIL-style: move to a parallel neighbour lane when it gives ``LANE_CHANGE_GAIN`` more
-        acceleration than staying and both new gaps are safe for us and the new follower."""
+        acceleration than staying and both new gaps are safe for us and the new follower (the
+        leader in the old lane still governs until the change is done)."""
         a, lanes, V = self.vehicles[i], self.lanes, self.vehicles
         lane = lanes[a.lane]
         if lane.junction >= 0 or a.v < 1.0 or a.prev >= 0 and a.s - a.length / 2 < 0:
             return
+        g_old, _ = occ.leader(lanes, V, i, a.lane, a.s, a.route)
+        if g_old < s0 + 0.5 * a.v:
+            return  # too close to the leader to pull out safely
         if lane.length - a.s < a.v * LANE_CHANGE_TIME + a.length + 5.0:
             return  # not enough lane left to finish the manoeuvre
         for target in (lane.left, lane.right):
@@ -425,6 +449,12 @@ class _Sim:
                     g = s_t - s_j - (a.length + V[j].length) / 2
                     if g < g_back:
                         g_back, j_back = g, j
+            for p in self.preds.get(target, ()):  # a follower still on the lane before the target
+                for s_j, j in occ.by_lane.get(p, ()):
+                    if j != i:
+                        g = s_t + lanes[p].length - s_j - (a.length + V[j].length) / 2
+                        if g < g_back:
+                            g_back, j_back = g, j
             v_back = V[j_back].v if j_back >= 0 else 0.0
             if g_lead < s0 + 0.8 * a.v or g_back < self.level.gap + 0.8 * v_back:
                 continue
@@ -449,7 +479,7 @@ class _Sim:
         way = self.ways[w.way]
         p, yaw = way.at(w.s)
         yaw = float(yaw) if w.sign > 0 else float(yaw) + math.pi
-        offset = min(0.45, way.width / 4)
+        offset = min(0.45, way.width / 4) + w.aside
         return p + np.array([math.sin(yaw), -math.cos(yaw), 0.0]) * offset, yaw
 
     def remaining(self, w: _Walker) -> float:
@@ -492,17 +522,23 @@ class _Sim:
         reach = radius[:, None] + radius[None, :] + WALKER_CLEAR
         ahead = (along > -0.5 * reach) & (lateral < reach)
         np.fill_diagonal(ahead, False)
-        # two walkers blocking each other: the higher index yields, the lower walks on
+        # two walkers blocking each other: the higher index steps aside (to its right) until the
+        # other can pass; both keep their distance meanwhile
         idx = np.arange(len(W))
-        ahead &= ~(ahead & ahead.T & (idx[:, None] < idx[None, :]))
+        yields = (ahead & ahead.T & (idx[:, None] > idx[None, :])).any(axis=1)
         gap = np.where(ahead, np.hypot(along, lateral) - reach, np.inf).min(axis=1)
+        for i, w in enumerate(W):
+            room = max(0.0, self.ways[w.way].width / 2 - min(0.45, self.ways[w.way].width / 4) - 0.3)
+            w.aside = min(room, w.aside + ASIDE_RATE * dt) if yields[i] else max(0.0, w.aside - ASIDE_RATE * dt)
         crossing = [self.crossing_ahead(w, i) for i, w in enumerate(W)]
         for i, c in enumerate(crossing):
             if c is not None and c[1] < 2.0:
                 J.request(c[0], "walker", i, self.step_no)
         J.grant()
+        where = np.array([w.pos[:2] for w in W])  # current positions, updated as walkers move
         for i, w in enumerate(W):
             w.v = w.v0 if gap[i] > 0.6 else (0.5 * w.v0 if gap[i] > 0.2 else 0.0)
+            before = (w.way, w.s, w.sign, w.plan, w.pos, w.walked)
             step = w.v * dt
             c = crossing[i]
             if c is not None and not J.holds(c[0], "walker", i):
@@ -526,6 +562,14 @@ class _Sim:
             if dist > cap:
                 d = d * (cap / dist)
             w.pos = w.pos + d
+            # hard rule: a move that would bring the walker's disc into another's is not made
+            near = np.hypot(*(where - w.pos[:2]).T) < radius + radius[i]
+            near[i] = False
+            if near.any():
+                w.way, w.s, w.sign, w.plan, w.pos, w.walked = before
+                w.v = 0.0
+                continue
+            where[i] = w.pos[:2]
             if w.v > 0:
                 w.yaw = math.atan2(d[1], d[0]) if dist > 0.05 * dt else yaw
             w.phase = (w.phase + w.v * dt / (2.0 * GAIT_STEP * float(w.asset.extent[2]))) % 1.0
@@ -653,7 +697,9 @@ def simulate_sequence(
         if any(abs(s - s2) < (L + L2) / 2 + level.gap + 3.0 for s2, L2 in placed.get(lane_id, [])):
             return False
         factor = 1.0 + level.speed_spread * float(rng.uniform(-1.0, 1.0))
-        a = _Vehicle(asset, lane_id, s, lane.speed_limit * factor, factor)
+        # start no faster than what stops before the lane end (a junction may follow)
+        v_start = min(lane.speed_limit * factor, math.sqrt(2 * IDM_DECEL * max(0.0, lane.length - s - L / 2 - 3.0)))
+        a = _Vehicle(asset, lane_id, s, v_start, factor)
         sim.vehicles.append(a)
         placed.setdefault(lane_id, []).append((s, L))
         return True
