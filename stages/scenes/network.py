@@ -60,8 +60,29 @@ def polyline_at(points: np.ndarray, cum: np.ndarray, s) -> tuple[np.ndarray, np.
     return pos, np.remainder(yaw + np.pi, 2 * np.pi) - np.pi
 
 
+class _Polyline:
+    """Shared by lanes and walkways: ``points`` (K, 3) and their cumulative length ``cum``."""
+
+    points: np.ndarray
+    cum: np.ndarray
+
+    def __post_init__(self) -> None:
+        pts = np.ascontiguousarray(self.points, dtype=np.float64)
+        object.__setattr__(self, "points", pts)
+        object.__setattr__(self, "cum", polyline_lengths(pts))
+
+    @property
+    def length(self) -> float:
+        """Length along the line (m)."""
+        return float(self.cum[-1])
+
+    def at(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Position(s) and yaw(s) (in the line's direction) at arc length ``s`` m from its start."""
+        return polyline_at(self.points, self.cum, s)
+
+
 @dataclass(frozen=True)
-class Lane:
+class Lane(_Polyline):
     """A directed driving lane (world frame, m). ``points`` (K >= 2, 3) follow the lane centre in
     the travel direction at the road surface; consecutive points are distinct in xy."""
 
@@ -76,23 +97,10 @@ class Lane:
     road: str = ""  # the road it belongs to (OpenDRIVE road id, or the builder's road name)
     cum: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
-        pts = np.ascontiguousarray(self.points, dtype=np.float64)
-        object.__setattr__(self, "points", pts)
-        object.__setattr__(self, "cum", polyline_lengths(pts))
-
-    @property
-    def length(self) -> float:
-        """Length along the lane (m)."""
-        return float(self.cum[-1])
-
-    def at(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Position(s) and yaw(s) at arc length ``s`` m from the lane start."""
-        return polyline_at(self.points, self.cum, s)
 
 
 @dataclass(frozen=True)
-class Walkway:
+class Walkway(_Polyline):
     """An undirected walking line between walk-graph nodes ``start_node`` and ``end_node``
     (world frame, m): ``points`` (K >= 2, 3) on the walking surface, from start to end."""
 
@@ -105,18 +113,6 @@ class Walkway:
     junction: int = -1  # crosswalks inside a junction's reservation zone: that junction's id
     cum: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
-        pts = np.ascontiguousarray(self.points, dtype=np.float64)
-        object.__setattr__(self, "points", pts)
-        object.__setattr__(self, "cum", polyline_lengths(pts))
-
-    @property
-    def length(self) -> float:
-        return float(self.cum[-1])
-
-    def at(self, s) -> tuple[np.ndarray, np.ndarray]:
-        """Position(s) and yaw(s) (start -> end direction) at arc length ``s``."""
-        return polyline_at(self.points, self.cum, s)
 
 
 @dataclass(frozen=True)
