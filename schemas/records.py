@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 from datetime import datetime
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict
 
 
 class Record(BaseModel):
@@ -38,6 +38,10 @@ def _check_vec3(v: list[float]) -> list[float]:
     return v
 
 
+Pose = Annotated[list[float], AfterValidator(_check_pose)]  # 4x4 row-major, finite
+Vec3 = Annotated[list[float], AfterValidator(_check_vec3)]  # 3 finite components
+
+
 class AssetRecord(Record):
     """One ADMesh asset: a standardized mesh in the asset frame (+X forward, Z up, metres, origin
     at the bottom centre of its bounding box)."""
@@ -50,7 +54,7 @@ class AssetRecord(Record):
     category_id: int
     category: str
     subclass: str
-    extent: list[float]  # bounding-box size x, y, z (m)
+    extent: Vec3  # bounding-box size x, y, z (m)
     vertex_count: int
     face_count: int  # triangles, after degenerate and duplicate faces are removed
     part_count: int
@@ -64,11 +68,6 @@ class AssetRecord(Record):
     aliases: list[str] = []  # source paths of duplicates stored once under this asset
     notes: str = ""  # what standardization changed (faces removed, winding repaired, turned...)
     mesh_path: str  # store-relative path of the standardized GLB
-
-    @field_validator("extent")
-    @classmethod
-    def _extent_vec3(cls, v: list[float]) -> list[float]:
-        return _check_vec3(v)
 
 
 class PartRecord(Record):
@@ -108,20 +107,10 @@ class PlacementRecord(Record):
     mesh_path: str  # store-relative GLB holding the geometry
     semantic_id: int
     instance_id: int  # 0 for stuff
-    pose: list[float]  # object-to-world, 4x4 row-major
+    pose: Pose  # object-to-world, 4x4 row-major
     is_thing: bool  # taxonomy thing class (has an instance id) or stuff
-    aabb_min: list[float]  # world-frame axis-aligned bounding box of the placed mesh, m
-    aabb_max: list[float]
-
-    @field_validator("pose")
-    @classmethod
-    def _pose_4x4(cls, v: list[float]) -> list[float]:
-        return _check_pose(v)
-
-    @field_validator("aabb_min", "aabb_max")
-    @classmethod
-    def _aabb_vec3(cls, v: list[float]) -> list[float]:
-        return _check_vec3(v)
+    aabb_min: Vec3  # world-frame axis-aligned bounding box of the placed mesh, m
+    aabb_max: Vec3
 
 
 class TownRecord(Record):
@@ -163,13 +152,8 @@ class FrameRecord(Record):
     sequence_id: str
     frame_index: int
     timestamp: float  # s since the sequence start
-    ego_pose: list[float]  # ego-to-world
-    lidar_pose: list[float]  # lidar-to-world
-
-    @field_validator("ego_pose", "lidar_pose")
-    @classmethod
-    def _poses_4x4(cls, v: list[float]) -> list[float]:
-        return _check_pose(v)
+    ego_pose: Pose  # ego-to-world
+    lidar_pose: Pose  # lidar-to-world
 
 
 class ActorStateRecord(Record):
@@ -181,23 +165,14 @@ class ActorStateRecord(Record):
     instance_id: int
     asset_id: str
     semantic_id: int
-    pose: list[float]  # actor-to-world (asset frame to world)
-    box_center: list[float]  # world frame, m
-    box_size: list[float]  # length, width, height, m
+    pose: Pose  # actor-to-world (asset frame to world)
+    box_center: Vec3  # world frame, m
+    box_size: Vec3  # length, width, height, m
     yaw: float  # rad, about world z
-    velocity: list[float]  # world frame, m/s
-    angular_velocity: list[float]  # world frame, rad/s
+    velocity: Vec3  # world frame, m/s
+    angular_velocity: Vec3  # world frame, rad/s
     gait_phase: float | None = None  # walkers only: simulated phase of the gait cycle, [0, 1)
     phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
-
-    @field_validator("pose")
-    @classmethod
-    def _pose_4x4(cls, v: list[float]) -> list[float]:
-        return _check_pose(v)
-    @field_validator("box_center", "box_size", "velocity", "angular_velocity")
-    @classmethod
-    def _vecs_3(cls, v: list[float]) -> list[float]:
-        return _check_vec3(v)
 
 
 class SensorPoseRecord(Record):
@@ -208,12 +183,7 @@ class SensorPoseRecord(Record):
     sequence_id: str
     frame_index: int
     sensor: str
-    pose: list[float]  # sensor-to-world, 4x4 row-major
-
-    @field_validator("pose")
-    @classmethod
-    def _pose_4x4(cls, v: list[float]) -> list[float]:
-        return _check_pose(v)
+    pose: Pose  # sensor-to-world, 4x4 row-major
 
 
 class QualityRecord(Record):
