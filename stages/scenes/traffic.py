@@ -173,6 +173,11 @@ def _smoothstep(t: float) -> float:
     return t * t * (3.0 - 2.0 * t)
 
 
+def _s_on_old_lane(lanes: Sequence[Lane], a: _Vehicle) -> float:
+    """Arc length on the lane a lane-changing vehicle leaves, at the same fraction of the lane."""
+    return a.s * lanes[a.lc_from].length / lanes[a.lane].length
+
+
 def _vehicle_pose(lanes: Sequence[Lane], a: _Vehicle) -> tuple[np.ndarray, float]:
     """World position (3,) and yaw of a vehicle: on its lane, or blended from the lane it leaves
     (at the same fraction of the lane) during a lane change."""
@@ -180,8 +185,7 @@ def _vehicle_pose(lanes: Sequence[Lane], a: _Vehicle) -> tuple[np.ndarray, float
     p, yaw = lane.at(a.s)
     if a.lc_from < 0:
         return p, float(yaw)
-    src = lanes[a.lc_from]
-    q, _ = src.at(a.s * src.length / lane.length)
+    q, _ = lanes[a.lc_from].at(_s_on_old_lane(lanes, a))
     w = _smoothstep(a.lc_t / LANE_CHANGE_TIME)
     pos = q + w * (p - q)
     # heading: the lane's plus the drift angle of the lateral motion
@@ -210,8 +214,7 @@ class _Occupancy:
         for j, a in enumerate(vehicles):
             self.by_lane.setdefault(a.lane, []).append((a.s, j))
             if a.lc_from >= 0:
-                src = lanes[a.lc_from]
-                self.by_lane.setdefault(a.lc_from, []).append((a.s * src.length / lanes[a.lane].length, j))
+                self.by_lane.setdefault(a.lc_from, []).append((_s_on_old_lane(lanes, a), j))
             if a.prev >= 0 and a.s - a.length / 2 < 0:
                 self.by_lane.setdefault(a.prev, []).append((lanes[a.prev].length + a.s, j))
 
@@ -272,6 +275,14 @@ class _Junctions:
         if kind == "vehicle":
             return self.vehicle.get(junction) == index
         return index in self.walkers.get(junction, ())
+
+    def release_all_but(self, keep: set[int], kind: str, index: int) -> None:
+        """Release every junction held or requested by ``(kind, index)`` except those in ``keep``."""
+        held = [j for j, h in self.vehicle.items() if h == index] if kind == "vehicle" else [
+            j for j, ws in self.walkers.items() if index in ws]
+        queued = [j for j, pending in self.queue.items() if (kind, index) in pending]
+        for j in set(held + queued) - keep:
+            self.release(j, kind, index)
 
     def release(self, junction: int, kind: str, index: int) -> None:
         if kind == "vehicle":
@@ -359,8 +370,7 @@ class _Sim:
             g, j = occ.leader(lanes, V, i, a.lane, a.s, a.route)
             if a.lc_from >= 0:
                 # changing lanes: still partly in the old lane, so its leader there counts too
-                src = lanes[a.lc_from]
-                g2, j2 = occ.leader(lanes, V, i, a.lc_from, a.s * src.length / lanes[a.lane].length, ())
+                g2, j2 = occ.leader(lanes, V, i, a.lc_from, _s_on_old_lane(lanes, a), ())
                 if g2 < g:
                     g, j = g2, j2
             gaps[i], lead_v[i] = g, (V[j].v if j >= 0 else 0.0)
@@ -376,10 +386,9 @@ class _Sim:
             if approach[i] >= 0 and to_junction[i] < near and gaps[i] > to_junction[i] - 1.0:
                 J.request(int(approach[i]), "vehicle", i, self.step_no)
         J.grant()
-        stop = np.full(n, np.inf)
-        for i in range(n):
-            if approach[i] >= 0 and not J.holds(int(approach[i]), "vehicle", i):
-                stop[i] = to_junction[i] - STOP_BACK
+        # blocked: a junction lies ahead that is not ours; stop before it
+        blocked = np.array([approach[i] >= 0 and not J.holds(int(approach[i]), "vehicle", i) for i in range(n)])
+        stop = np.where(blocked, to_junction - STOP_BACK, np.inf)
         use_stop = stop < gaps
         gap = np.where(use_stop, stop, gaps)
         v_lead = np.where(use_stop, 0.0, lead_v)
@@ -391,13 +400,13 @@ class _Sim:
         for i, a in enumerate(V):
             if a.lc_from < 0 and self.time >= a.next_lc_check and approach[i] < 0:
                 a.next_lc_check = self.time + LANE_CHANGE_EVERY
-                self.consider_lane_change(i, float(acc[i]), occ, float(s0[i]))
+                self.consider_lane_change(i, float(acc[i]), float(gaps[i]), occ, float(s0[i]))
         # 3. move along the lanes, onto the planned ones
         v_new = np.maximum(0.0, v + acc * dt)
         v_new[v0 <= 0] = 0.0
         for i, (a, vn) in enumerate(zip(V, v_new)):
             step = 0.5 * (a.v + float(vn)) * dt
-            if approach[i] >= 0 and not J.holds(int(approach[i]), "vehicle", i) and step > to_junction[i]:
+            if blocked[i] and step > to_junction[i]:
                 step, vn = max(0.0, float(to_junction[i])), 0.0  # never enter a junction that is not ours
             a.s += step
             a.v = float(vn)
@@ -414,13 +423,9 @@ class _Sim:
         for i, a in enumerate(V):
             inside, ahead, _ = self.junctions_wanted(a)
             keep = inside | ({ahead} - {-1})
-            for j in [j for j, holder in J.vehicle.items() if holder == i and j not in keep]:
-                J.release(j, "vehicle", i)
-            for j, pending in J.queue.items():
-                if ("vehicle", i) in pending and j not in keep:
-                    del pending[("vehicle", i)]
+            J.release_all_but(keep, "vehicle", i)
 
-    def consider_lane_change(self, i: int, acc_now: float, occ: _Occupancy, s0: float) -> None:
+    def consider_lane_change(self, i: int, acc_now: float, gap_now: float, occ: _Occupancy, s0: float) -> None:
         """MOBIL-style: move to a parallel neighbour lane when it gives ``LANE_CHANGE_GAIN`` more
         acceleration than staying and both new gaps are safe for us and the new follower (the
         leader in the old lane still governs until the change is done)."""
@@ -428,8 +433,7 @@ class _Sim:
         lane = lanes[a.lane]
         if lane.junction >= 0 or a.v < 1.0 or a.prev >= 0 and a.s - a.length / 2 < 0:
             return
-        g_old, _ = occ.leader(lanes, V, i, a.lane, a.s, a.route)
-        if g_old < s0 + 0.5 * a.v:
+        if gap_now < s0 + 0.5 * a.v:
             return  # too close to the leader to pull out safely
         if lane.length - a.s < a.v * LANE_CHANGE_TIME + a.length + 5.0:
             return  # not enough lane left to finish the manoeuvre
@@ -575,9 +579,8 @@ class _Sim:
             w.phase = (w.phase + w.v * dt / (2.0 * GAIT_STEP * float(w.asset.extent[2]))) % 1.0
             # hold a junction only while on one of its crosswalks
             way = self.ways[w.way]
-            for j in [j for j, held in J.walkers.items() if i in held]:
-                if not (way.crosswalk and way.junction == j) and (c is None or c[0] != j):
-                    J.release(j, "walker", i)
+            keep = {way.junction} if way.crosswalk and way.junction >= 0 else set()
+            J.release_all_but(keep | ({c[0]} if c is not None else set()), "walker", i)
 
     def step(self, dt: float) -> None:
         self.step_vehicles(dt)

@@ -18,10 +18,10 @@ from stages.ingest.procedural import (  # tests may reach into the builders
 )
 from stages.scenes import gait as G
 from stages.scenes import pedestrians as P
+from stages.scenes.traffic import GAIT_STEP  # the simulation's step length / body height
 
 D = 32
 RATE = 20.0
-GAIT_STEP = 0.415  # the traffic simulation's step length / body height (cycle = two steps)
 
 
 def _track(speed, T=200, height=1.75, yaw0=0.3, phase0=0.2, stops=(), rate=RATE):
