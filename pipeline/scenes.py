@@ -35,10 +35,6 @@ SWAP_STAGE = "scenes-swap"
 LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relative footprint/height difference
 
 
-def _palette() -> dict[int, tuple[int, int, int]]:
-    return {c.id: tuple(c.color) for c in taxonomy.CLASSES}
-
-
 def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
     """The whole town's static mesh (world frame) as GLB with per-face semantic and instance ids;
     returns (bytes, triangles, placements)."""
@@ -51,8 +47,7 @@ def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
     placements = t_place.load([f"town={town}"])
     geometry = load_geometry(store, {p.asset_id for p in placements}, placements)
     mesh = town_mesh(placements, geometry)
-    data = panoptic_glb_bytes(mesh.vertices, mesh.faces, mesh.semantic, mesh.instance, mesh.transparent, _palette())
-    return data, len(mesh.faces), len(placements)
+    return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces), len(placements)
 
 
 def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> tuple[bytes, int]:
@@ -60,8 +55,7 @@ def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> 
     from stages.scenes.assembly import flatten
 
     mesh = flatten(frame_scene(store, sequence_id, frame_index, region))
-    data = panoptic_glb_bytes(mesh.vertices, mesh.faces, mesh.semantic, mesh.instance, mesh.transparent, _palette())
-    return data, len(mesh.faces)
+    return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces)
 
 
 @dataclass(frozen=True)
@@ -134,10 +128,11 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
         started = datetime.now(timezone.utc)
         new_id = swap_id(parent.sequence_id, cls.name, seed)
         actors = tables["actors"].load([parent.sequence_id])
+        asset_of = {a.instance_id: a.asset_id for a in actors if a.semantic_id == cls.id}
         choice: dict[int, AssetRecord] = {}
         kept = 0
-        for inst in sorted({a.instance_id for a in actors if a.semantic_id == cls.id}):
-            original = by_id.get(next(a.asset_id for a in actors if a.instance_id == inst))
+        for inst in sorted(asset_of):
+            original = by_id.get(asset_of[inst])
             options = compatible(original, pool) if original is not None else []
             if not options:
                 kept += 1

@@ -128,24 +128,13 @@ def scene_assets(store: Store, cfg: ScenesConfig) -> list[AssetRecord]:
 
 
 def read_town_network(spec: TownSpec):
-    """The parsed OpenDRIVE network of an opendrive town spec (None for procedural ones), and
-    its file path (str, "" for procedural)."""
+    """The parsed OpenDRIVE network of an opendrive town spec (None for procedural ones)."""
     if spec.style != "opendrive":
-        return None, ""
+        return None
     from catalog.opendrive import read_opendrive
     from catalog.towns import resolve_opendrive
 
-    path = resolve_opendrive(spec.opendrive)
-    return read_opendrive(path), str(path)
-
-
-def build_town_from_spec(store: Store, cfg: ScenesConfig, index: int):
-    """Build town ``index`` of the config from the store's assets."""
-    from stages.scenes import build_town
-
-    spec = cfg.towns[index]
-    network, path = read_town_network(spec)
-    return build_town(spec, cfg, index, scene_assets(store, cfg), network, spec.opendrive or "")
+    return read_opendrive(resolve_opendrive(spec.opendrive))
 
 
 def is_edited(sequence_id: str) -> bool:
@@ -157,13 +146,13 @@ def is_edited(sequence_id: str) -> bool:
 def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
     """Build one town and simulate its sequences; write stuff meshes, placements, the town row,
     sequences, frames, sensor poses and actors."""
-    from stages.scenes import simulate_town
+    from stages.scenes import build_town, simulate_town
     from stages.scenes.pedestrians import match_walker_phases
 
     index = part.params["town_index"]
     spec = cfg.towns[index]
     assets = scene_assets(store, cfg)
-    town = build_town_from_spec(store, cfg, index)
+    town = build_town(spec, cfg, index, assets, read_town_network(spec), spec.opendrive or "")
     outputs: dict[str, str] = {}
     meshes = MeshStore(store)
     mesh_paths = {a.asset_id: a.mesh_path for a in assets}
@@ -213,21 +202,28 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
 
 
 # -- geometry loading (cached per worker by content) ----------------------------------------------
-_GEOMETRY_CACHE: OrderedDict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = OrderedDict()
-_GEOMETRY_CACHE_SIZE = 1024
+_GEOMETRY_CACHE: OrderedDict[tuple, AssetGeometry] = OrderedDict()
 
 
-def _mesh_arrays(store: Store, rel: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def _cached(cache: OrderedDict, key, make, size: int):
+    """``cache[key]``, made by ``make()`` on a miss; least recently used entries beyond ``size``
+    are dropped."""
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = cache[key] = make()
+    if len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def _mesh_geometry(store: Store, rel: str, key: tuple, build) -> AssetGeometry:
+    """``build(arrays)`` of the GLB ``rel``, cached per worker by the file's content and ``key``
+    (what else the geometry is made of): the same object comes back while nothing changed, so
+    callers may cache work on it by identity."""
     data = store.read_bytes(rel)
-    key = (rel, hashlib.sha256(data).hexdigest())
-    if key in _GEOMETRY_CACHE:
-        _GEOMETRY_CACHE.move_to_end(key)
-        return _GEOMETRY_CACHE[key]
-    arrays = load_glb_arrays(data)
-    _GEOMETRY_CACHE[key] = arrays
-    if len(_GEOMETRY_CACHE) > _GEOMETRY_CACHE_SIZE:
-        _GEOMETRY_CACHE.popitem(last=False)
-    return arrays
+    return _cached(_GEOMETRY_CACHE, (rel, hashlib.sha256(data).hexdigest(), key),
+                   lambda: build(load_glb_arrays(data)), 1024)
 
 
 def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementRecord]) -> dict[str, AssetGeometry]:
@@ -242,24 +238,30 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
     out: dict[str, AssetGeometry] = {}
     for aid in sorted(asset_ids):
         if aid in assets:
-            recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
-            arrays = _mesh_arrays(store, assets[aid].mesh_path)
-            if len(arrays) != len(recs):
-                raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
-            out[aid] = AssetGeometry(
-                asset_id=aid,
-                parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
-                            for r, (v, f) in zip(recs, arrays)),
-                part_closed=tuple(r.watertight for r in recs),
-            )
+            recs = tuple(sorted(parts.get(aid, []), key=lambda r: r.part_index))
+
+            def asset_geometry(arrays, aid=aid, recs=recs) -> AssetGeometry:
+                if len(arrays) != len(recs):
+                    raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
+                return AssetGeometry(
+                    asset_id=aid,
+                    parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
+                                for r, (v, f) in zip(recs, arrays)),
+                    part_closed=tuple(r.watertight for r in recs),
+                )
+
+            out[aid] = _mesh_geometry(store, assets[aid].mesh_path, (aid, recs), asset_geometry)
         elif aid in stuff:
             pl = stuff[aid]
-            arrays = _mesh_arrays(store, pl.mesh_path)
-            out[aid] = AssetGeometry(
-                asset_id=aid,
-                parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
-                part_closed=tuple(is_watertight(f) for _, f in arrays),
-            )
+
+            def stuff_geometry(arrays, aid=aid, pl=pl) -> AssetGeometry:
+                return AssetGeometry(
+                    asset_id=aid,
+                    parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
+                    part_closed=tuple(is_watertight(f) for _, f in arrays),
+                )
+
+            out[aid] = _mesh_geometry(store, pl.mesh_path, (aid, pl.name, pl.semantic_id), stuff_geometry)
         else:
             raise StoreError(f"asset {aid} is referenced by the scene but is neither in admesh/assets "
                              f"nor a town mesh")
@@ -268,22 +270,22 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
 
 # -- voxelize -------------------------------------------------------------------------------------
 _RIG_CACHE: OrderedDict[tuple[str, str], object] = OrderedDict()
+_INDEX_CACHE: OrderedDict[tuple[str, str, str | None], object] = OrderedDict()
 
 
 def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
     """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
-    (rigs cached per worker by asset and geometry)."""
+    (rigs cached per worker by asset id and geometry content)."""
+    from stages.geometry import geometry_hash
     from stages.scenes.pedestrians import rig_pedestrian
+
+    keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key, hashed once per frame
 
     def posed(asset_id: str, phase_index: int) -> AssetGeometry:
         geom = geometry[asset_id]
-        digest = hashlib.sha256(b"".join(p.vertices.tobytes() + p.faces.tobytes() for p in geom.parts)).hexdigest()
-        key = (asset_id, digest)
-        rig = _RIG_CACHE.get(key)
-        if rig is None:
-            rig = _RIG_CACHE[key] = rig_pedestrian(geom)
-            if len(_RIG_CACHE) > 256:
-                _RIG_CACHE.popitem(last=False)
+        if asset_id not in keys:
+            keys[asset_id] = (asset_id, geometry_hash([(p.vertices, p.faces) for p in geom.parts]))
+        rig = _cached(_RIG_CACHE, keys[asset_id], lambda: rig_pedestrian(geom), 256)
         return rig.posed(phase_index)
 
     return posed
@@ -313,12 +315,16 @@ def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
     if not frames:
         raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
     actors = _frame_rows(store, ActorStateRecord, seq_id, frame_index)
-    placements = ParquetTable(store, PlacementRecord).load([f"town={sequence.town}"])
-    index = PlacementIndex(placements)
+    # the town's placement index, kept per worker while the placements file is unchanged (its
+    # per-asset preparation of big stuff meshes is then reused across frames)
+    t_place = ParquetTable(store, PlacementRecord)
+    key = f"town={sequence.town}"
+    index = _cached(_INDEX_CACHE, (store.url, key, store.fingerprint(t_place.path(key))),
+                    lambda: PlacementIndex(t_place.load([key])), 8)
     # geometry of the placements whose world AABB meets the frame's region, and of the actors
     selected = index.select(*frame_region(frames[0], *region))
     needed = {index.placements[i].asset_id for i in selected} | {a.asset_id for a in actors}
-    geometry = load_geometry(store, needed, placements)
+    geometry = load_geometry(store, needed, index.placements)
     return assemble_frame(frames[0], actors, index, geometry, region,
                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
 
