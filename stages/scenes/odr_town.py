@@ -76,7 +76,7 @@ from schemas.records import AssetRecord
 from stages.geometry import concatenate
 from stages.scenes import opendrive as od
 from stages.scenes.network import URBAN_SPEED_LIMIT, Lane, RoadNetwork, Town, Walkway
-from stages.scenes.placing import POLE_RADIUS, AssetPools, Placer, stuff_geometry
+from stages.scenes.placing import POLE_RADIUS, AssetPools, Placer, rot2, stuff_geometry
 
 __all__ = ["build_opendrive_town", "build_opendrive_town_with_stats", "build_opendrive_network",
            "SURFACE_MESHES", "SIGN_SUBCLASSES"]  # fmt: skip
@@ -290,17 +290,8 @@ def _junction_fill(odr, raster_lo, raster_hi) -> list[tuple[np.ndarray, np.ndarr
         ii, jj = np.nonzero(holes)
         if not len(ii):
             continue
-        z = float(np.mean(P[:, 2]))
         x0, y0 = r.x0 + ii * CELL, r.y0 + jj * CELL
-        n = len(ii)
-        V = np.empty((4 * n, 3))
-        V[0::4] = np.column_stack([x0, y0, np.full(n, z)])
-        V[1::4] = np.column_stack([x0 + CELL, y0, np.full(n, z)])
-        V[2::4] = np.column_stack([x0 + CELL, y0 + CELL, np.full(n, z)])
-        V[3::4] = np.column_stack([x0, y0 + CELL, np.full(n, z)])
-        b = 4 * np.arange(n)
-        F = np.concatenate([np.stack([b, b + 1, b + 2], 1), np.stack([b, b + 2, b + 3], 1)])
-        out.append((V, F.astype(np.int64)))
+        out.append(_flat_quads(x0, x0 + CELL, y0, y0 + CELL, float(np.mean(P[:, 2]))))
     return out
 
 
@@ -318,15 +309,34 @@ def _road_marks(odr) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def _terrain(raster: _Raster) -> tuple[np.ndarray, np.ndarray]:
-    """Flat quads over the cells no surface covers, at the nearest surface's height."""
+def _nearest_surface(raster: _Raster) -> tuple[np.ndarray, np.ndarray]:
+    """Per raster cell: the distance (m) to the nearest surface cell and that cell's top height
+    in whole steps of :data:`TERRAIN_DZ` (0 when there is no surface)."""
+    dist, (ni, nj) = ndimage.distance_transform_edt(~raster.surf, sampling=CELL, return_indices=True)
+    if not raster.surf.any():
+        return dist, np.zeros(dist.shape, np.int64)
+    return dist, np.round(raster.top[ni, nj] / TERRAIN_DZ).astype(np.int64)
+
+
+def _flat_quads(x0: np.ndarray, x1: np.ndarray, y0: np.ndarray, y1: np.ndarray, z) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal rectangles ``[x0, x1] x [y0, y1]`` at heights ``z`` (m), two triangles each,
+    facing up. Returns (vertices (4n, 3), faces (2n, 3))."""
+    n = len(x0)
+    z = np.broadcast_to(np.asarray(z, dtype=np.float64), (n,))
+    V = np.empty((4 * n, 3))
+    V[0::4] = np.column_stack([x0, y0, z])
+    V[1::4] = np.column_stack([x1, y0, z])
+    V[2::4] = np.column_stack([x1, y1, z])
+    V[3::4] = np.column_stack([x0, y1, z])
+    b = 4 * np.arange(n)
+    F = np.concatenate([np.stack([b, b + 1, b + 2], 1), np.stack([b, b + 2, b + 3], 1)]).astype(np.int64)
+    return V, F
+
+
+def _terrain(raster: _Raster, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat quads over the cells no surface covers, at the nearest surface's height ``q`` (in
+    steps of :data:`TERRAIN_DZ`, from :func:`_nearest_surface`)."""
     free = ~raster.surf
-    if raster.surf.any():
-        _, (ni, nj) = ndimage.distance_transform_edt(free, return_indices=True)
-        z = raster.top[ni, nj]
-    else:
-        z = np.zeros(free.shape)
-    q = np.round(z / TERRAIN_DZ).astype(np.int64)
     rects = []  # (i0, i1, j0, j1, q)
     open_runs: dict[tuple[int, int, int], list] = {}
     for j in range(raster.ny):
@@ -360,16 +370,7 @@ def _terrain(raster: _Raster) -> tuple[np.ndarray, np.ndarray]:
     R = np.array(rects, dtype=np.float64)
     x0, x1 = raster.x0 + R[:, 0] * CELL, raster.x0 + R[:, 1] * CELL
     y0, y1 = raster.y0 + R[:, 2] * CELL, raster.y0 + R[:, 3] * CELL
-    z = R[:, 4] * TERRAIN_DZ
-    n = len(R)
-    V = np.empty((4 * n, 3))
-    V[0::4] = np.column_stack([x0, y0, z])
-    V[1::4] = np.column_stack([x1, y0, z])
-    V[2::4] = np.column_stack([x1, y1, z])
-    V[3::4] = np.column_stack([x0, y1, z])
-    b = 4 * np.arange(n)
-    F = np.concatenate([np.stack([b, b + 1, b + 2], 1), np.stack([b, b + 2, b + 3], 1)]).astype(np.int64)
-    return V, F
+    return _flat_quads(x0, x1, y0, y1, R[:, 4] * TERRAIN_DZ)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -509,8 +510,7 @@ def _walkways(odr, curb: float, jids: dict[str, int]) -> tuple[list[Walkway], di
     side_info: dict[tuple[str, str], list] = {}  # (road, "start"/"end") -> [(lane id, t_centre, sidewalk t ranges)]
     for road in odr.roads:
         rid = str(road.id)
-        secs = list(od._section_ranges(road))
-        last = secs[-1][0] if secs else 0
+        last = max(len(road.lane_sections) - 1, 0)
         for i, s, ref, strips in _road_sections(road, LANE_STEP):
             for st in strips:
                 if od.surface_kind(st.lane_type) != "sidewalk":
@@ -620,8 +620,7 @@ def _place_signals(odr, placer: Placer, pools: AssetPools, raster: _Raster, bloc
             yaw = face + off
             ext = asset.extent
             anchor = np.array([-ext[0] / 2 + POLE_RADIUS, 0.0])
-            c, sn = math.cos(yaw), math.sin(yaw)
-            centre = p[:2] - np.array([c * anchor[0] - sn * anchor[1], sn * anchor[0] + c * anchor[1]])
+            centre = p[:2] - rot2(yaw, anchor)
             cells = raster.rect_cells(centre, yaw, ext[0], ext[1])
             if cells is None or raster.drive[cells].any():
                 stats["signals_on_driving"] += 1
@@ -638,7 +637,7 @@ def _place_signals(odr, placer: Placer, pools: AssetPools, raster: _Raster, bloc
             stats["signals_placed"] += 1
 
 
-def _ground_z(raster: _Raster, terrain_z: np.ndarray, cells) -> float:
+def _ground_z(terrain_z: np.ndarray, cells) -> float:
     return float(terrain_z[cells].min())
 
 
@@ -680,7 +679,7 @@ def _place_buildings(odr, placer, pools, raster, blocked, terrain_z, rng, stats)
                     cells = raster.rect_cells(centre, yaw, depth, front)
                     if cells is None or blocked[cells].any():
                         continue
-                    placer.add_asset("building", asset, centre, _ground_z(raster, terrain_z, cells), yaw)
+                    placer.add_asset("building", asset, centre, _ground_z(terrain_z, cells), yaw)
                     grown = raster.rect_cells(centre, yaw, depth + 2 * gap * CELL, front + 2 * gap * CELL)
                     blocked[grown if grown is not None else cells] = True
                     stats["buildings"] += 1
@@ -710,7 +709,7 @@ def _place_vegetation(placer, pools, raster, blocked, terrain_z, dist, rng, stat
         cells = raster.rect_cells(centre, yaw, float(asset.extent[0]), float(asset.extent[1]))
         if cells is None or blocked[cells].any():
             continue
-        placer.add_asset(asset.subclass, asset, centre, _ground_z(raster, terrain_z, cells), yaw)
+        placer.add_asset(asset.subclass, asset, centre, _ground_z(terrain_z, cells), yaw)
         grown = raster.rect_cells(centre, yaw, float(asset.extent[0]) + 2 * gap, float(asset.extent[1]) + 2 * gap)
         blocked[grown if grown is not None else cells] = True
         stats["vegetation"] += 1
@@ -748,7 +747,8 @@ def build_opendrive_town_with_stats(odr, spec: TownSpec, scenes: ScenesConfig, i
         for V, _F in fill:
             centres = V.reshape(-1, 4, 3).mean(axis=1)
             raster.mark(centres, True)
-    terrain = _terrain(raster)
+    dist, terrain_q = _nearest_surface(raster)
+    terrain = _terrain(raster, terrain_q)
     stats["terrain_quads"] = len(terrain[1]) // 2
     sem_of = {v[0]: (v[1], v[2]) for v in SURFACE_MESHES.values()}
     stuff = {}
@@ -766,8 +766,7 @@ def build_opendrive_town_with_stats(odr, spec: TownSpec, scenes: ScenesConfig, i
         placer.add_stuff(geom)
 
     # 2. things beside the network
-    dist, (ni, nj) = ndimage.distance_transform_edt(~raster.surf, sampling=CELL, return_indices=True)
-    terrain_z = np.round(raster.top[ni, nj] / TERRAIN_DZ) * TERRAIN_DZ if raster.surf.any() else np.zeros_like(dist)
+    terrain_z = terrain_q * TERRAIN_DZ
     blocked = dist <= CLEARANCE
     _place_signals(odr, placer, pools, raster, blocked, rng, stats)
     _place_buildings(odr, placer, pools, raster, blocked, terrain_z, rng, stats)

@@ -17,7 +17,7 @@ from schemas.records import AssetRecord, PlacementRecord
 from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight, pose_matrix, pose_to_list
 
 __all__ = [
-    "SURFACE", "STUFF_TILE", "POLE_RADIUS", "slab", "slabs", "stuff_geometry", "rot2", "yaw_of", "Placer",
+    "SURFACE", "STUFF_TILE", "POLE_RADIUS", "grid_slab", "slab", "slabs", "stuff_geometry", "rot2", "yaw_of", "Placer",
     "AssetPools", "box_corners_aabb",
 ]  # fmt: skip
 
@@ -27,18 +27,20 @@ POLE_RADIUS = 0.09  # m: pole radius assumed when placing pole-like assets by th
 THINGS = frozenset(taxonomy.thing_ids())
 
 
-def slab(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, tile: float = STUFF_TILE):
-    """Closed axis-aligned slab ``[x0, x1] x [y0, y1] x [z0, z1]`` (m) whose top and bottom are
-    grids of tiles of at most ``tile`` m and whose sides match the grid edges (watertight,
-    outward normals). Returns (vertices (N, 3), faces (M, 3))."""
-    nx, ny = max(1, math.ceil((x1 - x0) / tile - 1e-9)), max(1, math.ceil((y1 - y0) / tile - 1e-9))
-    xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")  # grid vertex (i, j) -> index i * (ny + 1) + j
-    n = (nx + 1) * (ny + 1)
-    top = np.column_stack([gx.ravel(), gy.ravel(), np.full(n, z1)])
-    bottom = top.copy()
-    bottom[:, 2] = z0
-    idx = np.arange(n).reshape(nx + 1, ny + 1)
+def grid_slab(G: np.ndarray, z0: float, z1: float):
+    """Closed slab ``[z0, z1]`` (m) over the quad grid ``G`` (nx + 1, ny + 1, 2) of xy points,
+    in any orientation: top and bottom are the grid's quads, the sides follow its boundary
+    (watertight, outward normals). Returns (vertices (N, 3), faces (M, 3))."""
+    # orient the grid counter-clockwise seen from above
+    e0, e1 = G[1, 0] - G[0, 0], G[0, 1] - G[0, 0]
+    if e0[0] * e1[1] - e0[1] * e1[0] < 0:
+        G = G[:, ::-1]
+    nx1, ny1 = G.shape[:2]
+    n = nx1 * ny1  # grid vertex (i, j) -> index i * ny1 + j
+    flat = G.reshape(n, 2)
+    top = np.column_stack([flat, np.full(n, z1)])
+    bottom = np.column_stack([flat, np.full(n, z0)])
+    idx = np.arange(n).reshape(nx1, ny1)
     # cell corners counter-clockwise seen from above: a (i, j), b (i+1, j), c (i+1, j+1), d (i, j+1)
     a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
     c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
@@ -49,6 +51,14 @@ def slab(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, tile:
     p, q = ring, np.roll(ring, -1)
     faces += [np.column_stack([p + n, q + n, q]), np.column_stack([p + n, q, p])]
     return np.vstack([top, bottom]), np.concatenate(faces).astype(np.int64)
+
+
+def slab(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, tile: float = STUFF_TILE):
+    """Closed axis-aligned slab ``[x0, x1] x [y0, y1] x [z0, z1]`` (m) whose top and bottom are
+    grids of tiles of at most ``tile`` m (see :func:`grid_slab`)."""
+    nx, ny = max(1, math.ceil((x1 - x0) / tile - 1e-9)), max(1, math.ceil((y1 - y0) / tile - 1e-9))
+    gx, gy = np.meshgrid(np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1), indexing="ij")
+    return grid_slab(np.stack([gx, gy], axis=-1), z0, z1)
 
 
 def slabs(rects, z0: float, z1: float):

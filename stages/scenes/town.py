@@ -54,6 +54,7 @@ from stages.scenes.placing import (
     SURFACE,
     AssetPools,
     Placer,
+    grid_slab,
     rot2,
     slab,
     slabs,
@@ -184,34 +185,12 @@ def _at(P: np.ndarray, cum: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarra
     return P[i] + d * ((s - cum[i]) / L), d / L
 
 
-def _grid_slab(G: np.ndarray, z0: float, z1: float):
-    """Closed slab ``[z0, z1]`` over the quad grid ``G`` (nx + 1, ny + 1, 2) of xy points, any
-    orientation; the same topology as :func:`stages.scenes.placing.slab` (watertight)."""
-    e0, e1 = G[1, 0] - G[0, 0], G[0, 1] - G[0, 0]
-    if e0[0] * e1[1] - e0[1] * e1[0] < 0:
-        G = G[:, ::-1]
-    nx1, ny1 = G.shape[:2]
-    n = nx1 * ny1
-    flat = G.reshape(n, 2)
-    top = np.column_stack([flat, np.full(n, z1)])
-    bottom = np.column_stack([flat, np.full(n, z0)])
-    idx = np.arange(n).reshape(nx1, ny1)
-    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
-    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    faces = [np.column_stack([a, b, c]), np.column_stack([a, c, d])]
-    faces += [np.column_stack([a, c, b]) + n, np.column_stack([a, d, c]) + n]
-    ring = np.concatenate([idx[:-1, 0], idx[-1, :-1], idx[:0:-1, -1], idx[0, :0:-1]])
-    p, q = ring, np.roll(ring, -1)
-    faces += [np.column_stack([p + n, q + n, q]), np.column_stack([p + n, q, p])]
-    return np.vstack([top, bottom]), np.concatenate(faces).astype(np.int64)
-
-
 def _ribbon(P: np.ndarray, o0: float, o1: float, z0: float, z1: float):
     """Closed slab over the band between left offsets ``o0 < o1`` of polyline ``P``."""
     P = _densify(P, STUFF_TILE)
     N = _tangents(P)[1]
     offs = np.linspace(o0, o1, max(1, math.ceil((o1 - o0) / STUFF_TILE - 1e-9)) + 1)
-    return _grid_slab(P[:, None, :] + N[:, None, :] * offs[None, :, None], z0, z1)
+    return grid_slab(P[:, None, :] + N[:, None, :] * offs[None, :, None], z0, z1)
 
 
 def _strip(x: np.ndarray, yb: np.ndarray, yt: np.ndarray, z0: float, z1: float):
@@ -219,7 +198,7 @@ def _strip(x: np.ndarray, yb: np.ndarray, yt: np.ndarray, z0: float, z1: float):
     m = max(1, math.ceil(float(np.max(yt - yb)) / STUFF_TILE - 1e-9))
     t = np.linspace(0.0, 1.0, m + 1)[None, :]
     G = np.stack([np.repeat(x[:, None], m + 1, axis=1), yb[:, None] + (yt - yb)[:, None] * t], axis=-1)
-    return _grid_slab(G, z0, z1)
+    return grid_slab(G, z0, z1)
 
 
 def _rect(cx: float, cy: float, u, a0: float, a1: float, b0: float, b1: float):
