@@ -28,11 +28,21 @@ class MeshPartLike(typing.Protocol):
 _Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
 
+def to_gltf_axes(vertices: np.ndarray) -> np.ndarray:
+    """Our Z-up points (N, 3) in glTF's Y-up axes (x, z, -y)."""
+    return np.asarray(vertices, dtype=np.float64) @ _Z_UP_TO_Y_UP.T
+
+
+def from_gltf_axes(vertices: np.ndarray) -> np.ndarray:
+    """glTF Y-up points (N, 3) back in our Z-up axes (the inverse rotation)."""
+    return np.asarray(vertices, dtype=np.float64) @ _Z_UP_TO_Y_UP
+
+
 def glb_bytes(parts: typing.Sequence[MeshPartLike]) -> bytes:
     """Serialize parts into one GLB (geometry names ``p000``, ``p001``... keep the part order)."""
     scene = trimesh.Scene()
     for i, part in enumerate(parts):
-        mesh = trimesh.Trimesh(vertices=part.vertices @ _Z_UP_TO_Y_UP.T, faces=part.faces,
+        mesh = trimesh.Trimesh(vertices=to_gltf_axes(part.vertices), faces=part.faces,
                                process=False)
         mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=np.tile(part.color, (len(part.faces), 1)))
         # names carry only the order: part names live in the parts table, so identical geometry
@@ -47,7 +57,7 @@ def load_glb_arrays(data: bytes) -> list[tuple[np.ndarray, np.ndarray]]:
     out = []
     for name in sorted(scene.geometry):
         g = scene.geometry[name]
-        v = np.asarray(g.vertices, dtype=np.float64) @ _Z_UP_TO_Y_UP  # inverse of an orthonormal map
+        v = from_gltf_axes(g.vertices)
         out.append((v, np.asarray(g.faces, dtype=np.int64)))
     return out
 

@@ -34,7 +34,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from catalog.meshes import _Z_UP_TO_Y_UP
+from catalog.meshes import from_gltf_axes, to_gltf_axes
 from schemas import taxonomy
 
 __all__ = ["FORMAT", "TRANSPARENT_ALPHA", "load_panoptic_glb", "panoptic_glb_bytes"]
@@ -141,7 +141,7 @@ def panoptic_glb_bytes(
     ``transparent`` bool) into GLB bytes; see the module docstring for the layout. ``palette``
     overrides taxonomy colours per class id. Deterministic: equal inputs give equal bytes."""
     V, F, sem, inst, transp = _check(vertices, faces, semantic, instance, transparent)
-    Vy = (V @ _Z_UP_TO_Y_UP.T).astype(np.float32)
+    Vy = to_gltf_axes(V).astype(np.float32)
     buf = _Buffer()
     materials: list[dict] = []
     material_of: dict[tuple[int, bool], int] = {}
@@ -261,7 +261,7 @@ def load_panoptic_glb(data: bytes) -> Arrays:
             if prim.get("mode", _TRIANGLES) != _TRIANGLES:
                 raise ValueError(f"mesh {mesh.get('name', node['mesh'])!r}: only triangle primitives are supported")
             attrs = prim["attributes"]
-            V = _read(gltf, blob, attrs["POSITION"]).astype(np.float64) @ _Z_UP_TO_Y_UP  # inverse rotation
+            V = from_gltf_axes(_read(gltf, blob, attrs["POSITION"]))
             idx = _read(gltf, blob, prim["indices"]) if "indices" in prim else np.arange(len(V))
             F = idx.astype(np.int64).reshape(-1, 3)
             extras = prim.get("extras") or mesh.get("extras") or node.get("extras") or {}

@@ -205,15 +205,23 @@ class _Prepared:
 _BIG_STUFF = 4096  # stuff parts with at least this many triangles are pre-culled in the asset frame
 
 
-def _prepared(index: PlacementIndex | None, key: object, geom: AssetGeometry) -> _Prepared:
-    """The preparation of ``geom``, cached in ``index`` under ``key`` (an asset id, or an
+def _prepared(cache: dict[object, _Prepared], key: object, geom: AssetGeometry) -> _Prepared:
+    """The preparation of ``geom``, cached in ``cache`` under ``key`` (an asset id, or an
     ``(asset id, phase)`` pair) while the same geometry object is passed for it."""
-    if index is None:
-        return _Prepared(geom)
-    hit = index._prepared.get(key)
+    hit = cache.get(key)
     if hit is None or hit.geom is not geom:
-        hit = index._prepared[key] = _Prepared(geom)
+        hit = cache[key] = _Prepared(geom)
     return hit
+
+
+def _placement_geometry(p: PlacementRecord, geometry: Mapping[str, AssetGeometry]) -> AssetGeometry:
+    """The geometry of placement ``p``'s asset; ``ValueError`` naming the placement when missing."""
+    try:
+        return geometry[p.asset_id]
+    except KeyError:
+        raise ValueError(
+            f"placement {p.placement_id} ({p.name!r}) uses asset {p.asset_id!r}, which has no geometry"
+        ) from None
 
 
 def _emit(
@@ -339,13 +347,7 @@ def assemble_frame(
     # 1. static placements meeting the frame's world region, by placement id
     for i in index.select(*frame_region(frame, lo, hi)):
         p = index.placements[int(i)]
-        try:
-            geom = geometry[p.asset_id]
-        except KeyError:
-            raise ValueError(
-                f"placement {p.placement_id} ({p.name!r}) uses asset {p.asset_id!r}, which has no geometry"
-            ) from None
-        prep = _prepared(index, p.asset_id, geom)
+        prep = _prepared(index._prepared, p.asset_id, _placement_geometry(p, geometry))
         out.extend(_emit(prep, world_to_lidar @ pose_from_list(p.pose), p.instance_id, p.name, box))
     # 2. this frame's actors (never the ego), by instance id
     mine = [a for a in actors if a.sequence_id == frame.sequence_id and a.frame_index == frame.frame_index]
@@ -353,7 +355,7 @@ def assemble_frame(
         if _is_ego(a, ego_pose, ego_asset_id):
             continue
         key, geom = _actor_geometry(a, geometry, pedestrian_geometry)
-        out.extend(_emit(_prepared(index, key, geom), world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
+        out.extend(_emit(_prepared(index._prepared, key, geom), world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
     return out
 
 
@@ -427,15 +429,8 @@ def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, Asse
     by its pose, every part whole, stuff with instance 0 and things with the placement's
     instance id. Raises ``ValueError`` naming a placement whose asset has no geometry."""
     scene: list[SceneMesh] = []
-    prepared: dict[str, _Prepared] = {}
+    prepared: dict[object, _Prepared] = {}
     for p in sorted(placements, key=lambda p: p.placement_id):
-        try:
-            geom = geometry[p.asset_id]
-        except KeyError:
-            raise ValueError(
-                f"placement {p.placement_id} ({p.name!r}) uses asset {p.asset_id!r}, which has no geometry"
-            ) from None
-        if p.asset_id not in prepared or prepared[p.asset_id].geom is not geom:
-            prepared[p.asset_id] = _Prepared(geom)
-        scene.extend(_emit(prepared[p.asset_id], pose_from_list(p.pose), p.instance_id, p.name, None))
+        prep = _prepared(prepared, p.asset_id, _placement_geometry(p, geometry))
+        scene.extend(_emit(prep, pose_from_list(p.pose), p.instance_id, p.name, None))
     return flatten(scene)
