@@ -183,18 +183,8 @@ def frame_features(p: np.ndarray, forward: np.ndarray, leg: float | None = None)
     p = np.asarray(p, dtype=np.float64)
     fwd = np.broadcast_to(np.asarray(forward, dtype=np.float64), (p.shape[0], 3))
     leg = leg_length(p) if leg is None else leg
-
-    def sagittal(v: np.ndarray) -> np.ndarray:  # angle from straight down, + forward
-        return np.arctan2(np.einsum("fi,fi->f", v, fwd), -v[:, 2])
-
-    out = np.empty((p.shape[0], 5))
-    out[:, 0] = np.einsum("fi,fi->f", p[:, _LA] - p[:, _RA], fwd) / leg
-    for k, (h, kn, a) in enumerate(((_LH, _LK, _LA), (_RH, _RK, _RA))):
-        thigh = sagittal(p[:, kn] - p[:, h])
-        shin = sagittal(p[:, a] - p[:, kn])
-        out[:, 1 + k] = thigh
-        out[:, 3 + k] = thigh - shin
-    return out
+    # each frame as a window of one frame
+    return window_frame_features(p[:, None], fwd, np.full(p.shape[0], leg, dtype=np.float64))[:, 0]
 
 
 # --------------------------------------------------------------------------- window descriptor
@@ -284,12 +274,12 @@ def window_descriptors(
 def window_frame_features(w: np.ndarray, fwd: np.ndarray, leg: np.ndarray) -> np.ndarray:
     """(N, n, 5) gait.FEATURE_NAMES of windows (N, n, 7, 3), headings (N, 3), leg lengths (N,)."""
 
-    def sagittal(v: np.ndarray) -> np.ndarray:
+    def sagittal(v: np.ndarray) -> np.ndarray:  # angle from straight down, + forward
         return np.arctan2(np.einsum("nfi,ni->nf", v, fwd), -v[..., 2])
 
     out = np.empty(w.shape[:2] + (5,))
-    out[..., 0] = np.einsum("nfi,ni->nf", w[:, :, 3] - w[:, :, 6], fwd) / leg[:, None]
-    for k, (h, kn, a) in enumerate(((1, 2, 3), (4, 5, 6))):
+    out[..., 0] = np.einsum("nfi,ni->nf", w[:, :, _LA] - w[:, :, _RA], fwd) / leg[:, None]
+    for k, (h, kn, a) in enumerate(((_LH, _LK, _LA), (_RH, _RK, _RA))):
         thigh = sagittal(w[:, :, kn] - w[:, :, h])
         out[..., 1 + k] = thigh
         out[..., 3 + k] = thigh - sagittal(w[:, :, a] - w[:, :, kn])
