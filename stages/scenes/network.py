@@ -148,10 +148,11 @@ class Town:
 
 
 def check_network(net: RoadNetwork) -> None:
-    """Raise ``ValueError`` naming the first broken invariant of ``net``: ids equal to positions,
-    successor / neighbour / walk-node references valid, lanes at least 0.5 m long with finite
-    points, neighbours running the same way, at least one lane, and every lane with a way on
-    (a successor) unless the network has none at all."""
+    """Raise ``ValueError`` naming the first broken invariant of ``net``: at least one lane, ids
+    equal to positions, successor and neighbour references valid, lanes at least 0.5 m long with
+    finite points and a positive width, neighbours running the same way, walkways with finite
+    points and non-negative node ids, and a positive road length. (Dead ends are the builders'
+    business: they keep the strongly connected part of their lane graph.)"""
     if not net.lanes:
         raise ValueError("the road network has no lanes")
     n = len(net.lanes)

@@ -84,6 +84,7 @@ __all__ = ["build_opendrive_town", "build_opendrive_town_with_stats", "build_ope
 CELL = 0.5  # m: footprint raster cell
 SURF_STEP = 0.5  # m: surface sampling along s
 LANE_STEP = 1.0  # m: lane / walkway centre-line sampling along s
+SECTION_MIN = 1e-6  # m: shorter lane sections are skipped
 CLEARANCE = 1.5  # m: buildings and plants keep this far from every surface
 OBJECT_GAP = 1.0  # m: between placed buildings / plants
 NEAR = 40.0  # m: vegetation within this distance of a surface
@@ -125,15 +126,6 @@ TRAFFIC_LIGHT_TYPE = "1000001"
 
 # ---------------------------------------------------------------------------------------------
 # per-lane strips
-
-
-def _road_sections(road, step: float):
-    """Per lane section with positive length: (index, sample s, reference pose, strips)."""
-    for i, sec, s0, s1 in od._section_ranges(road):
-        if s1 - s0 < 1e-6:
-            continue
-        s = od._section_samples(road, s0, s1, step)
-        yield i, s, od.reference_pose(road, s), od._section_strips(road, i, sec, s)
 
 
 def _junction_ids(odr) -> dict[str, int]:
@@ -239,7 +231,7 @@ def _surfaces(odr, curb: float):
     samples: list[tuple[np.ndarray, bool]] = []
     for road in odr.roads:
         in_junction = str(road.junction) != "-1"
-        for _i, s, ref, strips in _road_sections(road, SURF_STEP):
+        for _i, s, ref, strips in od.section_strips(road, SURF_STEP, SECTION_MIN):
             raised_ids = set()
             for st in strips:
                 if od.surface_kind(st.lane_type) in _RAISED:
@@ -252,7 +244,7 @@ def _surfaces(odr, curb: float):
                 raised = kind in _RAISED
                 if raised:
                     p_in, p_out = p_in + [0, 0, curb], p_out + [0, 0, curb]
-                mesh = od._strip_mesh(p_in, p_out)
+                mesh = od.strip_mesh(p_in, p_out)
                 if len(mesh[1]):
                     name = SURFACE_MESHES["junction" if kind == "driving" and in_junction else kind][0]
                     meshes.setdefault(name, []).append(mesh)
@@ -274,7 +266,7 @@ def _junction_fill(odr, raster_lo, raster_hi) -> list[tuple[np.ndarray, np.ndarr
     for _jid, roads in sorted(by_junction.items()):
         pts = []
         for road in roads:
-            for _i, s, ref, strips in _road_sections(road, SURF_STEP):
+            for _i, s, ref, strips in od.section_strips(road, SURF_STEP, SECTION_MIN):
                 for st in strips:
                     if od.surface_kind(st.lane_type) is None or not np.any(np.abs(st.t_outer - st.t_inner) > 1e-6):
                         continue
@@ -392,7 +384,7 @@ def build_opendrive_network(odr, curb_height: float, source: str = "") -> tuple[
     for road in odr.roads:
         rid = str(road.id)
         nsec[rid] = len(road.lane_sections)
-        for i, s, ref, strips in _road_sections(road, LANE_STEP):
+        for i, s, ref, strips in od.section_strips(road, LANE_STEP, SECTION_MIN):
             for st in strips:
                 if od.surface_kind(st.lane_type) != "driving":
                     continue
@@ -511,7 +503,7 @@ def _walkways(odr, curb: float, jids: dict[str, int]) -> tuple[list[Walkway], di
     for road in odr.roads:
         rid = str(road.id)
         last = max(len(road.lane_sections) - 1, 0)
-        for i, s, ref, strips in _road_sections(road, LANE_STEP):
+        for i, s, ref, strips in od.section_strips(road, LANE_STEP, SECTION_MIN):
             for st in strips:
                 if od.surface_kind(st.lane_type) != "sidewalk":
                     continue

@@ -51,6 +51,8 @@ __all__ = [
     "lane_boundaries",
     "st_to_world",
     "road_surface_meshes",
+    "section_strips",
+    "strip_mesh",
     "road_marks",
     "mesh_area",
 ]
@@ -367,7 +369,17 @@ def _section_samples(road, s0: float, s1: float, step: float) -> np.ndarray:
     return s
 
 
-def _strip_mesh(p_inner: np.ndarray, p_outer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def section_strips(road, step: float, min_length: float = 1e-9):
+    """Per lane section at least ``min_length`` m long: ``(section index, s samples (<= step
+    apart plus every geometry start inside it), reference pose at s, lane strips)``."""
+    for i, sec, s0, s1 in _section_ranges(road):
+        if s1 - s0 < min_length:
+            continue
+        s = _section_samples(road, s0, s1, step)
+        yield i, s, reference_pose(road, s), _section_strips(road, i, sec, s)
+
+
+def strip_mesh(p_inner: np.ndarray, p_outer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Triangle strip between two polylines of n points; degenerate triangles dropped and every
     triangle wound counter-clockwise seen from above (normal z >= 0)."""
     n = len(p_inner)
@@ -404,16 +416,12 @@ def road_surface_meshes(road, step: float = 0.5) -> dict[str, tuple[np.ndarray, 
     if step <= 0:
         raise ValueError("step must be positive")
     parts: dict[str, list] = {}
-    for i, sec, s0, s1 in _section_ranges(road):
-        if s1 - s0 < 1e-9:
-            continue
-        s = _section_samples(road, s0, s1, step)
-        ref = reference_pose(road, s)
-        for strip in _section_strips(road, i, sec, s):
+    for _i, s, ref, strips in section_strips(road, step):
+        for strip in strips:
             kind = surface_kind(strip.lane_type)
             if kind is None or not np.any(np.abs(strip.t_outer - strip.t_inner) > 1e-9):
                 continue
-            mesh = _strip_mesh(st_to_world(road, s, strip.t_inner, ref), st_to_world(road, s, strip.t_outer, ref))
+            mesh = strip_mesh(st_to_world(road, s, strip.t_inner, ref), st_to_world(road, s, strip.t_outer, ref))
             if len(mesh[1]):
                 parts.setdefault(kind, []).append(mesh)
     return {k: _merge(v) for k, v in parts.items()}
@@ -483,7 +491,7 @@ def road_marks(road, step: float = 0.5) -> list[dict]:
                         s = _samples(a, b, step)
                         tb = np.interp(s, s_all, t_border) + t_off
                         ref = reference_pose(road, s)
-                        v, f = _strip_mesh(st_to_world(road, s, tb - width / 2, ref), st_to_world(road, s, tb + width / 2, ref))
+                        v, f = strip_mesh(st_to_world(road, s, tb - width / 2, ref), st_to_world(road, s, tb + width / 2, ref))
                         if len(f):
                             out.append({"lane_id": lane.id, "section": i, "type": mark.type, "color": mark.color,
                                         "vertices": v, "faces": f})  # fmt: skip
