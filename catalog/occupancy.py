@@ -1,28 +1,49 @@
-"""Occupancy volumes in Zarr v3: ``occupancy.zarr/<sequence>/<res>/{semantic,instance}``.
+"""Occupancy volumes in Zarr v3:
+``occupancy.zarr/<sequence>/<res>/{semantic,instance,mask_camera,mask_lidar,flow}``.
 
-Each array is ``(frame, x, y, z)``; a chunk is one frame's ``chunk_edge x chunk_edge x Z`` column
-block, so a task that writes one whole frame writes whole chunks and no two tasks ever touch the
-same chunk. Arrays are created by the driver before any task runs (:meth:`OccupancyStore.create`)
-and carry the grid spec, voxel size, origin, frame and taxonomy version in their attributes.
+Each array is ``(frame, x, y, z)`` (``flow`` has a trailing axis of 3 velocity components); a
+chunk is one frame's ``chunk_edge x chunk_edge x Z`` column block, so a task that writes one whole
+frame writes whole chunks and no two tasks ever touch the same chunk. Arrays are created by the
+driver before any task runs (:meth:`OccupancyStore.create`) and carry the grid spec, voxel size,
+origin, frame and taxonomy version in their attributes.
+
+Writing: :meth:`OccupancyStore.write_tile` encodes whole chunks itself (C-order little-endian
+bytes, zstd: the arrays' declared codec pipeline ``bytes`` + ``zstd``) and stores each as one
+object, skipping zarr-python's per-chunk machinery (measured 2.1 s for one 0.05 m uint8 frame
+through ``arr[frame] = data`` against 0.3 s here). All-zero chunks are not stored (and removed
+when a re-run makes them empty), as zarr does with ``write_empty_chunks=False``; edge chunks are
+padded to the full chunk shape with the fill value, as the regular chunk grid requires. Reads go
+through zarr-python, and the tests read every written array back through it.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import tempfile
 
 import numpy as np
 import zarr
+from numcodecs import Zstd
+from zarr.codecs import ZstdCodec
 from zarr.storage import FsspecStore, LocalStore
 
 from catalog.store import OCCUPANCY_ZARR, Store
 from schemas.grid import GridSpec
 from schemas.taxonomy import TAXONOMY_VERSION
 
-# array name -> dtype, description
-OCCUPANCY_ARRAYS: dict[str, tuple[str, str]] = {
-    "semantic": ("uint8", "semantic class id per voxel (0 = free), CarlaOcc 30-class taxonomy"),
-    "instance": ("uint32", "instance id per voxel, unique within the sequence (0 = stuff or free)"),
+# array name -> dtype, description, trailing axes (beyond frame, x, y, z)
+OCCUPANCY_ARRAYS: dict[str, tuple[str, str, tuple[int, ...]]] = {
+    "semantic": ("uint8", "semantic class id per voxel (0 = free), CarlaOcc 30-class taxonomy", ()),
+    "instance": ("uint32", "instance id per voxel, unique within the sequence (0 = stuff or free)", ()),
+    "mask_camera": ("uint8", "1 = observed by a camera of the rig: a pixel ray crosses or ends in the voxel "
+                             "before the first occupied voxel (Occ3D semantics)", ()),
+    "mask_lidar": ("uint8", "1 = observed by the LiDAR: a beam of the rig crosses or ends in the voxel before "
+                            "the first occupied voxel (Occ3D semantics)", ()),
+    "flow": ("float16", "velocity of the voxel's material point, m/s, world motion expressed in the LiDAR "
+                        "frame's axes (x, y, z); 0 for free, stuff and static voxels", (3,)),
 }
+ZSTD_LEVEL = 1
 
 
 def parse_output_key(key: str) -> tuple[str, int] | None:
@@ -58,18 +79,22 @@ class OccupancyStore:
         return f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}[{frame}]"
 
     def create(self, sequence_id: str, grid: GridSpec, frame_count: int, chunk_edge: int,
-               extra_attrs: dict | None = None) -> bool:
+               extra_attrs: dict | None = None, names: tuple[str, ...] | None = None) -> bool:
         """Create (or keep, when identical) the arrays of one sequence at one resolution.
 
         An existing array with the same shape, dtype, chunks and attributes is kept with its
         data; one that differs (another region, frame count, taxonomy...) is replaced, and then
         every frame of it must be written again: returns True when an existing array was replaced.
+        ``names`` (default: all of :data:`OCCUPANCY_ARRAYS`) selects the arrays; arrays left out
+        that exist from an earlier configuration are deleted, so nothing stale stays readable.
         """
+        names = tuple(OCCUPANCY_ARRAYS) if names is None else tuple(names)
+        unknown = set(names) - set(OCCUPANCY_ARRAYS)
+        if unknown:
+            raise ValueError(f"unknown occupancy arrays {sorted(unknown)}; known: {', '.join(OCCUPANCY_ARRAYS)}")
         replaced = False
         root = self._root("a")
         X, Y, Z = grid.shape
-        shape = (frame_count, X, Y, Z)
-        chunks = (1, min(chunk_edge, X), min(chunk_edge, Y), Z)
         attrs = {
             **grid.attrs(),
             "dims": ["frame", "x", "y", "z"],
@@ -77,9 +102,17 @@ class OccupancyStore:
             "taxonomy_version": TAXONOMY_VERSION,
             **(extra_attrs or {}),
         }
-        for name, (dtype, description) in OCCUPANCY_ARRAYS.items():
+        for name, (dtype, description, trailing) in OCCUPANCY_ARRAYS.items():
             path = self.array_path(sequence_id, grid, name)
+            if name not in names:
+                if path in root:
+                    del root[path]
+                continue
+            shape = (frame_count, X, Y, Z, *trailing)
+            chunks = (1, min(chunk_edge, X), min(chunk_edge, Y), Z, *trailing)
             want = {**attrs, "description": description}
+            if trailing:
+                want["dims"] = [*attrs["dims"], "component"]
             if path in root:
                 arr = root[path]
                 if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
@@ -87,7 +120,7 @@ class OccupancyStore:
                     continue
                 replaced = True
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
-                              overwrite=True, attributes=want)
+                              compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
         return replaced
 
     def exists(self, sequence_id: str, grid: GridSpec, name: str, frame: int | None = None) -> bool:
@@ -105,15 +138,88 @@ class OccupancyStore:
                     arrays: dict[str, np.ndarray]) -> dict[str, str]:
         """Write one frame of each array (whole chunks); returns lineage key -> fingerprint of
         the frame's encoded chunks (see :meth:`frame_fingerprint`)."""
-        out = {}
         for name, data in arrays.items():
-            arr = self.open(sequence_id, grid, name, mode="r+")
-            if data.shape != arr.shape[1:]:
-                raise ValueError(f"{name}: frame shape {data.shape} != array {arr.shape[1:]}")
-            arr[frame] = data.astype(arr.dtype, copy=False)
-            path = self.array_path(sequence_id, grid, name)
-            out[f"{OCCUPANCY_ZARR}/{path}[{frame}]"] = self.frame_fingerprint(path, frame)
-        return out
+            self.write_tile(sequence_id, grid, frame, name, data, 0)
+        return self.fingerprints(sequence_id, grid, frame, tuple(arrays))
+
+    def fingerprints(self, sequence_id: str, grid: GridSpec, frame: int,
+                     names: tuple[str, ...]) -> dict[str, str]:
+        """Lineage key -> fingerprint of one frame of each named array."""
+        return {self.output_key(sequence_id, grid, n, frame):
+                self.frame_fingerprint(self.array_path(sequence_id, grid, n), frame) for n in names}
+
+    def _layout(self, sequence_id: str, grid: GridSpec, name: str) -> tuple[tuple, tuple, np.dtype]:
+        """(shape, chunks, dtype) of an array, read once from its metadata per store object."""
+        cache = self.__dict__.setdefault("_layouts", {})
+        path = self.array_path(sequence_id, grid, name)
+        if path not in cache:
+            arr = self.open(sequence_id, grid, name)
+            cache[path] = (tuple(arr.shape), tuple(arr.chunks), np.dtype(arr.dtype))
+        return cache[path]
+
+    def write_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, data: np.ndarray,
+                   x0: int) -> None:
+        """Write voxels ``[x0, x0 + len(data))`` x all y x all z of one frame of one array.
+
+        The tile must cover whole chunks: ``x0`` on a chunk boundary, and its end on one or at
+        the end of the array. Each chunk is encoded here and stored as one object (see the module
+        docstring); all-zero chunks are removed instead.
+        """
+        shape, chunks, dtype = self._layout(sequence_id, grid, name)
+        if not 0 <= frame < shape[0]:
+            raise ValueError(f"{name}: frame {frame} outside [0, {shape[0]})")
+        nx = data.shape[0]
+        if data.shape[1:] != shape[2:]:
+            raise ValueError(f"{name}: tile shape {data.shape} does not match the array's {shape[1:]} beyond x")
+        cx, cy = chunks[1], chunks[2]
+        if x0 % cx or not (x0 + nx == shape[1] or (x0 + nx) % cx == 0) or x0 + nx > shape[1]:
+            raise ValueError(f"{name}: tile x [{x0}, {x0 + nx}) does not cover whole chunks of {cx}")
+        data = np.asarray(data)
+        base = f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}"
+        codec = Zstd(level=ZSTD_LEVEL)
+        little = dtype.newbyteorder("<")
+        tail = "/0" * (len(shape) - 3)  # z (one chunk) and any trailing axes
+        padded = np.zeros(chunks[1:], dtype=little)
+        for ci in range(x0 // cx, -(-(x0 + nx) // cx)):
+            for cj in range(-(-shape[2] // cy)):
+                block = data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
+                key = f"{base}/c/{frame}/{ci}/{cj}{tail}"
+                if not block.any():
+                    self._remove(key)
+                    continue
+                if block.shape != padded.shape:  # an edge chunk: pad with the fill value
+                    padded[...] = 0
+                    padded[:block.shape[0], :block.shape[1]] = block
+                    block = padded
+                self._put(key, codec.encode(np.ascontiguousarray(block, dtype=little)))
+
+    def _put(self, key: str, payload: bytes) -> None:
+        if self.store.is_local:
+            # a temporary file renamed into place: a reader never sees half a chunk
+            path = self.store.path(key)
+            directory = os.path.dirname(path)
+            os.makedirs(directory, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix=".chunk-")
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(payload)
+                os.replace(tmp, path)
+            except BaseException:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+                raise
+        else:
+            self.store.fs.pipe_file(self.store.path(key), bytes(payload))
+
+    def _remove(self, key: str) -> None:
+        path = self.store.path(key)
+        if self.store.is_local:
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+        elif self.store.fs.exists(path):
+            self.store.fs.rm_file(path)
 
     def frame_fingerprint(self, array_path: str, frame: int) -> str | None:
         """Fingerprint of one frame as stored: the names and encoded bytes of its chunk files

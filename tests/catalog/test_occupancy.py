@@ -47,7 +47,7 @@ def test_create_keeps_identical_arrays_and_their_data(store):
 def test_write_frame_rejects_wrong_shape(store):
     occ = OccupancyStore(store)
     occ.create("seq", GRID, 1, 16)
-    with pytest.raises(ValueError, match="frame shape"):
+    with pytest.raises(ValueError, match="tile shape"):
         occ.write_frame("seq", GRID, 0, {"semantic": np.zeros((2, 2, 2), np.uint8)})
 
 
@@ -77,3 +77,43 @@ def test_frame_fingerprint_tracks_stored_chunks(store):
     store.fs.rm(chunk)
     assert occ.frame_fingerprint(path, 0) not in (fp, fp2)
     assert occ.frame_fingerprint("nope/0.25/semantic", 0) is None
+
+
+@pytest.mark.parametrize("memory", [False, True])
+def test_write_tile_round_trips_through_zarr_with_edge_chunks_and_empty_chunks(tmp_path, memory):
+    from catalog.store import Store
+
+    store = Store(f"memory://occ-tiles-{memory}") if memory else Store(str(tmp_path / "root"))
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(4.0, 2.5, 1.0), voxel_size=0.1)  # 40x25x10
+    occ = OccupancyStore(store)
+    occ.create("s", grid, frame_count=2, chunk_edge=16)  # chunks 16 x 16: edge chunks in x and y
+    rng = np.random.default_rng(0)
+    sem = (rng.random(grid.shape) < 0.2).astype(np.uint8) * rng.integers(1, 30, grid.shape, dtype=np.uint8)
+    sem[:16, :16] = 0  # one empty chunk
+    inst = sem.astype(np.uint32) * 100_003
+    flow = rng.normal(size=(*grid.shape, 3)).astype(np.float16) * (sem > 0)[..., None]
+    for x0 in (0, 16, 32):  # three tiles, the last one 8 wide (the array's end)
+        occ.write_tile("s", grid, 1, "semantic", sem[x0:x0 + 16], x0)
+        occ.write_tile("s", grid, 1, "instance", inst[x0:x0 + 16], x0)
+        occ.write_tile("s", grid, 1, "flow", flow[x0:x0 + 16], x0)
+    back = occ.read_frame("s", grid, 1, ("semantic", "instance", "flow"))
+    np.testing.assert_array_equal(back["semantic"], sem)
+    np.testing.assert_array_equal(back["instance"], inst)
+    np.testing.assert_array_equal(back["flow"], flow)
+    assert occ.open("s", grid, "flow").shape == (2, *grid.shape, 3)
+    assert not occ.read_frame("s", grid, 0)["semantic"].any()
+    # the empty chunk is not stored; re-writing a chunk as empty removes it
+    fp = occ.frame_fingerprint(occ.array_path("s", grid, "semantic"), 1)
+    root = f"occupancy.zarr/{occ.array_path('s', grid, 'semantic')}/c/1"
+    assert not store.fs.exists(store.path(f"{root}/0/0/0")) and store.fs.exists(store.path(f"{root}/1/0/0"))
+    sem2 = sem.copy()
+    sem2[16:32] = 0
+    occ.write_tile("s", grid, 1, "semantic", sem2[16:32], 16)
+    assert not store.fs.exists(store.path(f"{root}/1/0/0"))
+    np.testing.assert_array_equal(occ.read_frame("s", grid, 1, ("semantic",))["semantic"], sem2)
+    assert occ.frame_fingerprint(occ.array_path("s", grid, "semantic"), 1) != fp
+    # tiles must cover whole chunks
+    with pytest.raises(ValueError, match="whole chunks"):
+        occ.write_tile("s", grid, 1, "semantic", sem[8:24], 8)
+    with pytest.raises(ValueError, match="whole chunks"):
+        occ.write_tile("s", grid, 1, "semantic", sem[0:10], 0)

@@ -1,0 +1,165 @@
+"""``carlaocc voxelize``: the voxelizer on any mesh files or ADMesh assets, outside a dataset.
+
+Each input is a mesh file (anything trimesh reads: OBJ, PLY, STL, OFF, GLB/glTF; a multi-mesh
+file is concatenated) labelled by ``--class``, or the id of an ADMesh asset in ``--root``, whose
+parts keep their own classes. Thing inputs get instance ids 1, 2, ... in argument order; stuff
+gets 0. Closed (watertight) inputs are filled according to ``--fill``. The grid is the inputs'
+bounding box snapped to the voxel lattice of the origin (0, 0, 0), unless ``--origin`` and
+``--shape`` give it. Meshes are used as they are (metres, their own frame).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from catalog.store import Store, StoreError
+from schemas import taxonomy
+from schemas.grid import GridSpec
+from stages.geometry import SceneMesh, is_watertight
+
+MAX_VOXELS = 2**31  # a grid beyond this is almost always a unit mistake (millimetres as metres)
+
+
+class InputError(ValueError):
+    """A bad standalone input; the message names it."""
+
+
+@dataclass(frozen=True)
+class VoxelizeResult:
+    grid: GridSpec
+    semantic: np.ndarray  # uint8 (X, Y, Z)
+    instance: np.ndarray  # uint32 (X, Y, Z)
+    meshes: list[SceneMesh]
+
+
+def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds for a corrupt file
+        raise InputError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from exc
+    V = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    F = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if len(F) == 0:
+        raise InputError(f"{path}: the file holds no triangles")
+    if not np.isfinite(V).all():
+        raise InputError(f"{path}: {int((~np.isfinite(V)).any(axis=1).sum())} vertices are NaN or infinite")
+    # weld coincident vertices (STL and many exporters repeat them per face) so closedness is seen
+    uniq, inverse = np.unique(V, axis=0, return_inverse=True)
+    return uniq, inverse.reshape(-1)[F]
+
+
+def _classes(classes: list[str], n: int) -> list[taxonomy.SemanticClass]:
+    if n == 0:
+        return []
+    if not classes:
+        raise InputError("give --class for the mesh files (one for all, or one per file)")
+    if len(classes) not in (1, n):
+        raise InputError(f"--class given {len(classes)} times for {n} mesh files: give it once or once per file")
+    try:
+        found = [taxonomy.by_name(c) for c in classes]
+    except KeyError as exc:
+        raise InputError(str(exc.args[0])) from None
+    return found * n if len(found) == 1 else found
+
+
+def load_inputs(items: list[str], classes: list[str], store: Store | None) -> list[SceneMesh]:
+    """The SceneMeshes of the inputs: files labelled by ``classes``, asset ids from ``store``."""
+    files = [Path(i) for i in items if os.path.exists(i)]
+    missing = [i for i in items if not os.path.exists(i)]
+    labels = iter(_classes(classes, len(files)))
+    assets = {}
+    if missing:
+        if store is None:
+            raise InputError(f"{missing[0]}: no such file (and no --root to look it up as an ADMesh asset id)")
+        from pipeline.tasks import load_geometry
+
+        try:
+            assets = load_geometry(store, set(missing), [])
+        except StoreError as exc:
+            raise InputError(f"{missing[0]}: no such file, and not an ADMesh asset of {store.url} ({exc})") from None
+    out: list[SceneMesh] = []
+    next_instance = 1
+    for item in items:
+        if os.path.exists(item):
+            V, F = _load_file(Path(item))
+            cls = next(labels)
+            thing = cls.kind == "thing"
+            out.append(SceneMesh(V, F, cls.id, next_instance if thing else 0, not thing, is_watertight(F),
+                                 name=str(item)))
+            next_instance += thing
+        else:
+            geom = assets[item]
+            thing = False
+            for part, closed in zip(geom.parts, geom.part_closed):
+                cls = taxonomy.by_id(part.semantic_id)
+                is_thing = cls.kind == "thing"
+                out.append(SceneMesh(part.vertices, part.faces, cls.id, next_instance if is_thing else 0,
+                                     not is_thing, closed, name=f"{item}/{part.name}", transparent=part.transparent))
+                thing |= is_thing
+            next_instance += thing
+    return out
+
+
+def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None) -> GridSpec:
+    """The grid: ``origin`` + ``shape`` when given, else the meshes' bounding box snapped out to
+    multiples of ``voxel_size`` (so voxels align with those of any other run at that size)."""
+    if not (voxel_size > 0 and math.isfinite(voxel_size)):
+        raise InputError(f"--voxel-size must be a positive number of metres, got {voxel_size}")
+    if (origin is None) != (shape is None):
+        raise InputError("give --origin and --shape together (or neither: the meshes' bounding box)")
+    if origin is None:
+        pts = np.concatenate([m.vertices for m in meshes]) if meshes else np.zeros((0, 3))
+        if len(pts) == 0:
+            raise InputError("no vertices to voxelize")
+        lo = np.floor(pts.min(axis=0) / voxel_size) * voxel_size
+        n = np.maximum(np.ceil((pts.max(axis=0) - lo) / voxel_size - 1e-9).astype(np.int64), 1)
+        origin, shape = tuple(float(c) for c in lo), tuple(int(c) for c in n)
+    if len(origin) != 3 or len(shape) != 3 or min(shape) < 1:
+        raise InputError(f"--origin needs x,y,z and --shape nx,ny,nz (positive), got {origin} and {shape}")
+    total = math.prod(int(s) for s in shape)
+    if total > MAX_VOXELS:
+        raise InputError(f"the grid would have {total:,} voxels ({shape[0]}x{shape[1]}x{shape[2]} at {voxel_size} m): "
+                         f"are the meshes in millimetres? give a larger --voxel-size or --origin/--shape")
+    hi = tuple(o + n * voxel_size for o, n in zip(origin, shape))
+    return GridSpec(region_min=tuple(origin), region_max=hi, voxel_size=voxel_size)
+
+
+def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:
+    from stages.voxelize import voxelize_scene
+
+    semantic, instance = voxelize_scene(meshes, grid, fill=fill)
+    return VoxelizeResult(grid, semantic, instance, meshes)
+
+
+def save_result(result: VoxelizeResult, out: Path) -> None:
+    """``.npz`` (compressed: semantic, instance, voxel_size, voxel_origin, shape) or ``.zarr``
+    (a Zarr v3 group with ``semantic`` and ``instance`` arrays carrying the grid attributes)."""
+    suffix = out.suffix.lower()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    g = result.grid
+    if suffix == ".npz":
+        tmp = out.with_name(out.name + ".tmp.npz")
+        np.savez_compressed(tmp, semantic=result.semantic, instance=result.instance,
+                            voxel_size=np.float64(g.voxel_size), voxel_origin=np.asarray(g.origin, np.float64),
+                            shape=np.asarray(g.shape, np.int64))
+        tmp.replace(out)
+    elif suffix == ".zarr":
+        import zarr
+
+        root = zarr.open_group(str(out), mode="w")
+        X, Y, Z = g.shape
+        chunks = (min(128, X), min(128, Y), Z)
+        attrs = {**g.attrs(), "dims": ["x", "y", "z"], "taxonomy_version": taxonomy.TAXONOMY_VERSION}
+        for name, data in (("semantic", result.semantic), ("instance", result.instance)):
+            arr = root.create_array(name, shape=data.shape, chunks=chunks, dtype=data.dtype, fill_value=0,
+                                    attributes=attrs)
+            arr[...] = data
+    else:
+        raise InputError(f"--out must end in .npz or .zarr, got {out}")

@@ -1,0 +1,84 @@
+"""``carlaocc voxelize``: the standalone voxelizer on mesh files (and its errors)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+from pipeline.cli import app
+
+cli = CliRunner()
+MODELS = Path(__file__).resolve().parents[3] / "shared" / "testdata" / "meshes" / "trimesh-models"
+
+
+@pytest.fixture
+def cube_obj(tmp_path) -> Path:
+    path = tmp_path / "cube.obj"
+    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(path)
+    return path
+
+
+def test_cube_known_answer_filled_and_surface(tmp_path, cube_obj):
+    args = ["voxelize", str(cube_obj), "--class", "Car", "--voxel-size", "0.1",
+            "--origin", "-0.55,-0.55,-0.55", "--shape", "13,13,13"]
+    r = cli.invoke(app, [*args, "--out", str(tmp_path / "solid.npz")])
+    assert r.exit_code == 0, r.output
+    d = np.load(tmp_path / "solid.npz")
+    assert d["semantic"].shape == (13, 13, 13) and np.count_nonzero(d["semantic"]) == 1331
+    assert set(np.unique(d["instance"])) == {0, 1}
+    np.testing.assert_allclose(d["voxel_origin"], (-0.55, -0.55, -0.55))
+    r = cli.invoke(app, [*args, "--fill", "surface", "--out", str(tmp_path / "shell.zarr")])
+    assert r.exit_code == 0, r.output
+    import zarr
+
+    g = zarr.open_group(str(tmp_path / "shell.zarr"), mode="r")
+    assert np.count_nonzero(g["semantic"][...]) == 602
+    assert g["semantic"].attrs["voxel_size"] == 0.1
+
+
+def test_per_file_classes_and_default_grid(tmp_path, cube_obj):
+    if not (MODELS / "chair_model.obj").exists():
+        pytest.skip("shared test data absent")
+    out = tmp_path / "two.npz"
+    r = cli.invoke(app, ["voxelize", str(cube_obj), str(MODELS / "chair_model.obj"), "--class", "Car",
+                         "--class", "Sidewalk", "--voxel-size", "0.05", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    d = np.load(out)
+    from schemas import taxonomy
+
+    car, walk = taxonomy.by_name("Car").id, taxonomy.by_name("Sidewalk").id
+    assert {car, walk} <= set(np.unique(d["semantic"]))
+    assert (d["instance"][d["semantic"] == walk] == 0).all()  # stuff: instance 0
+    # the default grid is the bounding box snapped to the 0.05 m lattice
+    assert np.allclose(d["voxel_origin"] / 0.05, np.round(d["voxel_origin"] / 0.05))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["missing.obj", "--class", "Car"], "missing.obj: no such file"),
+    (["{cube}"], "give --class"),
+    (["{cube}", "--class", "Spaceship"], "unknown semantic class"),
+    (["{cube}", "--class", "Car", "--fill", "hollow"], "--fill must be one of"),
+    (["{cube}", "--class", "Car", "--origin", "0,0"], "--origin must be three"),
+    (["{cube}", "--class", "Car", "--origin", "0,0,0"], "together"),
+])
+def test_errors_name_the_input(tmp_path, cube_obj, args, message):
+    args = [a.replace("{cube}", str(cube_obj)) for a in args]
+    r = cli.invoke(app, ["voxelize", *args, "--voxel-size", "0.1", "--out", str(tmp_path / "x.npz")])
+    assert r.exit_code == 2 and message in r.output, r.output
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_wrong_units_and_corrupt_mesh(tmp_path, cube_obj):
+    big = tmp_path / "mm.obj"
+    m = trimesh.creation.box(extents=(4000.0, 2000.0, 1500.0))  # a car in millimetres
+    m.export(big)
+    r = cli.invoke(app, ["voxelize", str(big), "--class", "Car", "--voxel-size", "0.05", "--out", str(tmp_path / "x.npz")])
+    assert r.exit_code == 2 and "millimetres" in r.output
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
+    r = cli.invoke(app, ["voxelize", str(bad), "--class", "Car", "--voxel-size", "0.1", "--out", str(tmp_path / "x.npz")])
+    assert r.exit_code == 2 and "bad.obj" in r.output, r.output
