@@ -1,0 +1,915 @@
+"""Headless pictures of panoptic occupancy grids: bird's-eye height maps, 3D voxel views, figures.
+
+Inputs are the dense grid arrays indexed ``[x, y, z]`` in the LiDAR frame (x forward, y left,
+z up): ``semantic`` (uint8; 0 = free, class ids 1..29 coloured by :func:`schemas.taxonomy.palette`)
+and ``instance`` (uint32; 0 = stuff or free, ``None`` for none), on a :class:`GridSpec`. Outputs
+are ``(H, W, 3)`` uint8 RGB images (write them with ``catalog.images.save_png``). Everything is
+numpy + numba (no plotting library) and deterministic: the same inputs give identical bytes.
+
+Colouring (``mode``), shared by every view:
+
+* ``"instance"`` (the default, panoptic): stuff by its class colour, every voxel with a nonzero
+  instance id (things) by a colour hashed from the id (:func:`instance_colors`: saturated,
+  deterministic, independent of the frame, so one object keeps its colour over a sequence);
+* ``"semantic"``: every voxel by its class colour;
+* ``"height"``: a blue-to-red ramp over the height of the voxel centre.
+
+Bird's-eye view (:func:`bev_height_map`): one pixel per (x, y) column, image up = +x (forward),
+image left = +y (left), so the ego's forward points up and its left is on the left. Each column
+shows its top-most occupied voxel (a numba scan down every column, stopping at the first occupied
+voxel), shaded by height: brightness ``0.6 + 0.4 sqrt(t)`` with ``t`` the top's height normalised over
+the occupied tops of the image (or ``z_range``), brighter = higher; with ``relief`` a column lower
+than its upper-left neighbour (the light comes from the image's upper left) is darkened by up to
+30% (a drop shadow over 0.5 m of step), so edges of objects read even in one colour. Free columns
+are dark grey. ``max_pixels`` downsamples big grids by an integer factor, keeping the top-most
+voxel of every block of columns.
+
+3D view (:func:`perspective_view`): a perspective (or, with ``fov_deg=0``, orthographic) camera at
+``azimuth_deg`` / ``elevation_deg`` around the scene, by default a chase camera behind (-x) and
+above the ego, framing the occupied voxels (or ``bounds``). Only surface voxels are drawn (occupied
+with a free 6-neighbour; outside the grid counts as free), and of them only the exposed faces
+turned towards the camera, as two triangles each into a numba z-buffer, flat Lambert shaded per
+face direction with the light and the ambient/diffuse split of :func:`stages.render.render_asset`.
+With ``outline`` a face of at least a few pixels gets a thin darker border, so voxel size stays
+visible on flat areas. **Pooling:** when the grid (after cropping to ``bounds``) has more than
+``max_voxels`` voxels it is pooled by the smallest power of two ``f`` that brings it under the
+budget: each ``f x f x f`` block is occupied when any of its voxels is and takes the class and
+instance of its top-most occupied voxel (:func:`pool_occupancy`). The default budget (64 M) pools a
+0.05 m default-size frame (409 M voxels) by 2, to 0.1 m voxels (about a pixel at 960 px wide).
+
+Figures: :func:`occupancy_figure` (title strip, BEV, 3D view and a legend of the classes present)
+and :func:`multi_resolution_figure` (one column per resolution: 3D view and BEV of the same metric
+window around the ego, the BEV nearest-neighbour sampled to a common pixel size so coarse voxels
+show as bigger blocks).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numba import njit
+
+from schemas.grid import GridSpec
+from schemas.taxonomy import CLASSES, palette, thing_ids
+from stages.render import AMBIENT, DIFFUSE, FONT_HEIGHT, FONT_WIDTH, _camera, draw_text, text_width
+
+__all__ = [
+    "FREE_RGB",
+    "bev_height_map",
+    "classes_present",
+    "instance_colors",
+    "multi_resolution_figure",
+    "occupancy_figure",
+    "perspective_view",
+    "pool_occupancy",
+    "surface_voxels",
+    "top_surface",
+]
+
+FREE_RGB = (40, 40, 40)  # BEV colour of a free column (and of window pixels outside the grid)
+MODES = ("instance", "semantic", "height")
+DEFAULT_MAX_VOXELS = 64_000_000  # pooling budget of the 3D view (voxels of the cropped grid)
+SHADE_MIN = 0.6  # BEV brightness of the lowest top (the highest gets 1.0)
+RELIEF_DARKEN = 0.30  # BEV drop shadow: at most this share darker ...
+RELIEF_STEP_M = 0.5  # ... reached for a step of this height (metres)
+OUTLINE_DARKEN = 0.72  # 3D view: face borders are multiplied by this
+_PALETTE = np.asarray(palette() + ((0, 0, 0),) * (256 - len(palette())), dtype=np.float32)  # any uint8 id
+# height ramp anchors (t, RGB): dark blue, blue, cyan, green, yellow, orange, red
+_RAMP_T = np.array([0.0, 0.15, 0.35, 0.55, 0.72, 0.87, 1.0])
+_RAMP_RGB = np.array(
+    [(48, 18, 120), (60, 100, 230), (30, 190, 230), (60, 225, 110), (200, 235, 50), (250, 160, 40), (215, 45, 20)],
+    dtype=np.float64,
+)
+
+
+# --------------------------------------------------------------------------------------------
+# numba kernels
+# --------------------------------------------------------------------------------------------
+
+
+_CHUNK = 32  # column scans test this many voxels at once (a vectorized OR) to skip free space
+
+
+@njit(cache=True, nogil=True)
+def _top_kernel(sem, inst, has_inst, ktop, stop, itop):  # pragma: no cover - numba
+    """Per (x, y) column: index of the top-most occupied voxel (-1 when free), its class and
+    instance."""
+    X, Y, Z = sem.shape
+    for i in range(X):
+        for j in range(Y):
+            ktop[i, j] = -1
+            stop[i, j] = 0
+            itop[i, j] = 0
+            hi = Z
+            while hi > 0:
+                lo = max(0, hi - _CHUNK)
+                acc = 0
+                for k in range(lo, hi):
+                    acc |= sem[i, j, k]
+                if acc != 0:
+                    for k in range(hi - 1, lo - 1, -1):
+                        c = sem[i, j, k]
+                        if c != 0:
+                            ktop[i, j] = k
+                            stop[i, j] = c
+                            if has_inst:
+                                itop[i, j] = inst[i, j, k]
+                            break
+                    break
+                hi = lo
+
+
+@njit(cache=True, nogil=True)
+def _pool_kernel(sem, inst, has_inst, f, psem, pinst, pk):  # pragma: no cover - numba
+    """Pool by ``f``: a block keeps its top-most occupied voxel's class and instance (``pk`` holds
+    that voxel's fine z index, -1 initially; ties in z go to the first voxel in x, y order)."""
+    X, Y, Z = sem.shape
+    for i in range(X):
+        bi = i // f
+        for j in range(Y):
+            bj = j // f
+            k = Z - 1
+            while k >= 0:
+                lo = max(0, k - _CHUNK + 1)
+                acc = 0
+                for kk in range(lo, k + 1):
+                    acc |= sem[i, j, kk]
+                if acc == 0:  # a free run: skip it
+                    k = lo - 1
+                    continue
+                while k >= lo:
+                    c = sem[i, j, k]
+                    if c != 0:
+                        bk = k // f
+                        if k > pk[bi, bj, bk]:
+                            pk[bi, bj, bk] = k
+                            psem[bi, bj, bk] = c
+                            if has_inst:
+                                pinst[bi, bj, bk] = inst[i, j, k]
+                        k = bk * f - 1  # the rest of this block's column cannot be higher
+                    else:
+                        k -= 1
+
+
+@njit(cache=True, nogil=True)
+def _surface_kernel(sem, fill, idx, mask):  # pragma: no cover - numba
+    """Count (``fill`` False) or list the surface voxels: occupied with at least one free
+    6-neighbour (outside the grid is free). ``mask`` bit d is set when the face in direction d
+    (0: -x, 1: +x, 2: -y, 3: +y, 4: -z, 5: +z) is exposed."""
+    X, Y, Z = sem.shape
+    n = 0
+    for i in range(X):
+        for j in range(Y):
+            for k in range(Z):
+                if sem[i, j, k] == 0:
+                    continue
+                m = 0
+                if i == 0 or sem[i - 1, j, k] == 0:
+                    m |= 1
+                if i == X - 1 or sem[i + 1, j, k] == 0:
+                    m |= 2
+                if j == 0 or sem[i, j - 1, k] == 0:
+                    m |= 4
+                if j == Y - 1 or sem[i, j + 1, k] == 0:
+                    m |= 8
+                if k == 0 or sem[i, j, k - 1] == 0:
+                    m |= 16
+                if k == Z - 1 or sem[i, j, k + 1] == 0:
+                    m |= 32
+                if m == 0:
+                    continue
+                if fill:
+                    idx[n, 0] = i
+                    idx[n, 1] = j
+                    idx[n, 2] = k
+                    mask[n] = m
+                n += 1
+    return n
+
+
+@njit(cache=True, nogil=True)
+def _seen_kernel(flat, seen):  # pragma: no cover - numba
+    for v in range(flat.shape[0]):
+        seen[flat[v]] = 1
+
+
+@njit(cache=True, nogil=True)
+def _fill_tri(x0, y0, z0, s0, t0, x1, y1, z1, s1, t1, x2, y2, z2, s2, t2,
+              r, g, b, ls, lt, edge, dark, zbuf, img):  # pragma: no cover - numba  # fmt: skip
+    """Opaque z-buffered triangle (pixel centres inside, either winding), as ``stages.render._raster``;
+    (s, t) are the quad coordinates of the vertices: pixels within ``edge`` pixels of the quad's
+    border (side lengths ``ls``, ``lt`` pixels) are multiplied by ``dark`` (``edge`` 0: none)."""
+    H, W = zbuf.shape
+    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    if abs(area) < 1e-12:
+        return
+    inv = 1.0 / area
+    xmin = max(int(math.floor(min(x0, min(x1, x2)))), 0)
+    xmax = min(int(math.ceil(max(x0, max(x1, x2)))), W - 1)
+    ymin = max(int(math.floor(min(y0, min(y1, y2)))), 0)
+    ymax = min(int(math.ceil(max(y0, max(y1, y2)))), H - 1)
+    for yy in range(ymin, ymax + 1):
+        cy = yy + 0.5
+        for xx in range(xmin, xmax + 1):
+            cx = xx + 0.5
+            w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
+            w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
+            w2 = 1.0 - w0 - w1
+            if w0 < -1e-9 or w1 < -1e-9 or w2 < -1e-9:
+                continue
+            z = w0 * z0 + w1 * z1 + w2 * z2
+            if z >= zbuf[yy, xx]:
+                continue
+            zbuf[yy, xx] = z
+            k = 1.0
+            if edge > 0.0:
+                s = w0 * s0 + w1 * s1 + w2 * s2
+                t = w0 * t0 + w1 * t1 + w2 * t2
+                d = min(min(s, 1.0 - s) * ls, min(t, 1.0 - t) * lt)
+                if d < edge:
+                    k = dark
+            img[yy, xx, 0] = r * k
+            img[yy, xx, 1] = g * k
+            img[yy, xx, 2] = b * k
+
+
+@njit(cache=True, nogil=True)
+def _draw_faces(idx, mask, cols, shade, origin, vs, cam, basis, persp, scale, offx, offy, edge, dark,
+                zbuf, img):  # pragma: no cover - numba  # fmt: skip
+    """Draw the exposed, camera-facing faces of voxels ``idx`` (N, 3) with face masks ``mask``
+    (bits as in :func:`_surface_kernel`), base colours ``cols`` (N, 3) and per-direction shade
+    ``shade`` (6,). Camera at ``cam``; ``basis`` rows are right, up, forward; screen x =
+    ``offx + scale * u``, y = ``offy - scale * v`` with (u, v) the view coordinates, divided by the
+    depth when ``persp``. Faces of at least ``3 * edge`` pixels a side get a ``dark`` border."""
+    p = np.empty(3)
+    sx = np.empty(4)
+    sy = np.empty(4)
+    sz = np.empty(4)
+    qs = (0.0, 1.0, 1.0, 0.0)
+    qt = (0.0, 0.0, 1.0, 1.0)
+    for n in range(idx.shape[0]):
+        m = mask[n]
+        if m == 0:
+            continue
+        bx = origin[0] + idx[n, 0] * vs
+        by = origin[1] + idx[n, 1] * vs
+        bz = origin[2] + idx[n, 2] * vs
+        for d in range(6):
+            if (m >> d) & 1 == 0:
+                continue
+            a = d // 2
+            pos = d & 1
+            sgn = 1.0 if pos else -1.0
+            if persp:
+                face = (bx, by, bz)[a] + (vs if pos else 0.0)
+                if sgn * (cam[a] - face) <= 0.0:
+                    continue
+            elif sgn * basis[2, a] >= 0.0:
+                continue
+            b_ = (a + 1) % 3
+            c_ = (a + 2) % 3
+            ok = True
+            for q in range(4):
+                p[0] = bx
+                p[1] = by
+                p[2] = bz
+                if pos:
+                    p[a] += vs
+                p[b_] += qs[q] * vs
+                p[c_] += qt[q] * vs
+                dx = p[0] - cam[0]
+                dy = p[1] - cam[1]
+                dz = p[2] - cam[2]
+                u = dx * basis[0, 0] + dy * basis[0, 1] + dz * basis[0, 2]
+                v = dx * basis[1, 0] + dy * basis[1, 1] + dz * basis[1, 2]
+                w = dx * basis[2, 0] + dy * basis[2, 1] + dz * basis[2, 2]
+                if w <= 1e-9:
+                    ok = False
+                    break
+                if persp:
+                    u /= w
+                    v /= w
+                sx[q] = offx + scale * u
+                sy[q] = offy - scale * v
+                sz[q] = w
+            if not ok:
+                continue
+            ls = math.hypot(sx[1] - sx[0], sy[1] - sy[0])
+            lt = math.hypot(sx[3] - sx[0], sy[3] - sy[0])
+            e = edge if min(ls, lt) >= 3.0 * edge else 0.0
+            k = shade[d]
+            r, g, bb = cols[n, 0] * k, cols[n, 1] * k, cols[n, 2] * k
+            _fill_tri(sx[0], sy[0], sz[0], 0.0, 0.0, sx[1], sy[1], sz[1], 1.0, 0.0, sx[2], sy[2], sz[2], 1.0, 1.0,
+                      r, g, bb, ls, lt, e, dark, zbuf, img)  # fmt: skip
+            _fill_tri(sx[0], sy[0], sz[0], 0.0, 0.0, sx[2], sy[2], sz[2], 1.0, 1.0, sx[3], sy[3], sz[3], 0.0, 1.0,
+                      r, g, bb, ls, lt, e, dark, zbuf, img)  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------
+# arrays: checks, top surface, pooling, surface voxels, colours
+# --------------------------------------------------------------------------------------------
+
+
+def _arrays(semantic, instance, grid: GridSpec | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """C-contiguous uint8 semantic and uint32 instance (a 1-voxel dummy when ``None``), checked."""
+    sem = np.asarray(semantic)
+    if sem.ndim != 3:
+        raise ValueError(f"semantic must be a 3D [x, y, z] array, got shape {sem.shape}")
+    if grid is not None and tuple(sem.shape) != tuple(grid.shape):
+        raise ValueError(f"semantic shape {sem.shape} does not match the grid shape {grid.shape}")
+    sem = np.ascontiguousarray(sem.astype(np.uint8, copy=False))
+    if instance is None:
+        return sem, np.zeros((1, 1, 1), np.uint32), False
+    inst = np.asarray(instance)
+    if inst.shape != sem.shape:
+        raise ValueError(f"instance shape {inst.shape} does not match semantic shape {sem.shape}")
+    return sem, np.ascontiguousarray(inst.astype(np.uint32, copy=False)), True
+
+
+def _check_mode(mode: str) -> None:
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}; valid modes: {', '.join(MODES)}")
+
+
+def top_surface(semantic, instance=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Top-most occupied voxel of every (x, y) column: ``(k, semantic, instance)`` arrays of shape
+    (X, Y), ``k`` the z index (int32, -1 for a free column, whose class and instance are 0)."""
+    sem, inst, has = _arrays(semantic, instance)
+    X, Y, _ = sem.shape
+    ktop = np.empty((X, Y), np.int32)
+    stop = np.empty((X, Y), np.uint8)
+    itop = np.empty((X, Y), np.uint32)
+    _top_kernel(sem, inst, has, ktop, stop, itop)
+    return ktop, stop, itop
+
+
+def _block_top(ktop, stop, itop, f: int):
+    """Downsample top maps by ``f`` per axis, keeping the top-most voxel of each f x f block (the
+    first in x, y order on ties); partial blocks at the far edges are padded with free columns."""
+    X, Y = ktop.shape
+    Xb, Yb = -(-X // f), -(-Y // f)
+
+    def blocks(a, fill):
+        out = np.full((Xb * f, Yb * f), fill, dtype=a.dtype)
+        out[:X, :Y] = a
+        return out.reshape(Xb, f, Yb, f).transpose(0, 2, 1, 3).reshape(Xb, Yb, f * f)
+
+    kb = blocks(ktop, -1)
+    best = np.argmax(kb, axis=2)[..., None]
+    take = lambda a: np.take_along_axis(a, best, axis=2)[..., 0]
+    return take(kb), take(blocks(stop, 0)), take(blocks(itop, 0))
+
+
+def pool_occupancy(semantic, instance=None, factor: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Pool a grid by ``factor`` per axis (shape rounded up): a block is occupied when any of its
+    voxels is, with the class and instance of its top-most occupied voxel (ties in z: the first
+    voxel in x, y order). Returns ``(semantic uint8, instance uint32)``; one streaming pass."""
+    f = int(factor)
+    if f < 1:
+        raise ValueError(f"factor must be >= 1, got {factor}")
+    sem, inst, has = _arrays(semantic, instance)
+    if f == 1:
+        return sem, (inst if has else np.zeros(sem.shape, np.uint32))
+    shape = tuple(-(-n // f) for n in sem.shape)
+    psem = np.zeros(shape, np.uint8)
+    pinst = np.zeros(shape, np.uint32)
+    pk = np.full(shape, -1, np.int32)
+    _pool_kernel(sem, inst, has, f, psem, pinst, pk)
+    return psem, pinst
+
+
+def surface_voxels(semantic) -> tuple[np.ndarray, np.ndarray]:
+    """Surface voxels (occupied, with a free 6-neighbour; outside the grid is free) in C order:
+    ``(idx (N, 3) int32, mask (N,) uint8)``, mask bit d set when the face in direction d
+    (0: -x, 1: +x, 2: -y, 3: +y, 4: -z, 5: +z) is exposed."""
+    sem = np.ascontiguousarray(np.asarray(semantic).astype(np.uint8, copy=False))
+    dummy_i, dummy_m = np.empty((1, 3), np.int32), np.empty(1, np.uint8)
+    n = _surface_kernel(sem, False, dummy_i, dummy_m)
+    idx, mask = np.empty((n, 3), np.int32), np.empty(n, np.uint8)
+    _surface_kernel(sem, True, idx, mask)
+    return idx, mask
+
+
+def classes_present(semantic) -> np.ndarray:
+    """Sorted nonzero class ids occurring in the grid (int64), in one pass without a copy."""
+    sem = np.ascontiguousarray(np.asarray(semantic).astype(np.uint8, copy=False))
+    seen = np.zeros(256, np.uint8)
+    _seen_kernel(sem.reshape(-1), seen)
+    seen[0] = 0
+    return np.flatnonzero(seen)
+
+
+def instance_colors(ids) -> np.ndarray:
+    """Deterministic saturated RGB colour (uint8, shape ``ids.shape + (3,)``) of instance ids: the
+    32-bit id is mixed (golden-ratio multiply, murmur3 finaliser) into a hue (any), a saturation
+    (0.65-0.95) and a value (0.80-1.0)."""
+    m32 = np.uint64(0xFFFFFFFF)
+    x = np.asarray(ids).astype(np.uint64) & m32
+    x = (x * np.uint64(0x9E3779B1)) & m32
+    x ^= x >> np.uint64(16)
+    x = (x * np.uint64(0x85EBCA6B)) & m32
+    x ^= x >> np.uint64(13)
+    x = (x * np.uint64(0xC2B2AE35)) & m32
+    x ^= x >> np.uint64(16)
+    h = (x & np.uint64(0xFFFF)).astype(np.float64) / 65536.0
+    s = 0.65 + 0.30 * ((x >> np.uint64(16)) & np.uint64(0xFF)).astype(np.float64) / 255.0
+    v = 0.80 + 0.20 * ((x >> np.uint64(24)) & np.uint64(0xFF)).astype(np.float64) / 255.0
+    h6 = h * 6.0
+    sector = np.floor(h6).astype(np.int64) % 6
+    frac = h6 - np.floor(h6)
+    p, q, t = v * (1 - s), v * (1 - s * frac), v * (1 - s * (1 - frac))
+    r = np.choose(sector, [v, q, p, p, t, v])
+    g = np.choose(sector, [t, v, v, q, p, p])
+    b = np.choose(sector, [p, p, t, v, v, q])
+    return np.round(np.stack([r, g, b], axis=-1) * 255.0).astype(np.uint8)
+
+
+def _height_ramp(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return np.stack([np.interp(t, _RAMP_T, _RAMP_RGB[:, c]) for c in range(3)], axis=-1).astype(np.float32)
+
+
+def _base_colours(sem, inst, z, mode: str, z_range) -> np.ndarray:
+    """Float32 RGB (0..255) of voxels with classes ``sem``, instances ``inst`` and heights ``z``."""
+    if mode == "height":
+        lo, hi = z_range
+        return _height_ramp((z - lo) / max(hi - lo, 1e-9))
+    out = _PALETTE[sem]
+    if mode == "instance":
+        things = inst != 0
+        if things.any():
+            ids, inverse = np.unique(inst[things], return_inverse=True)
+            out[things] = instance_colors(ids).astype(np.float32)[inverse]
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# bird's-eye view
+# --------------------------------------------------------------------------------------------
+
+
+def _top_range(ktop_list, grids) -> tuple[float, float] | None:
+    """Metric (lowest, highest) top-voxel centre over several top maps (``None`` when all free)."""
+    lo, hi = math.inf, -math.inf
+    for ktop, grid in zip(ktop_list, grids, strict=True):
+        occ = ktop >= 0
+        if occ.any():
+            ks = ktop[occ]
+            lo = min(lo, grid.origin[2] + (int(ks.min()) + 0.5) * grid.voxel_size)
+            hi = max(hi, grid.origin[2] + (int(ks.max()) + 0.5) * grid.voxel_size)
+    return None if lo > hi else (lo, hi)
+
+
+def _bev_colours(ktop, stop, itop, z0: float, vs: float, mode: str, z_range, relief: bool, free_color) -> np.ndarray:
+    """Float32 (X, Y, 3) colours of top maps in grid order (not yet flipped to the image)."""
+    occ = ktop >= 0
+    z = z0 + (ktop.astype(np.float64) + 0.5) * vs
+    out = np.empty(ktop.shape + (3,), np.float32)
+    out[:] = np.asarray(free_color, np.float32)
+    if not occ.any():
+        return out
+    if z_range is None:
+        z_range = (float(z[occ].min()), float(z[occ].max()))
+    lo, hi = float(z_range[0]), float(z_range[1])
+    col = _base_colours(stop[occ], itop[occ], z[occ], mode, (lo, hi))
+    if mode != "height":
+        t = np.clip((z[occ] - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.ones(int(occ.sum()))
+        col *= (SHADE_MIN + (1.0 - SHADE_MIN) * np.sqrt(t)).astype(np.float32)[:, None]
+    out[occ] = col
+    if relief:
+        # the light comes from the image's upper left = grid (+x, +y): darken a column lower than
+        # its (+1, +1) neighbour, by the step height
+        step = np.zeros(ktop.shape)
+        both = occ[1:, 1:] & occ[:-1, :-1]
+        step[:-1, :-1] = np.where(both, z[1:, 1:] - z[:-1, :-1], 0.0)
+        factor = 1.0 - RELIEF_DARKEN * np.clip(step / RELIEF_STEP_M, 0.0, 1.0)
+        out *= factor.astype(np.float32)[..., None]
+    return out
+
+
+def _to_image(colours: np.ndarray) -> np.ndarray:
+    """Grid-order (X, Y, 3) colours to the BEV image: rows from +x down, columns from +y right."""
+    return np.ascontiguousarray(np.clip(np.round(colours[::-1, ::-1]), 0, 255).astype(np.uint8))
+
+
+def _draw_ego(img: np.ndarray, x_top: float, y_left: float, cell: float, length: float = 4.6,
+              width: float = 1.9) -> None:  # fmt: skip
+    """Draw the ego as a white arrow-head triangle (``length`` x ``width`` metres, tip forward)
+    centred on the LiDAR origin into a BEV image whose top edge is at x = ``x_top``, left edge at
+    y = ``y_left``, ``cell`` metres per pixel. Clipped to the image."""
+    H, W = img.shape[:2]
+    r0 = max(0, int(math.floor((x_top - length / 2) / cell)) - 1)
+    r1 = min(H, int(math.ceil((x_top + length / 2) / cell)) + 1)
+    c0 = max(0, int(math.floor((y_left - width / 2) / cell)) - 1)
+    c1 = min(W, int(math.ceil((y_left + width / 2) / cell)) + 1)
+    if r1 <= r0 or c1 <= c0:
+        return
+    x = x_top - (np.arange(r0, r1) + 0.5)[:, None] * cell  # metres forward of the ego
+    y = y_left - (np.arange(c0, c1) + 0.5)[None, :] * cell  # metres left of the ego
+    # tip at x = +length/2 on the axis; base from (-length/2, -width/2) to (-length/2, +width/2)
+    inside = (x >= -length / 2) & (np.abs(y) <= (width / 2) * (length / 2 - x) / length)
+    img[r0:r1, c0:c1][inside] = (255, 255, 255)
+
+
+def bev_height_map(
+    semantic,
+    instance,
+    grid: GridSpec,
+    mode: str = "instance",
+    *,
+    max_pixels: int | None = None,
+    z_range: tuple[float, float] | None = None,
+    relief: bool = True,
+    mark_ego: bool = False,
+    free_color=FREE_RGB,
+) -> np.ndarray:
+    """Bird's-eye view of a grid: ``(X // f, Y // f, 3)`` uint8 (rounded up), one pixel per (x, y)
+    column (``f`` = 1) or per ``f x f`` block when ``max_pixels`` is given and exceeded (``f`` the
+    smallest integer that fits; each block shows its top-most voxel). Image up = +x (forward),
+    left = +y (left). Colours as in the module docstring (``mode``), shaded by the top's height
+    (normalised over the occupied tops, or over ``z_range`` in metres), with the ``relief`` drop
+    shadow; free columns ``free_color``; ``mark_ego`` draws the ego (white triangle pointing
+    forward) at the LiDAR origin."""
+    _check_mode(mode)
+    sem, inst, has = _arrays(semantic, instance, grid)
+    ktop, stop, itop = top_surface(sem, inst if has else None)
+    X, Y = ktop.shape
+    f = 1
+    if max_pixels is not None and X * Y > int(max_pixels):
+        if max_pixels < 1:
+            raise ValueError(f"max_pixels must be >= 1, got {max_pixels}")
+        f = max(1, int(math.ceil(math.sqrt(X * Y / max_pixels))))
+        while (-(-X // f)) * (-(-Y // f)) > max_pixels:
+            f += 1
+        ktop, stop, itop = _block_top(ktop, stop, itop, f)
+    vs = grid.voxel_size
+    img = _to_image(_bev_colours(ktop, stop, itop, grid.origin[2], vs, mode, z_range, relief, free_color))
+    if mark_ego:
+        cell = vs * f
+        Xb, Yb = ktop.shape
+        _draw_ego(img, grid.origin[0] + Xb * cell, grid.origin[1] + Yb * cell, cell)
+    return img
+
+
+def _bev_window(ktop, stop, itop, grid: GridSpec, i0: int, j0: int, window, shape, mode, z_range, relief, free_color):
+    """BEV of the metric ``window`` ((xmin, xmax), (ymin, ymax)) sampled nearest-neighbour to
+    ``shape`` (rows, cols) pixels from top maps of a crop starting at voxel (i0, j0)."""
+    (xmin, xmax), (ymin, ymax) = window
+    rows, cols = shape
+    colours = _bev_colours(ktop, stop, itop, grid.origin[2], grid.voxel_size, mode, z_range, relief, free_color)
+    x = xmax - (np.arange(rows) + 0.5) * (xmax - xmin) / rows
+    y = ymax - (np.arange(cols) + 0.5) * (ymax - ymin) / cols
+    i = np.floor((x - grid.origin[0]) / grid.voxel_size).astype(np.int64) - i0
+    j = np.floor((y - grid.origin[1]) / grid.voxel_size).astype(np.int64) - j0
+    vi = (i >= 0) & (i < ktop.shape[0])
+    vj = (j >= 0) & (j < ktop.shape[1])
+    out = np.empty((rows, cols, 3), np.float32)
+    out[:] = np.asarray(free_color, np.float32)
+    sub = colours[np.clip(i, 0, max(ktop.shape[0] - 1, 0))][:, np.clip(j, 0, max(ktop.shape[1] - 1, 0))]
+    keep = vi[:, None] & vj[None, :]
+    out[keep] = sub[keep]
+    return np.ascontiguousarray(np.clip(np.round(out), 0, 255).astype(np.uint8))
+
+
+# --------------------------------------------------------------------------------------------
+# 3D view
+# --------------------------------------------------------------------------------------------
+
+
+def _crop_indices(origin, vs: float, shape, bounds, centres: bool = True) -> tuple[slice, slice, slice]:
+    """Voxel index slices of the voxels (grid ``origin``, ``vs``, ``shape``) whose centres lie in
+    the metric ``bounds`` ((xmin, xmax), (ymin, ymax)[, (zmin, zmax)]), or with ``centres`` False
+    that overlap them; axes without bounds are whole."""
+    out = []
+    for a, n in enumerate(shape):
+        if bounds is None or a >= len(bounds) or bounds[a] is None:
+            out.append(slice(0, n))
+            continue
+        lo, hi = ((bounds[a][0] - origin[a]) / vs, (bounds[a][1] - origin[a]) / vs)
+        if centres:
+            i0, i1 = math.ceil(lo - 0.5 - 1e-9), math.floor(hi - 0.5 + 1e-9) + 1
+        else:
+            i0, i1 = math.floor(lo + 1e-9), math.ceil(hi - 1e-9)
+        i0, i1 = max(0, i0), min(n, i1)
+        out.append(slice(i0, max(i0, i1)))
+    return out[0], out[1], out[2]
+
+
+def _frame_camera(lo, hi, el: float, az: float, H: int, W: int, fov_deg: float, margin: float):
+    """Camera position, basis (rows right, up, forward), projection scale and offsets framing the
+    box [lo, hi] into an H x W image with ``margin`` on each side."""
+    right, up, fwd = _camera(el, az)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    c = (lo + hi) / 2
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) - c
+    u, v, wr = corners @ right, corners @ up, corners @ fwd
+    usable = 1.0 - 2.0 * min(max(margin, 0.0), 0.45)
+    size = float(np.linalg.norm(hi - lo)) + 1e-6
+    persp = fov_deg > 0
+    if persp:
+        tv = math.tan(math.radians(min(fov_deg, 170.0)) / 2)
+        th = tv * W / H
+        d = max(float(np.max(np.abs(u) / (th * usable) - wr)), float(np.max(np.abs(v) / (tv * usable) - wr)),
+                float(np.max(-wr)) + 0.05 * size)  # fmt: skip
+        w = d + wr
+        su, sv = u / w, v / w
+    else:
+        d = 2.0 * size
+        su, sv = u, v
+    cam = c - fwd * d
+    span_u, span_v = max(float(np.ptp(su)), 1e-12), max(float(np.ptp(sv)), 1e-12)
+    scale = min(W * usable / span_u, H * usable / span_v)
+    offx = W / 2 - (su.max() + su.min()) / 2 * scale
+    offy = H / 2 + (sv.max() + sv.min()) / 2 * scale
+    basis = np.ascontiguousarray(np.stack([right, up, fwd]))
+    light = -0.40 * right + 0.55 * up - 0.75 * fwd
+    light /= np.linalg.norm(light)
+    return cam, basis, persp, float(scale), float(offx), float(offy), light
+
+
+def _perspective(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azimuth_deg, mode, fov_deg, bounds,
+                 max_voxels, background, antialias, margin, outline) -> tuple[np.ndarray, int]:  # fmt: skip
+    """:func:`perspective_view` on checked arrays (see :func:`_arrays`) with voxel (0, 0, 0) at
+    ``grid_origin``; returns the image and the pooling factor."""
+    _check_mode(mode)
+    h, w = (size, size) if isinstance(size, (int, np.integer)) else size
+    H, W = int(h), int(w)
+    if H < 1 or W < 1:
+        raise ValueError(f"image size must be positive, got {size!r}")
+    ss = max(1, int(antialias))
+    bg = np.asarray(background, np.float32).reshape(3)
+    blank = np.ascontiguousarray(np.broadcast_to(np.round(bg).astype(np.uint8), (H, W, 3)))
+    vs0 = float(voxel_size)
+    full_lo = np.asarray(grid_origin, float)
+    full_hi = full_lo + np.array(sem.shape) * vs0
+    sx, sy, sz = _crop_indices(grid_origin, vs0, sem.shape, bounds)
+    origin = np.asarray(grid_origin, float) + np.array([sx.start, sy.start, sz.start]) * vs0
+    if (sx.start, sy.start, sz.start, sx.stop, sy.stop, sz.stop) != (0, 0, 0) + sem.shape:
+        sem = np.ascontiguousarray(sem[sx, sy, sz])
+        inst = np.ascontiguousarray(inst[sx, sy, sz]) if has else inst
+    f = 1
+    if sem.size == 0:
+        return blank, f
+    while math.prod(-(-n // f) for n in sem.shape) > max(int(max_voxels), 1):
+        f *= 2
+    psem, pinst = pool_occupancy(sem, inst if has else None, f)
+    vs = vs0 * f
+    idx, mask = surface_voxels(psem)
+    if len(idx) == 0:
+        return blank, f
+    i, j, k = idx[:, 0], idx[:, 1], idx[:, 2]
+    z = origin[2] + (k + 0.5) * vs
+    if bounds is not None and len(bounds) > 2 and bounds[2] is not None:
+        z_range = (float(bounds[2][0]), float(bounds[2][1]))
+    else:
+        z_range = (float(z.min()), float(z.max()))
+    cols = np.ascontiguousarray(_base_colours(psem[i, j, k], pinst[i, j, k], z, mode, z_range).astype(np.float64))
+    # framing: the bounds (clipped to the grid) or the occupied voxels
+    if bounds is not None:
+        lo, hi = full_lo.copy(), full_hi.copy()
+        for a in range(min(len(bounds), 3)):
+            if bounds[a] is not None:
+                lo[a], hi[a] = max(lo[a], bounds[a][0]), min(hi[a], bounds[a][1])
+    else:
+        lo, hi = origin + idx.min(axis=0) * vs, origin + (idx.max(axis=0) + 1) * vs
+    Hs, Ws = H * ss, W * ss
+    cam, basis, persp, scale, offx, offy, light = _frame_camera(
+        lo, hi, elevation_deg, azimuth_deg, Hs, Ws, fov_deg, margin
+    )
+    normals = np.array([[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]], float)
+    shade = AMBIENT + DIFFUSE * np.clip(normals @ light, 0.0, 1.0)
+    img = np.empty((Hs, Ws, 3), np.float32)
+    img[:] = bg
+    zbuf = np.full((Hs, Ws), np.inf)
+    edge = 0.75 * ss if outline else 0.0
+    _draw_faces(idx, mask, cols, shade, origin, float(vs), cam, basis, persp, scale, offx, offy, edge, OUTLINE_DARKEN,
+                zbuf, img)  # fmt: skip
+    if ss > 1:
+        img = img.reshape(H, ss, W, ss, 3).mean(axis=(1, 3))
+    return np.ascontiguousarray(np.clip(np.round(img), 0, 255).astype(np.uint8)), f
+
+
+def perspective_view(
+    semantic,
+    instance,
+    grid: GridSpec,
+    size=(540, 960),
+    elevation_deg: float = 35.0,
+    azimuth_deg: float = 180.0,
+    *,
+    mode: str = "instance",
+    fov_deg: float = 40.0,
+    bounds=None,
+    max_voxels: int = DEFAULT_MAX_VOXELS,
+    background=(255, 255, 255),
+    antialias: int = 2,
+    margin: float = 0.03,
+    outline: bool = True,
+) -> np.ndarray:
+    """3D view of the occupied voxels as shaded cubes: ``size`` = ``(height, width)`` (the
+    ``stages.render`` convention) uint8 RGB.
+
+    The camera looks from ``azimuth_deg`` (about +z, from +x towards +y; 180 = from behind the ego)
+    and ``elevation_deg`` (above the horizon) with a vertical field of view ``fov_deg`` (0 for an
+    orthographic view), framing the occupied voxels, or the metric ``bounds`` ((xmin, xmax),
+    (ymin, ymax)[, (zmin, zmax)]) to which the grid is then also cropped (the voxels whose centre
+    is inside). Grids of more than ``max_voxels`` voxels are pooled first (see the module
+    docstring). Only exposed faces are drawn, Lambert shaded per face direction, with thin darker
+    borders when ``outline``; ``antialias`` supersamples. An empty grid gives the ``background``."""
+    sem, inst, has = _arrays(semantic, instance, grid)
+    img, _ = _perspective(sem, inst, has, grid.origin, grid.voxel_size, size, elevation_deg, azimuth_deg, mode,
+                          fov_deg, bounds, max_voxels, background, antialias, margin, outline)  # fmt: skip
+    return img
+
+
+# --------------------------------------------------------------------------------------------
+# figures
+# --------------------------------------------------------------------------------------------
+
+_FIG_BG = (255, 255, 255)
+_STRIP_BG = (236, 236, 236)
+_TEXT = (20, 20, 20)
+
+
+def _resize_nearest(img: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    r = (np.arange(rows) * img.shape[0]) // rows
+    c = (np.arange(cols) * img.shape[1]) // cols
+    return np.ascontiguousarray(img[r][:, c])
+
+
+def _place(canvas: np.ndarray, img: np.ndarray, y: int, x: int) -> None:
+    canvas[y : y + img.shape[0], x : x + img.shape[1]] = img
+
+
+def _fit_text(text: str, width: int, scale: int) -> str:
+    max_chars = max(1, (width + scale) // ((FONT_WIDTH + 1) * scale))
+    return text if len(text) <= max_chars else text[: max(0, max_chars - 2)] + ".."[:max_chars]
+
+
+def _strip(width: int, text: str, scale: int, centre: bool = True) -> np.ndarray:
+    h = (FONT_HEIGHT + 4) * scale
+    strip = np.empty((h, width, 3), np.uint8)
+    strip[:] = _STRIP_BG
+    text = _fit_text(text, width - 4 * scale, scale)
+    x = (width - text_width(text, scale)) // 2 if centre else 2 * scale
+    draw_text(strip, text, x, 2 * scale, _TEXT, scale)
+    return strip
+
+
+def _legend(class_ids: Sequence[int], mode: str, height: int, scale: int) -> np.ndarray:
+    """Legend panel: a colour swatch and the name of every class, in columns of at most
+    ``height`` pixels; thing classes are starred in instance mode (one colour per instance)."""
+    things = set(thing_ids())
+    row_h = (FONT_HEIGHT + 4) * scale
+    names = [CLASSES[c].name + (" *" if mode == "instance" and c in things else "") for c in class_ids]
+    notes = ["* colour per instance"] if mode == "instance" and any(c in things for c in class_ids) else []
+    if mode == "height":
+        names, notes = ["(colour = height)"], []
+    lines = len(names) + len(notes)
+    per_col = max(1, (height - 2 * scale) // row_h)
+    ncols = max(1, -(-lines // per_col))
+    sw = FONT_HEIGHT * scale
+    col_w = sw + 3 * scale + max([text_width(n, scale) for n in names + notes] + [1]) + 4 * scale
+    panel = np.empty((max(height, row_h), ncols * col_w, 3), np.uint8)
+    panel[:] = _FIG_BG
+    for n, name in enumerate(names + notes):
+        c, r = divmod(n, per_col)
+        x, y = c * col_w + scale, scale + r * row_h
+        if n < len(names) and mode != "height":
+            panel[y : y + sw, x : x + sw] = np.asarray(palette()[class_ids[n]], np.uint8)
+            panel[y : y + sw, x : x + sw][[0, -1]] = _TEXT
+            panel[y : y + sw, x : x + sw][:, [0, -1]] = _TEXT
+            draw_text(panel, name, x + sw + 3 * scale, y, _TEXT, scale)
+        else:
+            draw_text(panel, name, x, y, _TEXT, scale)
+    return panel
+
+
+def occupancy_figure(
+    semantic,
+    instance,
+    grid: GridSpec,
+    title: str,
+    *,
+    height: int = 540,
+    mode: str = "instance",
+    elevation_deg: float = 35.0,
+    azimuth_deg: float = 180.0,
+    max_voxels: int = DEFAULT_MAX_VOXELS,
+) -> np.ndarray:
+    """One frame at a glance: a title strip over [BEV | 3D view | legend of the classes present],
+    the panels ``height`` pixels high with a caption strip under the BEV and the 3D view (the 3D
+    caption names the pooling, if any). The BEV (:func:`bev_height_map`, ego marked) is block-
+    downsampled to at least ``height`` rows and nearest-resized to exactly ``height``; the 3D view
+    (:func:`perspective_view`) is ``height`` x ``16/9 height``."""
+    _check_mode(mode)
+    H = int(height)
+    if H < 32:
+        raise ValueError(f"height must be >= 32 pixels, got {height}")
+    sem, inst, has = _arrays(semantic, instance, grid)
+    inst_arg = inst if has else None
+    scale = 1 if H < 400 else 2
+    X = sem.shape[0]
+    # BEV: block top-most downsample to >= H rows, then nearest-resize to H rows
+    f = max(1, X // H)
+    ktop, stop, itop = top_surface(sem, inst_arg)
+    if f > 1:
+        ktop, stop, itop = _block_top(ktop, stop, itop, f)
+    cell = grid.voxel_size * f
+    bev = _to_image(_bev_colours(ktop, stop, itop, grid.origin[2], grid.voxel_size, mode, None, True, FREE_RGB))
+    _draw_ego(bev, grid.origin[0] + ktop.shape[0] * cell, grid.origin[1] + ktop.shape[1] * cell, cell)
+    bw = max(1, int(round(bev.shape[1] * H / bev.shape[0])))
+    bev = _resize_nearest(bev, H, bw)
+    view, pool = _perspective(sem, inst, has, grid.origin, grid.voxel_size, (H, int(round(H * 16 / 9))),
+                              elevation_deg, azimuth_deg, mode, 40.0, None, max_voxels, _FIG_BG, 2, 0.03,
+                              True)  # fmt: skip
+    present = [int(c) for c in classes_present(sem) if c < len(CLASSES)]
+    legend = _legend(present, mode, H, scale)
+    gap = 6 * scale
+    res = f"{grid.voxel_size:g} m"
+    cap_bev = _strip(bev.shape[1], f"BEV {res}, up = forward", scale)
+    pooled = f", pooled x{pool} ({grid.voxel_size * pool:g} m)" if pool > 1 else ""
+    cap_3d = _strip(view.shape[1], f"3D {res}{pooled}", scale)
+    width = bev.shape[1] + view.shape[1] + legend.shape[1] + 2 * gap
+    title_strip = _strip(width, str(title), scale + 1, centre=False)
+    cap_h = cap_bev.shape[0]
+    fig = np.empty((title_strip.shape[0] + gap + max(H, legend.shape[0]) + cap_h, width, 3), np.uint8)
+    fig[:] = _FIG_BG
+    _place(fig, title_strip, 0, 0)
+    y = title_strip.shape[0] + gap
+    _place(fig, bev, y, 0)
+    _place(fig, cap_bev, y + H, 0)
+    _place(fig, view, y, bev.shape[1] + gap)
+    _place(fig, cap_3d, y + H, bev.shape[1] + gap)
+    _place(fig, legend, y, bev.shape[1] + view.shape[1] + 2 * gap)
+    return fig
+
+
+def multi_resolution_figure(
+    frames: Sequence[tuple[str, np.ndarray, np.ndarray | None, GridSpec]],
+    *,
+    window=((-5.0, 15.0), (-10.0, 10.0)),
+    cell_size: int = 360,
+    mode: str = "instance",
+    elevation_deg: float = 35.0,
+    azimuth_deg: float = 180.0,
+    max_voxels: int = DEFAULT_MAX_VOXELS,
+    title: str | None = None,
+) -> np.ndarray:
+    """The multi-resolution figure: one column per ``(label, semantic, instance, grid)`` frame
+    (typically the same scene at 0.05 / 0.1 / 0.2 / 0.4 m), the label on top, then the 3D view of
+    the metric ``window`` ((xmin, xmax), (ymin, ymax), all heights) and the BEV of the same window
+    with the ego marked, ``cell_size`` pixels per window x extent, nearest-neighbour sampled so
+    coarser voxels show as bigger blocks. Every column uses the same camera (framing the window
+    over the common occupied height range) and the same BEV height normalisation; an optional
+    ``title`` strip goes on top."""
+    _check_mode(mode)
+    if not frames:
+        raise ValueError("multi_resolution_figure needs at least one frame")
+    (xmin, xmax), (ymin, ymax) = window
+    if not (xmax > xmin and ymax > ymin):
+        raise ValueError(f"empty window {window!r}")
+    rows = int(cell_size)
+    cols = max(1, int(round(rows * (ymax - ymin) / (xmax - xmin))))
+    view_h = max(1, int(round(cols * 0.75)))
+    scale = 1 if cols < 300 else 2
+    crops = []
+    for label, semantic, instance, grid in frames:
+        sem, inst, has = _arrays(semantic, instance, grid)
+        sx, sy, _ = _crop_indices(grid.origin, grid.voxel_size, grid.shape, window, centres=False)
+        csem = np.ascontiguousarray(sem[sx, sy, :])
+        cinst = np.ascontiguousarray(inst[sx, sy, :]) if has else None
+        tops = top_surface(csem, cinst)
+        occ_z = np.flatnonzero(csem.any(axis=(0, 1))) if csem.size else np.empty(0, np.int64)
+        zr = None
+        if occ_z.size:
+            zr = (grid.origin[2] + occ_z[0] * grid.voxel_size, grid.origin[2] + (occ_z[-1] + 1) * grid.voxel_size)
+        crops.append((str(label), csem, cinst, grid, sx.start, sy.start, tops, zr))
+    z_range = _top_range([c[6][0] for c in crops], [c[3] for c in crops])
+    zs = [c[7] for c in crops if c[7] is not None]
+    zbox = (min(z[0] for z in zs), max(z[1] for z in zs)) if zs else None
+    gap = 8
+    label_h = (FONT_HEIGHT + 4) * (scale + 1)
+    col_h = label_h + view_h + gap + rows
+    fig_w = len(crops) * cols + (len(crops) - 1) * gap
+    title_strip = _strip(fig_w, title, scale + 1, centre=False) if title else np.empty((0, fig_w, 3), np.uint8)
+    top = title_strip.shape[0] + (gap if title else 0)
+    fig = np.empty((top + col_h, fig_w, 3), np.uint8)
+    fig[:] = _FIG_BG
+    _place(fig, title_strip, 0, 0)
+    for n, (label, csem, cinst, grid, i0, j0, (ktop, stop, itop), _) in enumerate(crops):
+        x0 = n * (cols + gap)
+        _place(fig, _strip(cols, label, scale + 1), top, x0)
+        if zbox is not None and csem.size:
+            corner = (grid.origin[0] + i0 * grid.voxel_size, grid.origin[1] + j0 * grid.voxel_size, grid.origin[2])
+            view, _ = _perspective(csem, cinst if cinst is not None else np.zeros((1, 1, 1), np.uint32),
+                                   cinst is not None, corner, grid.voxel_size, (view_h, cols), elevation_deg,
+                                   azimuth_deg, mode, 40.0, (window[0], window[1], zbox), max_voxels, _FIG_BG, 2,
+                                   0.03, True)  # fmt: skip
+            _place(fig, view, top + label_h, x0)
+        bev = _bev_window(ktop, stop, itop, grid, i0, j0, window, (rows, cols), mode, z_range, True, FREE_RGB)
+        _draw_ego(bev, xmax, ymax, (xmax - xmin) / rows)
+        _place(fig, bev, top + label_h + view_h + gap, x0)
+    return fig

@@ -1,0 +1,251 @@
+"""Occupancy pictures: BEV colours, orientation and height shading, the 3D voxel view, pooling,
+surface voxels and the two figures, on small synthetic grids (a road plane, a car box, a pole)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas.grid import GridSpec
+from schemas.taxonomy import by_name, palette
+from stages.render_occupancy import (FREE_RGB, bev_height_map, classes_present, instance_colors,
+                                     multi_resolution_figure, occupancy_figure, perspective_view,
+                                     pool_occupancy, surface_voxels, top_surface)  # fmt: skip
+
+ROAD, CAR, POLE, SIGN = (by_name(n).id for n in ("Road", "Car", "Pole", "TrafficSign"))
+CAR_ID = 7
+WHITE = np.array([255, 255, 255], np.uint8)
+
+
+def _grid(vs=0.25, lo=(-4.0, -4.0, -2.0), hi=(8.0, 4.0, 3.0)) -> GridSpec:
+    return GridSpec(region_min=lo, region_max=hi, voxel_size=vs)
+
+
+def _index(grid: GridSpec, value: float, axis: int) -> int:
+    return int(np.floor((value - grid.origin[axis]) / grid.voxel_size + 1e-9))
+
+
+def _box(sem, inst, grid, x, y, z, cls, ident=0):
+    """Fill the voxels of the metric box x, y, z (pairs) with a class and an instance id."""
+    sl = tuple(slice(_index(grid, a, k), _index(grid, b, k)) for k, (a, b) in enumerate((x, y, z)))
+    sem[sl] = cls
+    inst[sl] = ident
+
+
+def _scene(vs=0.25):
+    """Road plane (top at z = -1.5) with a hole, a car (x 3..5, y -2..-1) and a pole (x 1, y 2)."""
+    grid = _grid(vs)
+    sem = np.zeros(grid.shape, np.uint8)
+    inst = np.zeros(grid.shape, np.uint32)
+    _box(sem, inst, grid, (-4, 8), (-4, 4), (-2, -1.5), ROAD)
+    _box(sem, inst, grid, (-4, -3), (-4, -3), (-2, -1.5), 0)  # a hole: free columns
+    _box(sem, inst, grid, (3, 5), (-2, -1), (-1.5, 0), CAR, CAR_ID)
+    _box(sem, inst, grid, (1, 1.25), (2, 2.25), (-1.5, 2), POLE)
+    return sem, inst, grid
+
+
+def _pixel(img, grid, x, y, f=1):
+    """BEV pixel of the metric point (x, y): row from the top (+x), column from the left (+y);
+    with ``f`` x ``f`` blocks the grid is padded to whole blocks at its +x / +y ends."""
+    cell = f * grid.voxel_size
+    top = grid.origin[0] + -(-grid.shape[0] // f) * cell
+    left = grid.origin[1] + -(-grid.shape[1] // f) * cell
+    return img[int((top - x) // cell), int((left - y) // cell)]
+
+
+def _is_shade_of(pixel, base, tol=2.0) -> bool:
+    """``pixel`` is ``base`` times one brightness factor in (0, 1] (up to rounding)."""
+    pixel, base = np.asarray(pixel, float), np.asarray(base, float)
+    s = pixel.sum() / base.sum()
+    return 0.0 < s <= 1.0 + 1e-6 and np.abs(pixel - base * s).max() <= tol
+
+
+# ---------------------------------------------------------------------------------------------
+# bird's-eye view
+# ---------------------------------------------------------------------------------------------
+
+
+def test_bev_shape_dtype_and_colours():
+    sem, inst, grid = _scene()
+    img = bev_height_map(sem, inst, grid)
+    assert img.shape == (grid.shape[0], grid.shape[1], 3) and img.dtype == np.uint8
+    car = _pixel(img, grid, 4.0, -1.5)
+    assert _is_shade_of(car, instance_colors(CAR_ID))
+    assert not _is_shade_of(car, palette()[CAR], tol=10)
+    assert _is_shade_of(_pixel(img, grid, 6.0, 2.5), palette()[ROAD])
+    assert _is_shade_of(_pixel(img, grid, 1.1, 2.1), palette()[POLE])
+    assert (_pixel(img, grid, -3.5, -3.5) == FREE_RGB).all()
+    # semantic mode: every voxel by its class colour
+    sem_img = bev_height_map(sem, inst, grid, "semantic")
+    assert _is_shade_of(_pixel(sem_img, grid, 4.0, -1.5), palette()[CAR])
+    # height mode: a colour ramp, the pole top differs from the road
+    h = bev_height_map(sem, inst, grid, "height")
+    assert not (_pixel(h, grid, 1.1, 2.1) == _pixel(h, grid, 6.0, 2.5)).all()
+    # deterministic, and instance=None works (stuff colours only)
+    assert (bev_height_map(sem, inst, grid) == img).all()
+    assert _is_shade_of(_pixel(bev_height_map(sem, None, grid), grid, 4.0, -1.5), palette()[CAR])
+
+
+def test_bev_orientation_forward_is_up_and_left_is_left():
+    grid = _grid(0.25, lo=(-6.0, -6.0, -1.0), hi=(6.0, 6.0, 1.0))  # square: a transpose keeps the shape
+    sem = np.zeros(grid.shape, np.uint8)
+    inst = np.zeros(grid.shape, np.uint32)
+    _box(sem, inst, grid, (3.5, 4.5), (-0.5, 0.5), (-1, 0), CAR)  # ahead (+x)
+    _box(sem, inst, grid, (-0.5, 0.5), (3.5, 4.5), (-1, 0), SIGN)  # to the left (+y)
+    img = bev_height_map(sem, inst, grid, "semantic", mark_ego=True)
+    white = np.argwhere((img == WHITE).all(axis=2))  # the ego marker, centred on the LiDAR
+    ego = (white.min(axis=0) + white.max(axis=0)) / 2
+    ahead = np.argwhere((img[..., 2] > 60) & (img[..., 0] < 30)).mean(axis=0)  # Car is blue
+    left = np.argwhere((img[..., 0] > 60) & (img[..., 2] < 30)).mean(axis=0)  # TrafficSign is yellow
+    assert ahead[0] < ego[0] - 10 and abs(ahead[1] - ego[1]) < 2  # above the ego, same column
+    assert left[1] < ego[1] - 10 and abs(left[0] - ego[0]) < 2  # left of the ego, same row
+
+
+@pytest.mark.parametrize("relief", [True, False])
+def test_bev_higher_voxel_of_the_same_class_is_brighter(relief):
+    grid = _grid()
+    sem = np.zeros(grid.shape, np.uint8)
+    inst = np.zeros(grid.shape, np.uint32)
+    _box(sem, inst, grid, (-4, 8), (-4, 4), (-2, -1.5), ROAD)
+    _box(sem, inst, grid, (0, 1), (-2, -1), (-1.5, -1.0), ROAD)  # a low road block
+    _box(sem, inst, grid, (0, 1), (1, 2), (-1.5, 1.0), ROAD)  # a high road block
+    img = bev_height_map(sem, inst, grid, relief=relief).astype(int)
+    ground, low, high = (_pixel(img, grid, *p).sum() for p in ((5.0, 0.0), (0.5, -1.5), (0.5, 1.5)))
+    assert ground < low < high
+    assert _is_shade_of(_pixel(img, grid, 0.5, 1.5), palette()[ROAD])
+
+
+def test_bev_max_pixels_keeps_the_top_most_voxel_per_block():
+    sem, inst, grid = _scene()
+    img = bev_height_map(sem, inst, grid, "semantic", max_pixels=200)
+    # 48 x 32 columns: 3 is the smallest factor with ceil(48 / f) * ceil(32 / f) <= 200
+    assert img.shape == (16, 11, 3)
+    # the pole (one column) wins its 3 x 3 block over the road around it
+    assert _is_shade_of(_pixel(img, grid, 1.1, 2.1, f=3), palette()[POLE])
+    assert _is_shade_of(_pixel(img, grid, 6.0, -3.0, f=3), palette()[ROAD])
+
+
+def test_top_surface_and_instance_colours():
+    sem, inst, grid = _scene()
+    k, s, i = top_surface(sem, inst)
+    assert k.shape == grid.shape[:2] and (k[0, 0], s[0, 0], i[0, 0]) == (-1, 0, 0)  # the hole
+    ci, cj = _index(grid, 4.0, 0), _index(grid, -1.5, 1)
+    assert (s[ci, cj], i[ci, cj], k[ci, cj]) == (CAR, CAR_ID, _index(grid, 0, 2) - 1)
+    cols = instance_colors(np.arange(1, 201))
+    assert cols.shape == (200, 3) and cols.dtype == np.uint8
+    assert (instance_colors(np.arange(1, 201)) == cols).all()
+    assert len({tuple(c) for c in cols}) == 200
+    hi, lo = cols.max(axis=1).astype(int), cols.min(axis=1).astype(int)
+    assert (hi >= 200).all() and ((hi - lo) / hi >= 0.6).all()  # bright, saturated
+
+
+# ---------------------------------------------------------------------------------------------
+# voxels: surfaces and pooling
+# ---------------------------------------------------------------------------------------------
+
+
+def test_surface_voxels_of_a_cube_skip_the_inside():
+    sem = np.zeros((5, 5, 5), np.uint8)
+    sem[1:4, 1:4, 1:4] = 3
+    idx, mask = surface_voxels(sem)
+    assert len(idx) == 26 and not ((idx == 2).all(axis=1)).any()
+    corner = mask[(idx == 1).all(axis=1)][0]
+    assert corner == 1 | 4 | 16  # -x, -y, -z exposed
+    # outside the grid counts as free
+    idx, mask = surface_voxels(np.ones((1, 1, 1), np.uint8))
+    assert len(idx) == 1 and mask[0] == 63
+
+
+def test_pool_occupancy_takes_the_top_most_voxel_of_each_block():
+    sem = np.zeros((4, 4, 4), np.uint8)
+    inst = np.zeros((4, 4, 4), np.uint32)
+    sem[0, 0, 0], sem[1, 1, 1], inst[1, 1, 1] = ROAD, CAR, 5  # block (0, 0, 0): Car is higher
+    sem[3, 3, 2] = POLE
+    psem, pinst = pool_occupancy(sem, inst, 2)
+    assert psem.shape == (2, 2, 2)
+    assert (psem[0, 0, 0], pinst[0, 0, 0], psem[1, 1, 1]) == (CAR, 5, POLE)
+    assert np.count_nonzero(psem) == 2
+    assert pool_occupancy(np.ones((5, 5, 5), np.uint8), None, 2)[0].shape == (3, 3, 3)
+    assert list(classes_present(sem)) == [ROAD, POLE, CAR]
+
+
+# ---------------------------------------------------------------------------------------------
+# 3D view
+# ---------------------------------------------------------------------------------------------
+
+
+def test_perspective_view_of_an_empty_grid_is_the_background():
+    grid = _grid()
+    empty = np.zeros(grid.shape, np.uint8)
+    img = perspective_view(empty, np.zeros(grid.shape, np.uint32), grid, size=(60, 100))
+    assert img.shape == (60, 100, 3) and img.dtype == np.uint8 and (img == WHITE).all()
+
+
+def test_perspective_view_draws_the_voxels_from_behind_the_ego():
+    sem, inst, grid = _scene()
+    img = perspective_view(sem, inst, grid, size=(120, 200), mode="semantic")
+    assert img.shape == (120, 200, 3) and img.dtype == np.uint8
+    fg = (img != WHITE).any(axis=2)
+    assert fg.mean() > 0.3
+    # chase camera: the car (y < 0, right of the ego) is right of the pole (y > 0)
+    car = np.argwhere((img[..., 2] > 40) & (img[..., 0] < 30) & (img[..., 1] < 30)).mean(axis=0)
+    pole = np.argwhere((np.ptp(img.astype(int), axis=2) < 8) & (img[..., 0] > 60) & (img[..., 0] < 200))
+    assert len(pole) and car[1] > pole[:, 1].mean()
+    # orthographic, other angles, instance colours, pooling by a tiny voxel budget
+    for kw in ({"fov_deg": 0}, {"azimuth_deg": 0, "elevation_deg": 60}, {"max_voxels": 5000}):
+        other = perspective_view(sem, inst, grid, size=(60, 100), **kw)
+        assert (other != WHITE).any(axis=2).mean() > 0.2
+    assert (perspective_view(sem, inst, grid, size=(120, 200), mode="semantic") == img).all()
+
+
+def test_bad_inputs_are_rejected():
+    sem, inst, grid = _scene()
+    with pytest.raises(ValueError, match="grid shape"):
+        bev_height_map(sem[:-1], inst[:-1], grid)
+    with pytest.raises(ValueError, match="instance shape"):
+        perspective_view(sem, inst[:, :, :-1], grid)
+    with pytest.raises(ValueError, match="mode"):
+        bev_height_map(sem, inst, grid, mode="panoptic")
+
+
+# ---------------------------------------------------------------------------------------------
+# figures
+# ---------------------------------------------------------------------------------------------
+
+
+def test_occupancy_figure_has_title_panels_and_legend():
+    sem, inst, grid = _scene()
+    fig = occupancy_figure(sem, inst, grid, "frame 000042", height=120)
+    assert fig.dtype == np.uint8 and fig.ndim == 3
+    assert fig.shape[1] > 120 * 16 // 9 + 120 * 2 // 3  # BEV + 3D view + legend side by side
+    title = fig[:12]
+    assert (title == [20, 20, 20]).all(axis=2).any()  # text in the title strip
+    for cls in (ROAD, CAR, POLE):  # legend swatches of the classes present
+        assert (fig == palette()[cls]).all(axis=2).sum() >= 16
+    assert not (fig == palette()[SIGN]).all(axis=2).any()
+
+
+def test_multi_resolution_figure_has_one_labelled_column_per_resolution():
+    frames = [(f"{vs:g} m", *_scene(vs)) for vs in (0.25, 0.5)]
+    one = multi_resolution_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+    two = multi_resolution_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+    assert one.dtype == two.dtype == np.uint8 and one.shape[0] == two.shape[0]
+    assert two.shape[1] > 2 * one.shape[1] - 1 - 16 and two.shape[1] > one.shape[1]
+    col = one.shape[1]
+    label_rows = two[:14]
+    text = (label_rows == [20, 20, 20]).all(axis=2)
+    assert text[:, :col].any() and text[:, col:].any()  # a label over each column
+    # the same metric window: both BEVs have the car at the same place, the coarse one blockier
+    bev_rows = slice(two.shape[0] - 96, two.shape[0])
+    left, right = two[bev_rows, :col], two[bev_rows, two.shape[1] - col :]
+    car_l = np.argwhere(_shade_mask(left, instance_colors(CAR_ID))).mean(axis=0)
+    car_r = np.argwhere(_shade_mask(right, instance_colors(CAR_ID))).mean(axis=0)
+    assert np.abs(car_l - car_r).max() <= 4
+    assert len(np.unique(right.reshape(-1, 3), axis=0)) <= len(np.unique(left.reshape(-1, 3), axis=0))
+
+
+def _shade_mask(img, base) -> np.ndarray:
+    """Pixels whose colour is a shade of ``base``."""
+    img, base = img.astype(float), np.asarray(base, float)
+    s = img.sum(axis=2, keepdims=True) / base.sum()
+    return (np.abs(img - s * base).max(axis=2) <= 3) & (s[..., 0] > 0.3)
