@@ -8,6 +8,7 @@ from catalog.store import StoreError
 from pipeline import tasks
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
 from schemas.records import SequenceRecord
+from schemas.configs import DatasetConfig, VoxelizeConfig
 
 INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
 # code every task runs through besides its stage's compute: the contracts, the readers/writers and
@@ -60,6 +61,12 @@ def _sequences(ctx: Context) -> list[SequenceRecord]:
     return sorted(seqs, key=lambda s: s.sequence_id)
 
 
+def voxelize_config(config: DatasetConfig) -> VoxelizeConfig:
+    """The voxelize stage's config: ``voxelize`` with the rig of ``scenes`` (masks are cast from
+    the sensors the sequences were recorded with; a rig change re-runs both stages)."""
+    return config.voxelize.model_copy(update={"rig": config.scenes.rig})
+
+
 def _voxelize_partitions(ctx: Context) -> list[Partition]:
     out = []
     for seq in _sequences(ctx):
@@ -82,7 +89,8 @@ def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Pa
     groups = {(p.params["sequence_id"], p.params["resolution"]) for p in to_run}
     invalid: set[str] = set()
     for seq, res in sorted(groups):
-        if occ.create(seq, ctx.config.voxelize.grid(res), frames[seq], ctx.config.voxelize.chunk_edge):
+        vcfg = ctx.config.voxelize
+        if occ.create(seq, vcfg.grid(res), frames[seq], vcfg.chunk_edge, names=tasks.occupancy_arrays(vcfg)):
             invalid |= {p.key for p in partitions
                         if (p.params["sequence_id"], p.params["resolution"]) == (seq, res)}
     return invalid
@@ -133,10 +141,11 @@ STAGES: dict[str, StageSpec] = {
             upstream=("ingest", "scenes"),
             code_modules=("stages.voxelize", "stages.scenes", *SHARED_CODE),
             reads=("admesh/", "scenes/"),
-            writes=("occupancy.zarr/<seq>/<res>/{semantic,instance}",),
+            writes=("occupancy.zarr/<seq>/<res>/{semantic,instance,mask_camera,mask_lidar,flow}",),
             partitions=_voxelize_partitions,
             task=tasks.voxelize_task,
             prepare=_voxelize_prepare,
+            config_of=voxelize_config,
         ),
         StageSpec(
             name="metrics",

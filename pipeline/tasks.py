@@ -301,9 +301,18 @@ def _frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
     return from_table(model, table.filter(pc.equal(table["frame_index"], frame_index)))
 
 
-def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
-    """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
-    (lo, hi) in the LiDAR frame."""
+@dataclasses.dataclass(frozen=True)
+class FrameInputs:
+    """What one frame's tasks read: its sequence, frame and actor rows and the panoptic scene."""
+
+    sequence: SequenceRecord
+    frame: FrameRecord
+    actors: list[ActorStateRecord]
+    scene: list  # SceneMesh, LiDAR frame, cut to the requested region
+
+
+def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameInputs:
+    """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame."""
     from stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
 
     t_seq = ParquetTable(store, SequenceRecord)
@@ -325,23 +334,93 @@ def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
     selected = index.select(*frame_region(frames[0], *region))
     needed = {index.placements[i].asset_id for i in selected} | {a.asset_id for a in actors}
     geometry = load_geometry(store, needed, index.placements)
-    return assemble_frame(frames[0], actors, index, geometry, region,
-                          pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
+    scene = assemble_frame(frames[0], actors, index, geometry, region,
+                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
+    return FrameInputs(sequence, frames[0], actors, scene)
+
+
+def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
+    """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
+    (lo, hi) in the LiDAR frame."""
+    return frame_inputs(store, seq_id, frame_index, region).scene
+
+
+def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
+    """The occupancy arrays the voxelize stage writes under ``cfg``."""
+    return ("semantic", "instance") + (("mask_camera", "mask_lidar") if cfg.masks else ()) + (
+        ("flow",) if cfg.flow else ())
+
+
+def _scratch(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """A per-thread buffer reused across frames (fresh pages cost more than the voxelization)."""
+    from stages.voxelize.compose import _buffer
+
+    return _buffer(name, int(np.prod(shape)), dtype).reshape(shape)
+
+
+def _frame_flow(inputs: FrameInputs):
+    """``tile -> flow`` of the frame's actors (the flow of a tile without them is all zero)."""
+    from stages.geometry import pose_from_list
+    from stages.voxelize.flow import instance_flow
+
+    actors = [a for a in inputs.actors if a.instance_id > 0]
+    ids = np.asarray([a.instance_id for a in actors], dtype=np.uint32)
+    # rotation centre: the actor's pose origin (its velocity is that point's, see traffic)
+    centres = np.asarray([pose_from_list(a.pose)[:3, 3] for a in actors], dtype=np.float64).reshape(-1, 3)
+    vel = np.asarray([a.velocity for a in actors], dtype=np.float64).reshape(-1, 3)
+    ang = np.asarray([a.angular_velocity for a in actors], dtype=np.float64).reshape(-1, 3)
+    lidar_to_world = pose_from_list(inputs.frame.lidar_pose)
+
+    first = int(ids.min()) if len(ids) else None
+
+    def flow(tile, tile_origin, voxel_size) -> np.ndarray | None:
+        # actors' instance ids come after every static one of the town (see traffic): a tile whose
+        # largest id is below the first actor's holds no dynamic voxel (None: all zero)
+        if first is None or int(tile.instance.max()) < first:
+            return None
+        return instance_flow(tile.instance, tile_origin, voxel_size, ids, centres, vel, ang, lidar_to_world)
+
+    return flow
 
 
 def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
-    """Voxelize one frame of one sequence at one resolution into occupancy.zarr."""
+    """Voxelize one frame of one sequence at one resolution into occupancy.zarr: semantic and
+    instance tile by tile (x-slabs of whole chunks), the flow of each tile, then the camera and
+    LiDAR masks of the whole frame."""
+    from schemas.rig import RigConfig
     from stages.scenes.assembly import region_of_grid
-    from stages.voxelize import voxelize_scene
+    from stages.voxelize import visibility_masks, voxelize_tiles
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
-    scene = frame_scene(store, seq_id, frame_index, region_of_grid(grid))
-    if not cfg.fill_closed:
-        scene = [dataclasses.replace(m, closed=False) for m in scene]
-    semantic, instance = voxelize_scene(scene, grid)
-    return OccupancyStore(store).write_frame(seq_id, grid, frame_index,
-                                             {"semantic": semantic, "instance": instance})
+    inputs = frame_inputs(store, seq_id, frame_index, region_of_grid(grid))
+    occ = OccupancyStore(store)
+    shape = tuple(int(n) for n in grid.shape)
+    names = occupancy_arrays(cfg)
+    # 1. semantic + instance per tile: the instance tile is written at once (never a whole
+    #    uint32 frame in memory); the semantic frame is kept for the masks
+    semantic = _scratch("frame_semantic", shape, np.uint8)
+    flow = _frame_flow(inputs) if cfg.flow else None
+    vs = float(grid.voxel_size)
+    for tile in voxelize_tiles(inputs.scene, grid, cfg.chunk_edge * cfg.tile_chunks, cfg.fill):
+        x1 = tile.x0 + tile.semantic.shape[0]
+        semantic[tile.x0:x1] = tile.semantic
+        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0)
+        if flow is not None:
+            origin = (grid.origin[0] + tile.x0 * vs, grid.origin[1], grid.origin[2])
+            v = flow(tile, origin, vs)
+            if v is None:
+                occ.clear_tile(seq_id, grid, frame_index, "flow", tile.x0, x1 - tile.x0)
+            else:
+                occ.write_tile(seq_id, grid, frame_index, "flow", v, tile.x0)
+    occ.write_tile(seq_id, grid, frame_index, "semantic", semantic, 0)
+    # 2. visibility: rays of the rig's cameras and LiDAR through the frame's occupancy
+    if cfg.masks:
+        mask_camera, mask_lidar = visibility_masks(semantic, grid, cfg.rig or RigConfig(),
+                                                   camera_stride=cfg.camera_ray_stride)
+        occ.write_tile(seq_id, grid, frame_index, "mask_camera", mask_camera, 0)
+        occ.write_tile(seq_id, grid, frame_index, "mask_lidar", mask_lidar, 0)
+    return occ.fingerprints(seq_id, grid, frame_index, names)
 
 
 # -- metrics --------------------------------------------------------------------------------------

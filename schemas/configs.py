@@ -98,8 +98,16 @@ class VoxelizeConfig(StageConfig):
 
     region_min: tuple[float, float, float] = DEFAULT_REGION_MIN
     region_max: tuple[float, float, float] = DEFAULT_REGION_MAX
-    fill_closed: bool = True
+    fill: Literal["auto", "surface", "solid"] = Field(
+        "auto", description="auto: fill closed thing meshes; surface: fill nothing; solid: also closed stuff")
     chunk_edge: int = Field(128, ge=16, le=1024, description="x/y chunk edge of the Zarr arrays, voxels")
+    tile_chunks: int = Field(1, ge=1, le=64, description="x chunks per voxelization tile (memory per worker)")
+    masks: bool = Field(True, description="compute mask_camera and mask_lidar (3D DDA from the rig's sensors)")
+    camera_ray_stride: int = Field(
+        2, ge=1, le=64, description="camera mask rays through every n-th pixel row and column (1 = every pixel)")
+    flow: bool = Field(True, description="compute the occupancy flow of dynamic instances")
+    rig: RigConfig | None = Field(
+        None, description="the ego rig for the masks; the pipeline sets it from scenes.rig")
 
     def grid(self, voxel_size: float) -> GridSpec:
         """The grid spec of this region at one resolution (validates the resolution)."""

@@ -1,10 +1,15 @@
 """Voxelization stage: panoptic occupancy from the frame's scene meshes (see DESIGN "Occupancy grid").
 
 ``surface_voxels``/``fill_interior`` are the numba kernels (linear indices over a grid);
-``voxelize_scene`` composes a frame's meshes in elevation order into semantic/instance volumes.
+``voxelize_scene``/``voxelize_tiles`` compose a frame's meshes in elevation order into
+semantic/instance volumes (whole, or one x-slab at a time); ``visibility_masks`` casts the rig's
+camera and LiDAR rays through them (3D DDA); ``instance_flow`` gives dynamic voxels their velocity;
+``resample`` pools and resamples onto coarser grids and other datasets' grids.
 """
 
-from stages.voxelize.compose import elevation_order, voxelize_scene
+from stages.voxelize.compose import FILL_MODES, elevation_order, voxelize_scene, voxelize_tiles
 from stages.voxelize.kernels import fill_interior, surface_voxels
+from stages.voxelize.visibility import ray_mask, visibility_masks
 
-__all__ = ["voxelize_scene", "elevation_order", "surface_voxels", "fill_interior"]
+__all__ = ["voxelize_scene", "voxelize_tiles", "elevation_order", "surface_voxels", "fill_interior",
+           "visibility_masks", "ray_mask", "FILL_MODES"]

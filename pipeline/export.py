@@ -1,0 +1,158 @@
+"""``carlaocc export``: a dataset's occupancy in the formats models already train on.
+
+Layouts written under ``OUT``:
+
+* ``occ3d``: ``gts/<sequence>/<frame:06d>/labels.npz`` -- Occ3D-nuScenes grid (200 x 200 x 16,
+  0.4 m, ego frame, range [-40, -40, -1, 40, 40, 5.4] m), Occ3D labels (free = 17), with
+  ``mask_lidar`` and ``mask_camera`` resampled from ours (observed when any observed voxel of ours
+  falls in the target voxel).
+* ``semantickitti``: ``sequences/<sequence>/voxels/<frame:06d>.{bin,label,invalid,occluded}`` --
+  256 x 256 x 32 at 0.2 m, LiDAR frame, forward only (x [0, 51.2], y [-25.6, 25.6], z [-2, 4.4]);
+  raw SemanticKITTI label ids (``learning_map_inv``); ``.occluded`` = not observed by the LiDAR,
+  ``.invalid`` = observed by neither the LiDAR nor a camera (when the masks exist; else nothing).
+* ``surroundocc``: ``<sequence>/<frame:06d>.npy`` -- sparse (x, y, z, label) rows of the
+  200 x 200 x 16 grid at 0.5 m (LiDAR frame, [-50, -50, -5, 50, 50, 3] m), Occ3D/nuScenes
+  class ids 0-16.
+* ``carlaocc-npz``: ``<sequence>/<frame:06d>.npz`` -- our own grid at ``--res``, rows
+  (x, y, z, sem << 11 | inst); instance ids compacted per sequence to 1..K (stable across the
+  sequence's frames; ``<sequence>/instances.json`` maps them back). A sequence with more than
+  2047 instances, or a class id above 31, is refused (clear error) rather than wrapped.
+
+The grids of the other datasets are filled from ours by class-priority binning
+(:func:`stages.voxelize.resample.resample`); export from the finest resolution you built.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from catalog.formats import FormatError
+from catalog.occupancy import OccupancyStore
+from catalog.parquet import ParquetTable
+from catalog.store import Store, StoreError
+from schemas.configs import DatasetConfig
+from schemas.grid import GridSpec
+from schemas.records import SequenceRecord
+from stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
+
+FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz")
+
+SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
+                                SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
+SURROUNDOCC_GRID = TargetGrid("surroundocc", (200, 200, 16), 0.5, (-50.0, -50.0, -5.0), "lidar", "occ3d_nuscenes", 17)
+
+
+@dataclass(frozen=True)
+class ExportSummary:
+    format: str
+    sequences: int
+    frames: int
+    files: int
+    out: Path
+
+
+def _frames(store: Store, grid: GridSpec, sequences: list[str] | None) -> Iterator[tuple[str, int, int]]:
+    seqs = sorted(ParquetTable(store, SequenceRecord).load(), key=lambda s: s.sequence_id)
+    known = {s.sequence_id for s in seqs}
+    for s in sequences or []:
+        if s not in known:
+            raise StoreError(f"sequence {s!r} is not in {store.url}")
+    occ = OccupancyStore(store)
+    for s in seqs:
+        if sequences and s.sequence_id not in sequences:
+            continue
+        if not occ.exists(s.sequence_id, grid, "semantic"):
+            if sequences:
+                raise StoreError(f"{s.sequence_id} has no occupancy at {grid.key} m: run "
+                                 f"`carlaocc run --stages voxelize --res {grid.key}` first")
+            continue
+        yield s.sequence_id, s.frame_count, occ.open(s.sequence_id, grid, "semantic").shape[0]
+
+
+def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out: Path,
+           sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> ExportSummary:
+    """Write every frame of every voxelized sequence (or ``sequences``) at ``resolution`` in
+    ``fmt`` under ``out``. Files are written atomically, one frame at a time."""
+    from catalog.formats import (
+        Occ3DFrame,
+        SemanticKittiVoxels,
+        dense_to_surroundocc,
+        save_carlaocc_npz,
+        save_occ3d,
+        save_semantickitti,
+        save_surroundocc,
+        to_raw,
+    )
+
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
+    grid = config.voxelize.grid(resolution)
+    occ = OccupancyStore(store)
+    lidar_to_ego = np.asarray(config.scenes.rig.lidar.sensor_to_ego(), dtype=np.float64)
+    n_seq = n_frames = n_files = 0
+    todo = list(_frames(store, grid, sequences))
+    if not todo:
+        raise StoreError(f"no voxelized sequence at {grid.key} m in {store.url}: run "
+                         f"`carlaocc run --res {grid.key}` first")
+    for seq, _, frame_count in todo:
+        n_seq += 1
+        has_masks = occ.exists(seq, grid, "mask_lidar") and occ.exists(seq, grid, "mask_camera")
+        if fmt == "carlaocc-npz":
+            # instance ids compacted over the whole sequence (stable across frames): a first pass
+            # collects the ids frame by frame (one dense frame in memory at a time)
+            inst = occ.open(seq, grid, "instance")
+            present = [np.unique(f[f != 0]) for f in (inst[t] for t in range(frame_count))]
+            ids = np.unique(np.concatenate(present)) if present else np.zeros(0, np.uint32)
+            if len(ids) > 2047:
+                raise FormatError(f"{seq}: {len(ids)} instances, more than CarlaOcc npz's 11-bit ids hold (2047)")
+            table = {int(o): i + 1 for i, o in enumerate(ids.tolist())}
+            (out / seq).mkdir(parents=True, exist_ok=True)
+            (out / seq / "instances.json").write_text(json.dumps({str(k): v for k, v in table.items()}, indent=1))
+            for t in range(frame_count):
+                sem = occ.open(seq, grid, "semantic")[t]
+                f = inst[t]
+                compact = np.where(f == 0, 0, np.searchsorted(ids, f) + 1).astype(np.uint32)
+                save_carlaocc_npz(out / seq / f"{t:06d}.npz", sem, compact, grid.voxel_size, grid.origin)
+                n_files += 1
+                n_frames += 1
+                if progress:
+                    progress(1)
+            continue
+        for t in range(frame_count):
+            names = ("semantic", "mask_lidar", "mask_camera") if has_masks else ("semantic",)
+            data = occ.read_frame(seq, grid, t, names)
+            masks = {k: data[k] for k in names[1:]}
+            if fmt == "occ3d":
+                labels, m = resample(data["semantic"], grid, OCC3D_NUSCENES, lidar_to_ego, masks)
+                shape = OCC3D_NUSCENES.shape
+                frame = Occ3DFrame(labels, m.get("mask_lidar", np.ones(shape, bool)).astype(np.uint8),
+                                   m.get("mask_camera", np.ones(shape, bool)).astype(np.uint8))
+                save_occ3d(out / "gts" / seq / f"{t:06d}" / "labels.npz", frame)
+                n_files += 1
+            elif fmt == "semantickitti":
+                labels, m = resample(data["semantic"], grid, SEMANTICKITTI_GRID, np.eye(4), masks)
+                shape = SEMANTICKITTI_GRID.shape
+                lidar_seen = m.get("mask_lidar", np.ones(shape, bool))
+                any_seen = lidar_seen | m.get("mask_camera", np.ones(shape, bool))
+                vox = SemanticKittiVoxels(occupied=labels != 0, invalid=~any_seen, occluded=~lidar_seen,
+                                          labels=to_raw(labels))
+                save_semantickitti(out / "sequences" / seq / "voxels", f"{t:06d}", vox)
+                n_files += 4
+            else:  # surroundocc
+                labels, _ = resample(data["semantic"], grid, SURROUNDOCC_GRID, np.eye(4))
+                save_surroundocc(out / seq / f"{t:06d}.npy", dense_to_surroundocc(labels, SURROUNDOCC_GRID.free_label))
+                n_files += 1
+            n_frames += 1
+            if progress:
+                progress(1)
+    return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+
+
+def frame_count(store: Store, config: DatasetConfig, resolution: float, sequences: list[str] | None) -> int:
+    """Frames an export would write (for a progress bar)."""
+    return sum(n for _, _, n in _frames(store, config.voxelize.grid(resolution), sequences))

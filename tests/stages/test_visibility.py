@@ -1,0 +1,264 @@
+"""Camera/LiDAR visibility masks by 3D DDA (stages/voxelize/visibility.py).
+
+The reference is an exact slab test of the ray segment against every voxel's box (voxel units,
+grid origin 0, voxel size 1). A voxel whose *open* box the segment crosses before the first
+occupied voxel must be marked; a marked voxel must at least touch the segment (closed box) no
+later than that first hit. Voxels the ray only grazes (touches at a face, edge or corner) are
+the tolerance band between the two, where the DDA's tie rule decides.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from schemas.grid import GridSpec
+from schemas.rig import CameraSpec, RigConfig
+from stages.voxelize import visibility as vis
+from stages.voxelize.visibility import (
+    camera_rays,
+    lidar_directions,
+    ray_mask,
+    sensor_to_lidar,
+    visibility_masks,
+)
+
+SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+EPS = 1e-7
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _jit():
+    vis.warmup()
+
+
+def _unit_grid(shape) -> GridSpec:
+    return GridSpec(region_min=(0.0, 0.0, 0.0), region_max=tuple(float(n) for n in shape), voxel_size=1.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# brute-force reference
+# ------------------------------------------------------------------------------------------------
+
+
+def _reference(occ: np.ndarray, o, d, t_end):
+    """(must, may) boolean volumes for one ray (voxel units, grid at the origin, unit voxels).
+
+    must: open box crossed before the first hit (and the first occupied voxel crossed);
+    may: closed box touched no later than the first hit. When the ray grazes an occupied voxel
+    before its first proper hit, ``must`` is cut at the graze (the DDA may stop there)."""
+    o = np.asarray(o, float)
+    d = np.asarray(d, float) / np.linalg.norm(d)
+    idx = np.indices(occ.shape).reshape(3, -1).T.astype(float)  # (V, 3) lower corners
+    tin = np.zeros(len(idx))
+    tout = np.full(len(idx), float(t_end))
+    open_ok = np.ones(len(idx), bool)
+    closed_ok = np.ones(len(idx), bool)
+    for a in range(3):
+        lo, hi = idx[:, a], idx[:, a] + 1.0
+        if d[a] == 0.0:
+            closed_ok &= (lo <= o[a]) & (o[a] <= hi)
+            open_ok &= (lo + EPS < o[a]) & (o[a] < hi - EPS)
+        else:
+            with np.errstate(over="ignore"):  # subnormal components: +-inf is the right answer
+                ta, tb = (lo - o[a]) / d[a], (hi - o[a]) / d[a]
+            tin = np.maximum(tin, np.minimum(ta, tb))
+            tout = np.minimum(tout, np.maximum(ta, tb))
+    closed = closed_ok & (tin <= tout + EPS)
+    opened = open_ok & (tin < tout - EPS)
+    flat_occ = occ.reshape(-1) != 0
+    hits = opened & flat_occ
+    t_hit = tin[hits].min() if hits.any() else np.inf
+    grazes = closed & ~opened & flat_occ
+    t_graze = tin[grazes].min() if grazes.any() else np.inf
+    must = opened & (tin < min(t_hit, t_graze) - EPS)
+    if t_hit < t_graze - EPS:
+        first = hits & (np.abs(tin - t_hit) <= EPS)
+        if first.sum() == 1:  # a unique first occupied voxel must be marked
+            must |= first
+    may = closed & (tin <= t_hit + EPS)
+    return must.reshape(occ.shape), may.reshape(occ.shape), tin.reshape(occ.shape)
+
+
+@st.composite
+def _scene(draw):
+    shape = tuple(draw(st.integers(1, 6)) for _ in range(3))
+    density = draw(st.sampled_from([0.0, 0.05, 0.2, 0.5]))
+    seed = draw(st.integers(0, 2**31 - 1))
+    occ = np.random.default_rng(seed).random(shape) < density
+    o = [draw(st.floats(-3.0, n + 3.0, allow_nan=False)) for n in shape]
+    d = [draw(st.floats(-1.0, 1.0, allow_nan=False)) for _ in range(3)]
+    assume(np.linalg.norm(d) > 1e-3)
+    t_end = draw(st.floats(0.0, 20.0))
+    return occ, np.array(o), np.array(d), t_end
+
+
+# ------------------------------------------------------------------------------------------------
+# property tests against the reference
+# ------------------------------------------------------------------------------------------------
+
+
+@SETTINGS
+@given(_scene())
+def test_agrees_with_brute_force_reference(scene):
+    occ, o, d, t_end = scene
+    m = ray_mask(occ, _unit_grid(occ.shape), o, d[None], t_end).astype(bool)
+    must, may, _ = _reference(occ, o, d, t_end)
+    assert not (must & ~m).any(), "a voxel the ray crosses before the first hit is not marked"
+    assert not (m & ~may).any(), "a marked voxel is off the ray or behind the first hit"
+
+
+@SETTINGS
+@given(_scene())
+def test_marks_stop_at_first_occupied(scene):
+    occ, o, d, t_end = scene
+    m = ray_mask(occ, _unit_grid(occ.shape), o, d[None], t_end).astype(bool)
+    _, _, tin = _reference(occ, o, d, t_end)
+    marked_occ = m & occ
+    # at most one occupied voxel is marked, and nothing beyond it
+    assert marked_occ.sum() <= 1
+    if marked_occ.any():
+        assert tin[m].max() <= tin[marked_occ][0] + EPS
+
+
+@SETTINGS
+@given(_scene(), st.tuples(st.integers(-4, 4), st.integers(-4, 4), st.integers(-4, 4)),
+       st.sampled_from([0.25, 0.5, 1.0]))
+def test_translation_by_whole_voxels_commutes(scene, shift, vs):
+    occ, o, d, t_end = scene
+    # dyadic coordinates: metres <-> voxel units is exact, so the results must be identical
+    o = np.round(o * 64) / 64
+    d = np.round(d * 64) / 64
+    assume(np.abs(d).sum() > 0)
+    base = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=tuple(n * vs for n in occ.shape), voxel_size=vs)
+    s = np.array(shift, float) * vs
+    moved = GridSpec(region_min=tuple(s), region_max=tuple(s + np.array(occ.shape) * vs), voxel_size=vs)
+    a = ray_mask(occ, base, o * vs, d[None], t_end * vs)
+    b = ray_mask(occ, moved, o * vs + s, d[None], t_end * vs)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_many_rays_serial_equals_parallel_and_union(monkeypatch):
+    rng = np.random.default_rng(0)
+    occ = rng.random((9, 7, 5)) < 0.1
+    grid = GridSpec(region_min=(-1.0, -2.0, 0.5), region_max=(3.5, 1.5, 3.0), voxel_size=0.5)
+    O = rng.uniform(-3, 4, size=(300, 3))
+    D = rng.normal(size=(300, 3))
+    D[::7, 1] = 0.0  # zero components
+    D[5] = np.nan  # skipped
+    union = np.zeros(grid.shape, np.uint8)
+    for r in range(len(D)):
+        ray_mask(occ, grid, O[r], D[r:r + 1], 6.0, out=union)
+    monkeypatch.setattr(vis, "PARALLEL_MIN_RAYS", 10**9)
+    serial = ray_mask(occ, grid, O, D, 6.0)
+    monkeypatch.setattr(vis, "PARALLEL_MIN_RAYS", 1)
+    parallel = ray_mask(occ, grid, O, D, 6.0)
+    np.testing.assert_array_equal(serial, union)
+    np.testing.assert_array_equal(parallel, union)
+    assert serial.dtype == np.uint8 and set(np.unique(serial)) <= {0, 1}
+
+
+# ------------------------------------------------------------------------------------------------
+# known answers
+# ------------------------------------------------------------------------------------------------
+
+
+def test_wall_in_front_of_the_lidar():
+    grid = GridSpec(voxel_size=0.5)
+    occ = np.zeros(grid.shape, bool)
+    iw = int((10.0 - grid.origin[0]) // grid.voxel_size)  # the voxel slab containing x = 10 m
+    occ[iw] = True
+    cam, lid = visibility_masks(occ, grid, RigConfig(), camera_stride=4)
+    for m in (cam, lid):
+        assert not m[iw + 1:].any(), "something behind the wall is marked"
+        assert m[iw].any(), "no wall voxel is marked"
+    # the forward beam closest to horizontal: the voxels between the LiDAR and the wall are marked,
+    # and so is the wall voxel it hits
+    e = np.radians(min(RigConfig().lidar.beam_elevations_deg, key=abs))
+    for x in np.arange(0.25, 9.8, 0.25):
+        i, j, k = ((np.array([x, 0.0, x * np.tan(e)]) - grid.origin) // grid.voxel_size).astype(int)
+        assert lid[i, j, k] == 1
+    hit = ((np.array([10.0, 0.0, 10.0 * np.tan(e)]) - grid.origin) // grid.voxel_size).astype(int)
+    assert lid[tuple(hit)] == 1
+    # the front camera's view of the free space ahead is marked too
+    assert cam[int((5.0 - grid.origin[0]) // 0.5), int((0.3 - grid.origin[1]) // 0.5), int((-0.18 - grid.origin[2]) // 0.5)]
+
+
+def test_ray_from_outside_enters_the_grid():
+    grid = GridSpec(voxel_size=0.5)
+    occ = np.zeros(grid.shape, bool)
+    m = ray_mask(occ, grid, np.array([-40.0, 0.1, 0.1]), np.array([[1.0, 0.0, 0.0]]), 200.0)
+    j, k = ((np.array([0.1, 0.1]) - grid.origin[1:]) // 0.5).astype(int)
+    assert m[:, j, k].all() and m.sum() == grid.shape[0]
+    # a ray that misses the grid does nothing; a ray too short to reach it neither
+    assert not ray_mask(occ, grid, np.array([-40.0, 0.1, 0.1]), np.array([[-1.0, 0.0, 0.0]]), 200.0).any()
+    assert not ray_mask(occ, grid, np.array([-40.0, 0.1, 0.1]), np.array([[1.0, 0.0, 0.0]]), 10.0).any()
+
+
+def test_ray_stops_at_max_range():
+    grid = GridSpec(voxel_size=0.5)
+    occ = np.zeros(grid.shape, bool)
+    i0, j, k = ((np.array([0.25, 0.25, 0.25]) - grid.origin) // 0.5).astype(int)
+    m = ray_mask(occ, grid, np.array([0.25, 0.25, 0.25]), np.array([[2.0, 0.0, 0.0]]), 3.0)
+    # 3 m from a voxel centre along x ends at the centre of the 6th voxel ahead
+    assert np.argwhere(m).tolist() == [[i, j, k] for i in range(i0, i0 + 7)]
+
+
+def test_origin_in_occupied_voxel_marks_only_it():
+    grid = _unit_grid((4, 4, 4))
+    occ = np.zeros(grid.shape, bool)
+    occ[1, 2, 3] = True
+    m = ray_mask(occ, grid, np.array([1.5, 2.5, 3.5]), np.array([[1.0, -1.0, 0.3], [0.0, 0.0, -1.0]]), 10.0)
+    assert np.argwhere(m).tolist() == [[1, 2, 3]]
+
+
+def test_out_accumulates_and_is_checked():
+    grid = _unit_grid((4, 3, 2))
+    occ = np.zeros(grid.shape, np.uint32)
+    out = np.zeros(grid.shape, np.uint8)
+    out[3, 2, 1] = 1
+    res = ray_mask(occ, grid, np.array([0.5, 0.5, 0.5]), np.array([[1.0, 0.0, 0.0]]), 100.0, out=out)
+    assert res is out and out[:, 0, 0].all() and out[3, 2, 1] == 1 and out.sum() == 5
+    with pytest.raises(ValueError):
+        ray_mask(occ, grid, np.zeros(3), np.array([[1.0, 0, 0]]), 1.0, out=np.zeros((4, 3, 2), np.int32))
+    with pytest.raises(ValueError):
+        ray_mask(np.zeros((2, 2, 2)), grid, np.zeros(3), np.array([[1.0, 0, 0]]), 1.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# sensors
+# ------------------------------------------------------------------------------------------------
+
+
+def test_lidar_directions():
+    lidar = RigConfig().lidar
+    D = lidar_directions(lidar)
+    steps = lidar.points_per_frame // lidar.channels
+    assert D.shape == (lidar.channels * steps, 3)
+    np.testing.assert_allclose(np.linalg.norm(D, axis=1), 1.0)
+    e0 = np.radians(lidar.beam_elevations_deg[0])
+    np.testing.assert_allclose(D[0], [np.cos(e0), 0.0, np.sin(e0)], atol=1e-12)
+    assert D[1, 1] > 0  # counter-clockwise: the second azimuth turns towards +y
+    np.testing.assert_allclose(np.degrees(np.arcsin(D[::steps, 2])), lidar.beam_elevations_deg, atol=1e-9)
+
+
+def test_camera_rays_point_where_the_cameras_look():
+    rig = RigConfig()
+    poses = sensor_to_lidar(rig)
+    np.testing.assert_allclose(poses[rig.lidar.name], np.eye(4), atol=1e-12)
+    o, d = camera_rays(rig.cameras[0], poses["camera_00"], stride=8)
+    np.testing.assert_allclose(o, [0.8, 0.3, 1.55 - 1.73], atol=1e-12)  # CARLA y=-0.3 is our left
+    assert (d[:, 0] > 0).all() and len(d) == len(range(0, 376, 8)) * len(range(0, 1408, 8))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0)
+    _, d_rear = camera_rays(rig.cameras[4], poses["camera_04"], stride=8)
+    assert (d_rear[:, 0] < 0).all()
+    # odd image size: the middle pixel centre is the principal point, its ray the optical axis
+    cam = CameraSpec(name="c", x=0.0, y=0.46, z=1.55, yaw_deg=90.0, width=5, height=3, hfov_deg=60.0)
+    T = np.linalg.inv(np.asarray(rig.lidar.sensor_to_ego())) @ np.asarray(cam.camera_to_ego())
+    _, d = camera_rays(cam, T)
+    np.testing.assert_allclose(d[1 * 5 + 2], T[:3, 2], atol=1e-12)
+    np.testing.assert_allclose(T[:3, 2], [0.0, -1.0, 0.0], atol=1e-12)  # CARLA yaw +90 = right = -y
+    # top-left pixel looks up-left of the axis (optical x right, y down)
+    assert d[0] @ T[:3, 0] < 0 and d[0] @ T[:3, 1] < 0
