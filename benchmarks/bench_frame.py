@@ -1,0 +1,74 @@
+"""One voxelize task on a default-town frame, end to end, on one core: the frame's scene assembled
+from the store, composed tile by tile (filled), flow, the camera and LiDAR masks, and every array
+written to Zarr -- with and without the masks, and the peak memory of the worker process.
+
+The embedded default's ingest and scenes stages are built once into a temporary root; each
+(resolution, masks) case then runs in a fresh process (numba limited to one thread, JIT warmed
+up on the first frame, which is not timed) over ``frames`` frames of ``town00_high_seq000``.
+
+Usage: ``python -m benchmarks.bench_frame [frames] [out.json]``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+
+CASE = r"""
+import json, resource, sys, time
+import numba
+numba.set_num_threads(1)
+from catalog.occupancy import OccupancyStore
+from catalog.store import Store
+from pipeline.registry import Partition
+from pipeline.stages import voxelize_config
+from pipeline.tasks import occupancy_arrays, voxelize_task
+from schemas.configs import DatasetConfig
+root, res, masks, frames = sys.argv[1], float(sys.argv[2]), sys.argv[3] == "1", int(sys.argv[4])
+store = Store(root)
+cfg = voxelize_config(DatasetConfig()).model_copy(update={"masks": masks})
+grid = cfg.grid(res)
+seq = "town00_high_seq000"
+OccupancyStore(store).create(seq, grid, 20, cfg.chunk_edge, names=occupancy_arrays(cfg))
+run = lambda t: voxelize_task(store, cfg, Partition("b", {"sequence_id": seq, "resolution": res, "frame_index": t}))
+run(0)  # JIT and per-worker caches
+times = []
+for t in range(1, frames + 1):
+    t0 = time.perf_counter(); run(t); times.append(time.perf_counter() - t0)
+print(json.dumps({"seconds": times, "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
+"""
+
+
+def main(argv: list[str] | None = None) -> dict:
+    argv = [] if argv is None else argv
+    frames = int(argv[0]) if argv else 3
+    results = {"frames": frames, "cases": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        root = f"{tmp}/data"
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "pipeline.cli", "run", "--stages", "ingest,scenes", "--root", root,
+                        "--scheduler", "synchronous"], check=True, capture_output=True)
+        print(f"ingest + scenes of the embedded default: {time.perf_counter() - t0:.1f} s")
+        print(f"{'res':>5} {'masks':>5} {'s/frame (mean)':>14} {'min':>6} {'max':>6} {'peak RSS':>9}")
+        for res in (0.2, 0.1, 0.05):
+            for masks in (False, True):
+                out = subprocess.run([sys.executable, "-c", CASE, root, str(res), "1" if masks else "0", str(frames)],
+                                     check=True, capture_output=True, text=True)
+                r = json.loads(out.stdout.strip().splitlines()[-1])
+                s = r["seconds"]
+                row = {"voxel_size": res, "masks": masks, "mean_s": sum(s) / len(s), "min_s": min(s), "max_s": max(s),
+                       "peak_rss_gib": r["peak_rss_gib"]}
+                results["cases"].append(row)
+                print(f"{res:>5} {'yes' if masks else 'no':>5} {row['mean_s']:>13.2f}s {min(s):>5.2f}s {max(s):>5.2f}s "
+                      f"{row['peak_rss_gib']:>7.2f} GiB")
+    if len(argv) > 1:
+        with open(argv[1], "w") as fh:
+            json.dump(results, fh, indent=2)
+    return results
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
