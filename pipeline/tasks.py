@@ -351,13 +351,6 @@ def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
         ("flow",) if cfg.flow else ())
 
 
-def _scratch(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
-    """A per-thread buffer reused across frames (fresh pages cost more than the voxelization)."""
-    from stages.voxelize.compose import _buffer
-
-    return _buffer(name, int(np.prod(shape)), dtype).reshape(shape)
-
-
 def _frame_flow(inputs: FrameInputs):
     """``tile -> flow`` of the frame's actors (the flow of a tile without them is all zero)."""
     from stages.geometry import pose_from_list
@@ -389,7 +382,10 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     LiDAR masks of the whole frame."""
     from schemas.rig import RigConfig
     from stages.scenes.assembly import region_of_grid
-    from stages.voxelize import visibility_masks, voxelize_tiles
+    from stages.scratch import scratch
+    from stages.voxelize import voxelize_tiles
+    from stages.voxelize.visibility import (auto_camera_stride, camera_visibility, lidar_visibility,
+                                            pack_occupancy)
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
@@ -399,7 +395,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     names = occupancy_arrays(cfg)
     # 1. semantic + instance per tile: the instance tile is written at once (never a whole
     #    uint32 frame in memory); the semantic frame is kept for the masks
-    semantic = _scratch("frame_semantic", shape, np.uint8)
+    semantic = scratch("frame_semantic", int(np.prod(shape)), np.uint8).reshape(shape)
     flow = _frame_flow(inputs) if cfg.flow else None
     vs = float(grid.voxel_size)
     for tile in voxelize_tiles(inputs.scene, grid, cfg.chunk_edge * cfg.tile_chunks, cfg.fill):
@@ -416,10 +412,15 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     occ.write_tile(seq_id, grid, frame_index, "semantic", semantic, 0)
     # 2. visibility: rays of the rig's cameras and LiDAR through the frame's occupancy
     if cfg.masks:
-        mask_camera, mask_lidar = visibility_masks(semantic, grid, cfg.rig or RigConfig(),
-                                                   camera_stride=cfg.camera_ray_stride)
-        occ.write_tile(seq_id, grid, frame_index, "mask_camera", mask_camera, 0)
-        occ.write_tile(seq_id, grid, frame_index, "mask_lidar", mask_lidar, 0)
+        rig = cfg.rig or RigConfig()
+        stride = cfg.camera_ray_stride or auto_camera_stride(rig, grid.voxel_size)
+        packed = pack_occupancy(semantic, grid)
+        n = int(np.prod(shape))
+        # one mask buffer, reused: LiDAR first, written, then the cameras
+        mask = lidar_visibility(packed, rig, out=scratch("mask", n, np.uint8, zero=True).reshape(shape))
+        occ.write_tile(seq_id, grid, frame_index, "mask_lidar", mask, 0)
+        mask = camera_visibility(packed, rig, stride, out=scratch("mask", n, np.uint8, zero=True).reshape(shape))
+        occ.write_tile(seq_id, grid, frame_index, "mask_camera", mask, 0)
     return occ.fingerprints(seq_id, grid, frame_index, names)
 
 
