@@ -122,6 +122,7 @@ class OccupancyStore:
         if unknown:
             raise ValueError(f"unknown occupancy arrays {sorted(unknown)}; known: {', '.join(OCCUPANCY_ARRAYS)}")
         replaced = False
+        self.__dict__.pop("_layouts", None)  # arrays may be recreated with another layout
         root = self._root("a")
         X, Y, Z = grid.shape
         attrs = {
@@ -151,6 +152,21 @@ class OccupancyStore:
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
                               compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
         return replaced
+
+    def stored_grid(self, sequence_id: str, voxel_size: float) -> GridSpec | None:
+        """The grid a sequence was voxelized on at ``voxel_size`` (from the arrays' attributes,
+        whatever the current config says), or None when it was not."""
+        from schemas.grid import resolution_key
+
+        try:
+            arr = self._root("r")[f"{sequence_id}/{resolution_key(voxel_size)}/semantic"]
+        except (KeyError, FileNotFoundError, zarr.errors.GroupNotFoundError):
+            return None
+        return GridSpec.model_validate(dict(arr.attrs)["grid_spec"])
+
+    def attrs(self, sequence_id: str, grid: GridSpec, name: str = "semantic") -> dict:
+        """The attributes of one array (grid spec, frame, taxonomy version, rig LiDAR pose...)."""
+        return dict(self.open(sequence_id, grid, name).attrs)
 
     def exists(self, sequence_id: str, grid: GridSpec, name: str, frame: int | None = None) -> bool:
         try:
@@ -279,6 +295,8 @@ class OccupancyStore:
         prefix = f"{base}/c/{frame}"
         files = sorted(fs.find(prefix)) if fs.exists(prefix) else []
         for f in files:
+            if f.rsplit("/", 1)[-1].startswith("."):
+                continue  # a temporary chunk left by a crashed write is not part of the frame
             h.update(f[len(prefix):].encode())
             h.update(fs.cat_file(f))
         return "sha256:" + h.hexdigest()[:24]

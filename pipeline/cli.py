@@ -556,6 +556,8 @@ def voxelize_files(
         save_result(result, out)
     except (InputError, ValueError) as exc:
         fail(str(exc))
+    except OSError as exc:
+        fail(f"--out {out}: cannot write: {exc.strerror or exc}")
     occupied = int((result.semantic > 0).sum())
     X, Y, Z = grid.shape
     typer.echo(f"wrote {out}: {X}x{Y}x{Z} grid at {voxel_size:g} m from origin "
@@ -603,10 +605,13 @@ def export_cmd(
 def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, res: float):
     from catalog.occupancy import OccupancyStore
 
-    grid = cfg.voxelize.grid(res)
+    from schemas.grid import resolution_key
+
     occ = OccupancyStore(store)
-    if not occ.exists(sequence, grid, "semantic"):
-        fail(f"{sequence} has no occupancy at {grid.key} m in {store.url}: run `carlaocc run --res {grid.key}`")
+    grid = occ.stored_grid(sequence, res)  # the grid it was built on, whatever the config says now
+    if grid is None:
+        key = resolution_key(res)
+        fail(f"{sequence} has no occupancy at {key} m in {store.url}: run `carlaocc run --res {key}`")
     n = occ.open(sequence, grid, "semantic").shape[0]
     if not 0 <= frame < n:
         fail(f"{sequence} has frames 0..{n - 1}, not {frame}")
@@ -658,20 +663,21 @@ def compare_resolutions(
     """Pool the fine grid onto the coarse one by class priority and count where the pooled grid
     and the coarse grid voxelized directly from the meshes disagree (occupancy and label)."""
     from catalog.occupancy import OccupancyStore
-    from pipeline.export import _frames
+    from pipeline.export import voxelized_sequences
     from stages.voxelize.resample import pool_to_grid, pooling_disagreement
 
-    cfg = load_config(config)
+    from schemas.grid import resolution_key
+
+    load_config(config)  # a bad --config is refused like everywhere else
     store = _store(root, writable=False)
-    try:
-        gf, gc = cfg.voxelize.grid(fine), cfg.voxelize.grid(coarse)
-    except ValueError as exc:
-        fail(str(exc))
+    if not (fine > 0 and coarse > fine):
+        fail(f"--coarse ({coarse}) must be larger than --fine ({fine}), both positive")
     occ = OccupancyStore(store)
     rows = []
     try:
-        for seq, _, n in _frames(store, gf, sequence):
-            if not occ.exists(seq, gc, "semantic"):
+        for seq, gf, n in voxelized_sequences(store, fine, sequence):
+            gc = occ.stored_grid(seq, coarse)
+            if gc is None:
                 continue
             for t in range(n):
                 pooled = pool_to_grid(occ.read_frame(seq, gf, t, ("semantic",))["semantic"], gf, gc)
@@ -680,7 +686,7 @@ def compare_resolutions(
     except (StoreError, ValueError) as exc:
         fail(str(exc))
     if not rows:
-        fail(f"no sequence has both {gf.key} m and {gc.key} m occupancy in {store.url}")
+        fail(f"no sequence has both {resolution_key(fine)} m and {resolution_key(coarse)} m occupancy in {store.url}")
     typer.echo(f"{'sequence':<28} {'frames':>6} {'occ. IoU':>9} {'occ. mismatch':>14} {'label mismatch':>15} {'mismatch rate':>14}")
     for seq in sorted({r["sequence"] for r in rows}):
         rs = [r for r in rows if r["sequence"] == seq]

@@ -56,7 +56,11 @@ class ExportSummary:
     out: Path
 
 
-def _frames(store: Store, grid: GridSpec, sequences: list[str] | None) -> Iterator[tuple[str, int, int]]:
+def voxelized_sequences(store: Store, voxel_size: float, sequences: list[str] | None) -> Iterator[tuple[str, GridSpec, int]]:
+    """(sequence, the grid it was voxelized on at ``voxel_size``, frames) of every voxelized
+    sequence (or of ``sequences``, refusing those not voxelized)."""
+    from schemas.grid import resolution_key
+
     seqs = sorted(ParquetTable(store, SequenceRecord).load(), key=lambda s: s.sequence_id)
     known = {s.sequence_id for s in seqs}
     for s in sequences or []:
@@ -66,12 +70,14 @@ def _frames(store: Store, grid: GridSpec, sequences: list[str] | None) -> Iterat
     for s in seqs:
         if sequences and s.sequence_id not in sequences:
             continue
-        if not occ.exists(s.sequence_id, grid, "semantic"):
+        grid = occ.stored_grid(s.sequence_id, voxel_size)
+        if grid is None:
             if sequences:
-                raise StoreError(f"{s.sequence_id} has no occupancy at {grid.key} m: run "
-                                 f"`carlaocc run --stages voxelize --res {grid.key}` first")
+                key = resolution_key(voxel_size)
+                raise StoreError(f"{s.sequence_id} has no occupancy at {key} m: run "
+                                 f"`carlaocc run --stages voxelize --res {key}` first")
             continue
-        yield s.sequence_id, s.frame_count, occ.open(s.sequence_id, grid, "semantic").shape[0]
+        yield s.sequence_id, grid, occ.open(s.sequence_id, grid, "semantic").shape[0]
 
 
 def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out: Path,
@@ -91,16 +97,19 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
 
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
-    grid = config.voxelize.grid(resolution)
+    from schemas.grid import resolution_key
+
     occ = OccupancyStore(store)
-    lidar_to_ego = np.asarray(config.scenes.rig.lidar.sensor_to_ego(), dtype=np.float64)
     n_seq = n_frames = n_files = 0
-    todo = list(_frames(store, grid, sequences))
+    todo = list(voxelized_sequences(store, resolution, sequences))
     if not todo:
-        raise StoreError(f"no voxelized sequence at {grid.key} m in {store.url}: run "
-                         f"`carlaocc run --res {grid.key}` first")
-    for seq, _, frame_count in todo:
+        key = resolution_key(resolution)
+        raise StoreError(f"no voxelized sequence at {key} m in {store.url}: run `carlaocc run --res {key}` first")
+    for seq, grid, frame_count in todo:
         n_seq += 1
+        # the LiDAR mount the sequence was recorded with (older arrays: the configured rig)
+        lidar_to_ego = np.asarray(occ.attrs(seq, grid).get("lidar_to_ego", config.scenes.rig.lidar.sensor_to_ego()),
+                                  dtype=np.float64)
         has_masks = occ.exists(seq, grid, "mask_lidar") and occ.exists(seq, grid, "mask_camera")
         if fmt == "carlaocc-npz":
             # instance ids compacted over the whole sequence (stable across frames): a first pass
@@ -155,4 +164,4 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
 
 def frame_count(store: Store, config: DatasetConfig, resolution: float, sequences: list[str] | None) -> int:
     """Frames an export would write (for a progress bar)."""
-    return sum(n for _, _, n in _frames(store, config.voxelize.grid(resolution), sequences))
+    return sum(n for _, _, n in voxelized_sequences(store, resolution, sequences))

@@ -90,7 +90,10 @@ def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Pa
     invalid: set[str] = set()
     for seq, res in sorted(groups):
         vcfg = ctx.config.voxelize
-        if occ.create(seq, vcfg.grid(res), frames[seq], vcfg.chunk_edge, names=tasks.occupancy_arrays(vcfg)):
+        # the rig's LiDAR mount travels with the arrays: exports to ego-frame grids need it
+        lidar_to_ego = [list(r) for r in ctx.config.scenes.rig.lidar.sensor_to_ego()]
+        if occ.create(seq, vcfg.grid(res), frames[seq], vcfg.chunk_edge, extra_attrs={"lidar_to_ego": lidar_to_ego},
+                      names=tasks.occupancy_arrays(vcfg)):
             invalid |= {p.key for p in partitions
                         if (p.params["sequence_id"], p.params["resolution"]) == (seq, res)}
     return invalid

@@ -57,6 +57,9 @@ def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _classes(classes: list[str], n: int) -> list[taxonomy.SemanticClass]:
     if n == 0:
+        if classes:
+            raise InputError("--class labels mesh files, but every input is an ADMesh asset id (their parts keep "
+                             "their own classes)")
         return []
     if not classes:
         raise InputError("give --class for the mesh files (one for all, or one per file)")
@@ -73,11 +76,11 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     """The SceneMeshes of the inputs: files labelled by ``classes``, asset ids from ``store``."""
     files = [Path(i) for i in items if os.path.exists(i)]
     missing = [i for i in items if not os.path.exists(i)]
+    if missing and store is None:
+        raise InputError(f"{missing[0]}: no such file (and no --root to look it up as an ADMesh asset id)")
     labels = iter(_classes(classes, len(files)))
     assets = {}
     if missing:
-        if store is None:
-            raise InputError(f"{missing[0]}: no such file (and no --root to look it up as an ADMesh asset id)")
         from pipeline.tasks import load_geometry
 
         try:

@@ -98,8 +98,9 @@ class VoxelizeConfig(StageConfig):
 
     region_min: tuple[float, float, float] = DEFAULT_REGION_MIN
     region_max: tuple[float, float, float] = DEFAULT_REGION_MAX
-    fill: Literal["auto", "surface", "solid"] = Field(
-        "auto", description="auto: fill closed thing meshes; surface: fill nothing; solid: also closed stuff")
+    fill: Literal["auto", "surface"] = Field(
+        "auto", description="auto: fill closed thing meshes; surface: fill nothing (stuff is cut to the region, "
+        "so the standalone voxelizer's 'solid' has no meaning here)")
     chunk_edge: int = Field(128, ge=16, le=1024, description="x/y chunk edge of the Zarr arrays, voxels")
     tile_chunks: int = Field(1, ge=1, le=64, description="x chunks per voxelization tile (memory per worker)")
     masks: bool = Field(True, description="compute mask_camera and mask_lidar (3D DDA from the rig's sensors)")

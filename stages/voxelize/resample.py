@@ -520,7 +520,8 @@ def resample(
     target voxel ``floor((p - range_min) / voxel_size)``; centres outside the target grid are
     dropped. Each target voxel takes the **highest-priority** class among the centres it received
     (priority on our class ids, as in :func:`pool_to_grid`), then that class is mapped through
-    ``taxonomy.mapping(target.taxonomy)``. Target voxels that receive nothing get
+    ``taxonomy.mapping(target.taxonomy)``; classes the target maps to its empty label rank below
+    all others (they only win a voxel nothing else reaches). Target voxels that receive nothing get
     ``target.free_label``. A class that maps to the target's ignore/unlabelled id keeps that id
     (e.g. Wall -> 0 in SemanticKITTI, which coincides with empty there, as in the real labels).
     A mask voxel of the target is observed when any observed voxel centre of ours falls in it.
@@ -537,8 +538,12 @@ def resample(
     mask_items = dict(masks or {})
     for name, mk in mask_items.items():
         _check_volume(f"mask {name!r}", np.asarray(mk), grid.shape)
-    rank, label = rank_table(priority)
     lut = _label_lut(target)
+    # classes the target maps to its empty label rank below every class it keeps, so a wall or
+    # prop voxel in a target voxel of road does not turn the road empty (SemanticKITTI: 0)
+    prio = [int(c) for c in (DEFAULT_POOLING_PRIORITY if priority is None else priority)]
+    prio = [c for c in prio if lut[c] != target.free_label] + [c for c in prio if lut[c] == target.free_label]
+    rank, label = rank_table(prio)
     points = not np.array_equal(m[:3, :3], np.eye(3))  # a pure translation takes the fast path
 
     # 1. per target voxel, the max rank of the classes whose centres land in it (0 = nothing)

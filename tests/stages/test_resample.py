@@ -402,3 +402,24 @@ def test_translation_fast_path_equals_binning_the_centres(seed, shift, target, v
         fast = _bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=False)
         slow = _bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=True)
         assert np.array_equal(fast, slow)
+
+
+def test_classes_mapped_to_target_empty_do_not_erase_road():
+    """A prop or wall voxel inside a target voxel of road keeps it road (review finding): classes
+    the target maps to its empty label rank below every class it keeps."""
+    from schemas import taxonomy
+
+    skitti = TargetGrid("sk", (256, 256, 32), 0.2, (0.0, -25.6, -2.0), "lidar", "semantickitti", 0)
+    grid = GridSpec(region_min=(0.0, -25.6, -2.0), region_max=(51.2, 25.6, 4.4), voxel_size=0.1)
+    sem = np.zeros(grid.shape, np.uint8)
+    road, static = taxonomy.by_name("Road").id, taxonomy.by_name("Static").id
+    assert taxonomy.mapping("semantickitti")[static] == 0
+    sem[10:12, 20:22, 4:6] = road  # one 0.2 m target voxel of road...
+    sem[10, 20, 4] = static  # ...with one prop voxel in it
+    labels, _ = resample(sem, grid, skitti, np.eye(4))
+    assert labels[5, 10, 2] == taxonomy.mapping("semantickitti")[road]
+    # alone, the prop still maps to the target's empty label
+    sem[:] = 0
+    sem[10, 20, 4] = static
+    labels, _ = resample(sem, grid, skitti, np.eye(4))
+    assert labels[5, 10, 2] == 0
