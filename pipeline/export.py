@@ -9,14 +9,16 @@ Layouts written under ``OUT``:
 * ``semantickitti``: ``sequences/<sequence>/voxels/<frame:06d>.{bin,label,invalid,occluded}`` --
   256 x 256 x 32 at 0.2 m, LiDAR frame, forward only (x [0, 51.2], y [-25.6, 25.6], z [-2, 4.4]);
   raw SemanticKITTI label ids (``learning_map_inv``); ``.occluded`` = not observed by the LiDAR,
-  ``.invalid`` = observed by neither the LiDAR nor a camera (when the masks exist; else nothing).
+  ``.invalid`` = observed by neither the LiDAR nor a camera. Without masks (``voxelize.masks:
+  false``) every target voxel inside our region counts as observed, the others as not.
 * ``surroundocc``: ``<sequence>/<frame:06d>.npy`` -- sparse (x, y, z, label) rows of the
   200 x 200 x 16 grid at 0.5 m (LiDAR frame, [-50, -50, -5, 50, 50, 3] m), Occ3D/nuScenes
   class ids 0-16.
 * ``carlaocc-npz``: ``<sequence>/<frame:06d>.npz`` -- our own grid at ``--res``, rows
-  (x, y, z, sem << 11 | inst); instance ids compacted per sequence to 1..K (stable across the
-  sequence's frames; ``<sequence>/instances.json`` maps them back). A sequence with more than
-  2047 instances, or a class id above 31, is refused (clear error) rather than wrapped.
+  (x, y, z, sem << 11 | inst) with the published id layout, stable across the sequence: static
+  things numbered 1..999 in id order, simulated actors at 1000 + (id mod 1000)
+  (``<sequence>/instances.json`` maps them back). More than 999 static things, two actors equal
+  modulo 1000, or a class id above 31 is refused (clear error) rather than wrapped.
 
 The grids of the other datasets are filled from ours by class-priority binning
 (:func:`stages.voxelize.resample.resample`); export from the finest resolution you built.
@@ -31,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from catalog.formats import FormatError
+from catalog.formats import FormatError, atomic_write
 from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
 from catalog.store import Store, StoreError
@@ -54,6 +56,27 @@ class ExportSummary:
     frames: int
     files: int
     out: Path
+
+
+def _coverage(target: TargetGrid, grid: GridSpec, grid_to_target: np.ndarray) -> np.ndarray:
+    """bool target.shape: target voxels whose centre lies inside our grid's region (what an
+    export without visibility masks can claim as known)."""
+    idx = np.indices(target.shape).reshape(3, -1).T
+    centres = np.asarray(target.range_min) + (idx + 0.5) * target.voxel_size
+    inv = np.linalg.inv(grid_to_target)
+    p = centres @ inv[:3, :3].T + inv[:3, 3]
+    inside = np.all((p >= np.asarray(grid.origin)) & (p < np.asarray(grid.effective_max)), axis=1)
+    return inside.reshape(target.shape)
+
+
+def _actor_ids(store: Store, seq: str) -> np.ndarray:
+    """Instance ids of the sequence's simulated actors (the actors table)."""
+    from schemas.records import ActorStateRecord
+
+    t = ParquetTable(store, ActorStateRecord)
+    if not t.exists(seq):
+        return np.zeros(0, dtype=np.uint32)
+    return np.unique(np.asarray(t.load_arrow([seq])["instance_id"].to_numpy(), dtype=np.uint32))
 
 
 def voxelized_sequences(store: Store, voxel_size: float, sequences: list[str] | None) -> Iterator[tuple[str, GridSpec, int]]:
@@ -112,20 +135,34 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
                                   dtype=np.float64)
         has_masks = occ.exists(seq, grid, "mask_lidar") and occ.exists(seq, grid, "mask_camera")
         if fmt == "carlaocc-npz":
-            # instance ids compacted over the whole sequence (stable across frames): a first pass
-            # collects the ids frame by frame (one dense frame in memory at a time)
+            # the published id layout, stable across the sequence: static things (buildings,
+            # parked vehicles, props with ids) compacted to 1..999 in id order, the simulated
+            # actors at 1000 + (id mod 1000); one dense frame in memory at a time
             inst = occ.open(seq, grid, "instance")
             present = [np.unique(f[f != 0]) for f in (inst[t] for t in range(frame_count))]
             ids = np.unique(np.concatenate(present)) if present else np.zeros(0, np.uint32)
-            if len(ids) > 2047:
-                raise FormatError(f"{seq}: {len(ids)} instances, more than CarlaOcc npz's 11-bit ids hold (2047)")
-            table = {int(o): i + 1 for i, o in enumerate(ids.tolist())}
+            actor_ids = _actor_ids(store, seq)
+            is_actor = np.isin(ids, actor_ids)
+            static = ids[~is_actor]
+            if len(static) > 999:
+                raise FormatError(f"{seq}: {len(static)} static instances, more than CarlaOcc npz's ids 1-999 hold")
+            new = np.zeros(len(ids), dtype=np.int64)
+            new[~is_actor] = np.arange(1, len(static) + 1)
+            new[is_actor] = 1000 + ids[is_actor].astype(np.int64) % 1000
+            if len(np.unique(new[is_actor])) != is_actor.sum():
+                raise FormatError(f"{seq}: two actors share an id modulo 1000 (CarlaOcc npz's 1000-1999 range)")
+            table = {int(o): int(n) for o, n in zip(ids.tolist(), new.tolist())}
             (out / seq).mkdir(parents=True, exist_ok=True)
-            (out / seq / "instances.json").write_text(json.dumps({str(k): v for k, v in table.items()}, indent=1))
+            atomic_write(out / seq / "instances.json",
+                         lambda fh: fh.write(json.dumps({str(k): v for k, v in table.items()}, indent=1).encode()))
             for t in range(frame_count):
                 sem = occ.open(seq, grid, "semantic")[t]
                 f = inst[t]
-                compact = np.where(f == 0, 0, np.searchsorted(ids, f) + 1).astype(np.uint32)
+                if len(ids):  # every nonzero id of the frame is in ids (clip only guards zeros)
+                    compact = np.where(f == 0, 0, new[np.minimum(np.searchsorted(ids, f), len(ids) - 1)])
+                else:
+                    compact = np.zeros_like(f)
+                compact = compact.astype(np.uint32)
                 save_carlaocc_npz(out / seq / f"{t:06d}.npz", sem, compact, grid.voxel_size, grid.origin)
                 n_files += 1
                 n_frames += 1
@@ -138,16 +175,17 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
             masks = {k: data[k] for k in names[1:]}
             if fmt == "occ3d":
                 labels, m = resample(data["semantic"], grid, OCC3D_NUSCENES, lidar_to_ego, masks)
-                shape = OCC3D_NUSCENES.shape
-                frame = Occ3DFrame(labels, m.get("mask_lidar", np.ones(shape, bool)).astype(np.uint8),
-                                   m.get("mask_camera", np.ones(shape, bool)).astype(np.uint8))
+                if not has_masks:  # no visibility: observed = inside our region
+                    m = dict.fromkeys(("mask_lidar", "mask_camera"), _coverage(OCC3D_NUSCENES, grid, lidar_to_ego))
+                frame = Occ3DFrame(labels, m["mask_lidar"].astype(np.uint8), m["mask_camera"].astype(np.uint8))
                 save_occ3d(out / "gts" / seq / f"{t:06d}" / "labels.npz", frame)
                 n_files += 1
             elif fmt == "semantickitti":
                 labels, m = resample(data["semantic"], grid, SEMANTICKITTI_GRID, np.eye(4), masks)
-                shape = SEMANTICKITTI_GRID.shape
-                lidar_seen = m.get("mask_lidar", np.ones(shape, bool))
-                any_seen = lidar_seen | m.get("mask_camera", np.ones(shape, bool))
+                if not has_masks:  # no visibility: observed = inside our region
+                    m = dict.fromkeys(("mask_lidar", "mask_camera"), _coverage(SEMANTICKITTI_GRID, grid, np.eye(4)))
+                lidar_seen = m["mask_lidar"]
+                any_seen = lidar_seen | m["mask_camera"]
                 vox = SemanticKittiVoxels(occupied=labels != 0, invalid=~any_seen, occluded=~lidar_seen,
                                           labels=to_raw(labels))
                 save_semantickitti(out / "sequences" / seq / "voxels", f"{t:06d}", vox)

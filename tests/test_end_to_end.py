@@ -278,8 +278,18 @@ def test_export_formats_read_back(built, tmp_path, fmt):
         _, grid, d = _frame(built, ("semantic", "instance"))
         np.testing.assert_array_equal(f.semantic, d["semantic"])
         assert f.voxel_size == RES and (f.instance > 0).sum() == (d["instance"] > 0).sum()
-        table = json.loads((out / seq / "instances.json").read_text())
-        assert sorted(table.values()) == list(range(1, len(table) + 1)) and len(table) <= 2047
+        table = {int(k): v for k, v in json.loads((out / seq / "instances.json").read_text()).items()}
+        actors = {r[0] for r in query(built, f"SELECT DISTINCT instance_id FROM actors WHERE sequence_id = '{seq}'")[1]}
+        static = sorted(v for k, v in table.items() if k not in actors)
+        assert static == list(range(1, len(static) + 1))  # static things 1..K in id order
+        moving = [v for k, v in table.items() if k in actors]
+        assert moving and all(v == 1000 + k % 1000 for k, v in table.items() if k in actors)
+        # the same instance keeps its exported id in every frame
+        f0 = formats.load_carlaocc_npz(out / seq / "000000.npz")
+        d0 = OccupancyStore(built).read_frame(seq, grid, 0, ("instance",))["instance"]
+        for k, v in table.items():
+            if (d0 == k).any():
+                assert (f0.instance[d0 == k] == v).all()
     assert len(list(out.rglob("*"))) >= frames
 
 

@@ -31,8 +31,11 @@ wide), so a worker holds one tile of the uint32 instance grid instead of the who
 at 0.05 m) and reuses the tile's buffers across tiles and frames (fresh pages cost more than the
 voxelization itself). The plan (fusion, cull, order) is made once for the whole grid, so every
 tile writes the meshes in the same order; each tile paints the triangles whose x range reaches it
-with the vertices shifted by the tile's first index, an exact float subtraction, so tiles agree
-bit for bit with the whole grid.
+with the vertices shifted by the tile's first index. That subtraction is exact whenever the
+coordinate is at least half the shift (Sterbenz) and otherwise rounds by at most an ulp of the
+shift (~1e-13 voxel), so tiles agree with the whole grid except, in principle, for a triangle
+touching a voxel face within that distance (the tests use dyadic coordinates, for which the
+shift is exact, and check equality on random scenes).
 """
 
 from __future__ import annotations
@@ -211,7 +214,7 @@ class _TiledMesh:
 def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
                    fill: FillMode = "auto") -> Iterator[Tile]:
     """The frame's panoptic occupancy one x-slab at a time, ``tile_x`` voxels wide (the last may
-    be narrower), in ascending x. Identical, voxel for voxel, to :func:`voxelize_scene`.
+    be narrower), in ascending x. The same as :func:`voxelize_scene` (see the module docstring).
 
     ``meshes`` in the grid's frame (LiDAR frame, metres). Each yielded :class:`Tile` views
     per-thread buffers that the next tile overwrites.
