@@ -54,6 +54,29 @@ SHADOW_DARKEN = 0.80  # the ground shadow multiplies the background by this
 # --------------------------------------------------------------------------------------------
 
 
+@njit(cache=True, nogil=True, inline="always")
+def tri_pixel_box(x0, y0, x1, y1, x2, y2, W, H):  # pragma: no cover - numba
+    """(1 / signed area, xmin, xmax, ymin, ymax) of a screen triangle (pixels), its pixel box
+    clipped to a W x H image; 1 / area is 0.0 for a degenerate triangle."""
+    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    if abs(area) < 1e-12:
+        return 0.0, 0, -1, 0, -1
+    xmin = max(int(math.floor(min(x0, min(x1, x2)))), 0)
+    xmax = min(int(math.ceil(max(x0, max(x1, x2)))), W - 1)
+    ymin = max(int(math.floor(min(y0, min(y1, y2)))), 0)
+    ymax = min(int(math.ceil(max(y0, max(y1, y2)))), H - 1)
+    return 1.0 / area, xmin, xmax, ymin, ymax
+
+
+@njit(cache=True, nogil=True, inline="always")
+def barycentric(x0, y0, x1, y1, x2, y2, cx, cy, inv):  # pragma: no cover - numba
+    """Barycentric weights of the pixel point (cx, cy) from signed areas times ``inv`` =
+    1 / area (normalized, so either winding works)."""
+    w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
+    w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
+    return w0, w1, 1.0 - w0 - w1
+
+
 @njit(cache=True)
 def _raster(px, py, pz, tris, cols, alpha, blend, zbuf, img):  # pragma: no cover - numba
     """Rasterize triangles ``tris`` (M, 3) with screen vertices ``px``, ``py`` (pixels, y down)
@@ -67,23 +90,14 @@ def _raster(px, py, pz, tris, cols, alpha, blend, zbuf, img):  # pragma: no cove
         x0, y0, z0 = px[i0], py[i0], pz[i0]
         x1, y1, z1 = px[i1], py[i1], pz[i1]
         x2, y2, z2 = px[i2], py[i2], pz[i2]
-        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if abs(area) < 1e-12:
-            continue
-        inv = 1.0 / area
-        xmin = max(int(math.floor(min(x0, min(x1, x2)))), 0)
-        xmax = min(int(math.ceil(max(x0, max(x1, x2)))), W - 1)
-        ymin = max(int(math.floor(min(y0, min(y1, y2)))), 0)
-        ymax = min(int(math.ceil(max(y0, max(y1, y2)))), H - 1)
+        inv, xmin, xmax, ymin, ymax = tri_pixel_box(x0, y0, x1, y1, x2, y2, W, H)
+        if inv == 0.0:
+            continue  # degenerate on screen
         r, g, b, a = cols[t, 0], cols[t, 1], cols[t, 2], alpha[t]
         for yy in range(ymin, ymax + 1):
             cy = yy + 0.5
             for xx in range(xmin, xmax + 1):
-                cx = xx + 0.5
-                # barycentric weights from signed areas (normalized, so either winding works)
-                w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
-                w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
-                w2 = 1.0 - w0 - w1
+                w0, w1, w2 = barycentric(x0, y0, x1, y1, x2, y2, xx + 0.5, cy, inv)
                 if w0 < -1e-9 or w1 < -1e-9 or w2 < -1e-9:
                     continue
                 z = w0 * z0 + w1 * z1 + w2 * z2

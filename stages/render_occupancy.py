@@ -53,7 +53,8 @@ from numba import njit
 
 from schemas.grid import GridSpec
 from schemas.taxonomy import CLASSES, palette, thing_ids
-from stages.render import AMBIENT, DIFFUSE, FONT_HEIGHT, FONT_WIDTH, _camera, draw_text, text_width
+from stages.render import (AMBIENT, DIFFUSE, FONT_HEIGHT, FONT_WIDTH, _camera, barycentric, draw_text,
+                           text_width, tri_pixel_box)
 
 __all__ = [
     "FREE_RGB",
@@ -202,21 +203,13 @@ def _fill_tri(x0, y0, z0, s0, t0, x1, y1, z1, s1, t1, x2, y2, z2, s2, t2,
     (s, t) are the quad coordinates of the vertices: pixels within ``edge`` pixels of the quad's
     border (side lengths ``ls``, ``lt`` pixels) are multiplied by ``dark`` (``edge`` 0: none)."""
     H, W = zbuf.shape
-    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-    if abs(area) < 1e-12:
+    inv, xmin, xmax, ymin, ymax = tri_pixel_box(x0, y0, x1, y1, x2, y2, W, H)
+    if inv == 0.0:
         return
-    inv = 1.0 / area
-    xmin = max(int(math.floor(min(x0, min(x1, x2)))), 0)
-    xmax = min(int(math.ceil(max(x0, max(x1, x2)))), W - 1)
-    ymin = max(int(math.floor(min(y0, min(y1, y2)))), 0)
-    ymax = min(int(math.ceil(max(y0, max(y1, y2)))), H - 1)
     for yy in range(ymin, ymax + 1):
         cy = yy + 0.5
         for xx in range(xmin, xmax + 1):
-            cx = xx + 0.5
-            w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
-            w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
-            w2 = 1.0 - w0 - w1
+            w0, w1, w2 = barycentric(x0, y0, x1, y1, x2, y2, xx + 0.5, cy, inv)
             if w0 < -1e-9 or w1 < -1e-9 or w2 < -1e-9:
                 continue
             z = w0 * z0 + w1 * z1 + w2 * z2
