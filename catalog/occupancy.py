@@ -63,22 +63,38 @@ def zarr_store(store: Store, name: str):
 
 
 @njit(cache=True, nogil=True)
-def _chunk_flags(b, nx, ny, m, cx, cy):  # pragma: no cover - numba
+def _any_run(b, b64, start, end):  # pragma: no cover - numba
+    """True when a byte of ``b[start:end]`` is nonzero: unaligned head and tail byte by byte, the
+    body OR-reduced as uint64 words (``b64`` views the same buffer)."""
+    k = start
+    while k < end and k % 8:
+        if b[k]:
+            return True
+        k += 1
+    w1 = end // 8
+    acc = np.uint64(0)
+    for w in range(k // 8, w1):
+        acc |= b64[w]
+    if acc:
+        return True
+    for k2 in range(max(k, w1 * 8), end):
+        if b[k2]:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def _chunk_flags(b, b64, nx, ny, m, cx, cy):  # pragma: no cover - numba
     """1 for each (cx, cy) column block of the flat byte volume ``b`` (nx, ny, m bytes per
-    column, C order) that holds a nonzero byte. For each x row a block's columns are one
-    contiguous byte run, OR-reduced without branches (vectorized by LLVM)."""
+    column, C order) that holds a nonzero byte; for each x row a block's columns are one
+    contiguous byte run."""
     fy = (ny + cy - 1) // cy
     flags = np.zeros(((nx + cx - 1) // cx, fy), dtype=np.uint8)
     for i in range(nx):
         for cj in range(fy):
             if flags[i // cx, cj]:
                 continue
-            start = (i * ny + cj * cy) * m
-            end = (i * ny + min(ny, (cj + 1) * cy)) * m
-            acc = np.uint8(0)
-            for k in range(start, end):
-                acc |= b[k]
-            if acc:
+            if _any_run(b, b64, (i * ny + cj * cy) * m, (i * ny + min(ny, (cj + 1) * cy)) * m):
                 flags[i // cx, cj] = 1
     return flags
 
@@ -87,7 +103,8 @@ def chunk_flags(data: np.ndarray, cx: int, cy: int) -> np.ndarray:
     """Which (x, y) chunks of a tile (nx, ny, ...) hold a nonzero value (bitwise: -0.0 counts)."""
     nx, ny = data.shape[:2]
     b = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
-    return _chunk_flags(b, nx, ny, b.size // max(nx * ny, 1), cx, cy)
+    b64 = b[: b.size // 8 * 8].view(np.uint64)  # the buffer start is 8-aligned (numpy allocations are)
+    return _chunk_flags(b, b64, nx, ny, b.size // max(nx * ny, 1), cx, cy)
 
 
 class OccupancyStore:

@@ -354,6 +354,7 @@ def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
 def _frame_flow(inputs: FrameInputs):
     """``tile -> flow`` of the frame's actors (the flow of a tile without them is all zero)."""
     from stages.geometry import pose_from_list
+    from stages.scratch import scratch
     from stages.voxelize.flow import instance_flow
 
     actors = [a for a in inputs.actors if a.instance_id > 0]
@@ -371,7 +372,8 @@ def _frame_flow(inputs: FrameInputs):
         # largest id is below the first actor's holds no dynamic voxel (None: all zero)
         if first is None or int(tile.instance.max()) < first:
             return None
-        return instance_flow(tile.instance, tile_origin, voxel_size, ids, centres, vel, ang, lidar_to_world)
+        buf = scratch("tile_flow", tile.instance.size * 3, np.float16).reshape(*tile.instance.shape, 3)
+        return instance_flow(tile.instance, tile_origin, voxel_size, ids, centres, vel, ang, lidar_to_world, out=buf)
 
     return flow
 

@@ -31,13 +31,15 @@ def instance_flow(
     velocities: np.ndarray,
     angular_velocities: np.ndarray,
     lidar_to_world: np.ndarray,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """float16 (X, Y, Z, 3) flow (m/s, LiDAR axes) of the voxels of the given actors, 0 elsewhere.
 
     ``instance`` (X, Y, Z) uint32 instance ids (a tile of the grid, ``tile_origin`` metres in the
     LiDAR frame); ``instance_ids`` (K,) unique actor ids with ``centres`` (K, 3) world metres,
     ``velocities`` (K, 3) world m/s and ``angular_velocities`` (K, 3) world rad/s;
-    ``lidar_to_world`` 4x4. Work is proportional to the nonzero voxels.
+    ``lidar_to_world`` 4x4. Work is proportional to the nonzero voxels. ``out``: a float16
+    (X, Y, Z, 3) buffer to fill (zeroed here) instead of a new array.
     """
     inst = np.asarray(instance)
     if inst.ndim != 3:
@@ -51,7 +53,12 @@ def instance_flow(
     if len(np.unique(ids)) != len(ids):
         raise ValueError("instance_ids must be unique")
     T = np.asarray(lidar_to_world, dtype=np.float64)
-    out = np.zeros(inst.shape + (3,), dtype=np.float16)
+    if out is None:
+        out = np.zeros(inst.shape + (3,), dtype=np.float16)
+    elif out.shape != inst.shape + (3,) or out.dtype != np.float16 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float16 array of shape {inst.shape + (3,)}")
+    else:
+        out[...] = 0
     if len(ids) == 0:
         return out
     # 1. the nonzero voxels and their ids (instance 0 is free space / stuff)

@@ -135,20 +135,33 @@ def _pack_occupancy(occ, nx, ny, nz, tx, ty, tz, words):
 
 @njit(parallel=True, cache=True, nogil=True)
 def _unswizzle_or(sw, pages, nx, ny, nz, tx, ty, tz, out):
-    """Set ``out`` (flat C order) to 1 where the swizzled mask ``sw`` is nonzero, skipping the
-    16-voxel runs of unflagged pages. C order (sequential writes), parallel over x-slabs."""
+    """OR the swizzled mask ``sw`` into ``out`` (flat C order), one 4x4x4 brick at a time.
+
+    Inside a brick the 4 voxels along z of each (x, y) row are 4 consecutive bytes in both
+    layouts (brick offset (x & 3) * 16 + (y & 3) * 4 + (z & 3)), so a brick is 16 runs of 4
+    bytes; bricks of unflagged pages are skipped. Parallel over x-blocks of 4 (disjoint rows)."""
     npy = (ny + _PAGE - 1) // _PAGE
     npz = (nz + _PAGE - 1) // _PAGE
-    for i in prange(nx):
-        for j in range(ny):
-            base = (i * ny + j) * nz
-            pij = tx[i] + ty[j]
-            prow = ((i >> 4) * npy + (j >> 4)) * npz
-            for pk in range(npz):
-                if pages[prow + pk] == 0:
+    for i4 in prange((nx + 3) // 4):
+        i0 = 4 * i4
+        ni = min(4, nx - i0)
+        for j4 in range((ny + 3) // 4):
+            j0 = 4 * j4
+            nj = min(4, ny - j0)
+            prow = ((i0 >> 4) * npy + (j0 >> 4)) * npz
+            sij = tx[i0] + ty[j0]
+            for k4 in range((nz + 3) // 4):
+                k0 = 4 * k4
+                if pages[prow + (k0 >> 4)] == 0:
                     continue
-                for k in range(pk * _PAGE, min(pk * _PAGE + _PAGE, nz)):
-                    out[base + k] |= sw[pij + tz[k]]
+                src = sij + tz[k0]
+                nk = min(4, nz - k0)
+                for xi in range(ni):
+                    for yi in range(nj):
+                        base = ((i0 + xi) * ny + j0 + yi) * nz + k0
+                        s0 = src + xi * 16 + yi * 4
+                        for zi in range(nk):
+                            out[base + zi] |= sw[s0 + zi]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -117,3 +117,28 @@ def test_write_tile_round_trips_through_zarr_with_edge_chunks_and_empty_chunks(t
         occ.write_tile("s", grid, 1, "semantic", sem[8:24], 8)
     with pytest.raises(ValueError, match="whole chunks"):
         occ.write_tile("s", grid, 1, "semantic", sem[0:10], 0)
+
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+@settings(max_examples=80, deadline=None)
+@given(nx=st.integers(1, 9), ny=st.integers(1, 9), nz=st.integers(1, 11), cx=st.integers(1, 4), cy=st.integers(1, 4),
+       dtype=st.sampled_from(["uint8", "uint32", "float16"]), trailing=st.sampled_from([(), (3,)]),
+       seed=st.integers(0, 2**32 - 1))
+def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing, seed):
+    from catalog.occupancy import chunk_flags
+
+    rng = np.random.default_rng(seed)
+    data = np.zeros((nx, ny, nz, *trailing), dtype=dtype)
+    n = rng.integers(0, 4)
+    for _ in range(n):  # a few isolated nonzero values anywhere (unaligned runs included)
+        idx = tuple(rng.integers(0, s) for s in data.shape)
+        data[idx] = 1
+    got = chunk_flags(data, cx, cy)
+    want = np.zeros_like(got)
+    for a in range(got.shape[0]):
+        for b in range(got.shape[1]):
+            want[a, b] = data[a * cx:(a + 1) * cx, b * cy:(b + 1) * cy].any()
+    np.testing.assert_array_equal(got, want)
