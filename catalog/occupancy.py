@@ -30,7 +30,7 @@ from zarr.codecs import ZstdCodec
 from zarr.storage import FsspecStore, LocalStore
 
 from catalog.store import OCCUPANCY_ZARR, Store
-from schemas.grid import GridSpec
+from schemas.grid import GridSpec, resolution_key
 from schemas.taxonomy import TAXONOMY_VERSION
 
 # array name -> dtype, description, trailing axes (beyond frame, x, y, z)
@@ -173,8 +173,6 @@ class OccupancyStore:
     def stored_grid(self, sequence_id: str, voxel_size: float) -> GridSpec | None:
         """The grid a sequence was voxelized on at ``voxel_size`` (from the arrays' attributes,
         whatever the current config says), or None when it was not."""
-        from schemas.grid import resolution_key
-
         try:
             arr = self._root("r")[f"{sequence_id}/{resolution_key(voxel_size)}/semantic"]
         except (KeyError, FileNotFoundError, zarr.errors.GroupNotFoundError):
@@ -219,6 +217,22 @@ class OccupancyStore:
             cache[path] = (tuple(arr.shape), tuple(arr.chunks), np.dtype(arr.dtype))
         return cache[path]
 
+    def _tile_chunks(self, sequence_id: str, grid: GridSpec, frame: int, name: str, x0: int, nx: int):
+        """(layout, [(ci, cj, key)]) of the chunks of voxels ``[x0, x0 + nx)`` of one frame; the
+        range must cover whole chunks (``x0`` on a chunk boundary, the end on one or at the end of
+        the array)."""
+        shape, chunks, dtype = self._layout(sequence_id, grid, name)
+        if not 0 <= frame < shape[0]:
+            raise ValueError(f"{name}: frame {frame} outside [0, {shape[0]})")
+        cx, cy = chunks[1], chunks[2]
+        if x0 % cx or not (x0 + nx == shape[1] or (x0 + nx) % cx == 0) or x0 + nx > shape[1]:
+            raise ValueError(f"{name}: tile x [{x0}, {x0 + nx}) does not cover whole chunks of {cx}")
+        base = f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}"
+        tail = "/0" * (len(shape) - 3)  # z (one chunk) and any trailing axes
+        keys = [(ci, cj, f"{base}/c/{frame}/{ci}/{cj}{tail}")
+                for ci in range(x0 // cx, -(-(x0 + nx) // cx)) for cj in range(-(-shape[2] // cy))]
+        return (shape, chunks, dtype), keys
+
     def write_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, data: np.ndarray,
                    x0: int) -> None:
         """Write voxels ``[x0, x0 + len(data))`` x all y x all z of one frame of one array.
@@ -227,48 +241,33 @@ class OccupancyStore:
         the end of the array. Each chunk is encoded here and stored as one object (see the module
         docstring); all-zero chunks are removed instead.
         """
-        shape, chunks, dtype = self._layout(sequence_id, grid, name)
-        if not 0 <= frame < shape[0]:
-            raise ValueError(f"{name}: frame {frame} outside [0, {shape[0]})")
-        nx = data.shape[0]
+        data = np.asarray(data)
+        shape = self._layout(sequence_id, grid, name)[0]
         if data.shape[1:] != shape[2:]:
             raise ValueError(f"{name}: tile shape {data.shape} does not match the array's {shape[1:]} beyond x")
+        (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, grid, frame, name, x0, data.shape[0])
         cx, cy = chunks[1], chunks[2]
-        if x0 % cx or not (x0 + nx == shape[1] or (x0 + nx) % cx == 0) or x0 + nx > shape[1]:
-            raise ValueError(f"{name}: tile x [{x0}, {x0 + nx}) does not cover whole chunks of {cx}")
-        data = np.asarray(data)
-        base = f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}"
         codec = Zstd(level=ZSTD_LEVEL)
         little = dtype.newbyteorder("<")
-        tail = "/0" * (len(shape) - 3)  # z (one chunk) and any trailing axes
         padded = np.zeros(chunks[1:], dtype=little)
         # one pass over the tile finds the chunks that hold data (per-block .any() is ~10x slower)
         flags = chunk_flags(data, cx, cy)
-        for ci in range(x0 // cx, -(-(x0 + nx) // cx)):
-            for cj in range(-(-shape[2] // cy)):
-                key = f"{base}/c/{frame}/{ci}/{cj}{tail}"
-                if not flags[ci - x0 // cx, cj]:
-                    self._remove(key)
-                    continue
-                block = data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
-                if block.shape != padded.shape:  # an edge chunk: pad with the fill value
-                    padded[...] = 0
-                    padded[:block.shape[0], :block.shape[1]] = block
-                    block = padded
-                self._put(key, codec.encode(np.ascontiguousarray(block, dtype=little)))
+        for ci, cj, key in keys:
+            if not flags[ci - x0 // cx, cj]:
+                self._remove(key)
+                continue
+            block = data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
+            if block.shape != padded.shape:  # an edge chunk: pad with the fill value
+                padded[...] = 0
+                padded[:block.shape[0], :block.shape[1]] = block
+                block = padded
+            self._put(key, codec.encode(np.ascontiguousarray(block, dtype=little)))
 
     def clear_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, x0: int, nx: int) -> None:
         """Make voxels ``[x0, x0 + nx)`` of one frame of one array all zero (their chunks are
         removed); the same chunk rules as :meth:`write_tile`, without a zero volume in memory."""
-        shape, chunks, _ = self._layout(sequence_id, grid, name)
-        cx, cy = chunks[1], chunks[2]
-        if x0 % cx or not (x0 + nx == shape[1] or (x0 + nx) % cx == 0) or x0 + nx > shape[1]:
-            raise ValueError(f"{name}: tile x [{x0}, {x0 + nx}) does not cover whole chunks of {cx}")
-        base = f"{OCCUPANCY_ZARR}/{self.array_path(sequence_id, grid, name)}"
-        tail = "/0" * (len(shape) - 3)
-        for ci in range(x0 // cx, -(-(x0 + nx) // cx)):
-            for cj in range(-(-shape[2] // cy)):
-                self._remove(f"{base}/c/{frame}/{ci}/{cj}{tail}")
+        for _, _, key in self._tile_chunks(sequence_id, grid, frame, name, x0, nx)[1]:
+            self._remove(key)
 
     def _put(self, key: str, payload: bytes) -> None:
         if self.store.is_local:
