@@ -356,6 +356,14 @@ class _Volume:
         return out
 
 
+def _checked_out(out: np.ndarray | None, shape) -> np.ndarray:
+    if out is None:
+        return np.zeros(shape, dtype=np.uint8)
+    if out.shape != tuple(shape) or out.dtype != np.uint8 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous uint8 array of shape {tuple(shape)}")
+    return out
+
+
 def ray_mask(
     occupied: np.ndarray,
     grid: GridSpec,
@@ -373,10 +381,7 @@ def ray_mask(
     C-contiguous, same shape) is OR-ed into and returned when given.
     """
     shape = tuple(int(s) for s in grid.shape)
-    if out is None:
-        out = np.zeros(shape, dtype=np.uint8)
-    elif out.shape != shape or out.dtype != np.uint8 or not out.flags.c_contiguous:
-        raise ValueError(f"out must be a C-contiguous uint8 array of shape {shape}")
+    out = _checked_out(out, shape)
     # 1. pack the occupancy, 2. trace into a swizzled mask, 3. OR it into out in C order
     vol = _Volume(occupied, grid)
     mask = vol.new_mask()
@@ -450,14 +455,6 @@ def auto_camera_stride(rig: RigConfig, voxel_size: float, distance: float = 25.0
 def pack_occupancy(occupied: np.ndarray, grid: GridSpec) -> _Volume:
     """The occupancy packed once (bits, brick order) for any number of ray sets."""
     return _Volume(occupied, grid)
-
-
-def _checked_out(out: np.ndarray | None, shape) -> np.ndarray:
-    if out is None:
-        return np.zeros(shape, dtype=np.uint8)
-    if out.shape != tuple(shape) or out.dtype != np.uint8 or not out.flags.c_contiguous:
-        raise ValueError(f"out mask must be a C-contiguous uint8 array of shape {tuple(shape)}")
-    return out
 
 
 def lidar_visibility(packed: _Volume, rig: RigConfig, out: np.ndarray | None = None) -> np.ndarray:
