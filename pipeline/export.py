@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from catalog.formats import FormatError, atomic_write
+from catalog.formats import atomic_write
 from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
 from catalog.store import Store, StoreError
@@ -111,6 +111,8 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         Occ3DFrame,
         SemanticKittiVoxels,
         dense_to_surroundocc,
+        published_instance_ids,
+        remap_instances,
         save_carlaocc_npz,
         save_occ3d,
         save_semantickitti,
@@ -135,64 +137,46 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
                                   dtype=np.float64)
         has_masks = occ.exists(seq, grid, "mask_lidar") and occ.exists(seq, grid, "mask_camera")
         if fmt == "carlaocc-npz":
-            # the published id layout, stable across the sequence: static things (buildings,
-            # parked vehicles, props with ids) compacted to 1..999 in id order, the simulated
-            # actors at 1000 + (id mod 1000); one dense frame in memory at a time
-            inst = occ.open(seq, grid, "instance")
+            # the published id layout, stable across the sequence (a first pass collects the ids
+            # frame by frame: one dense frame in memory at a time)
+            inst, sem = occ.open(seq, grid, "instance"), occ.open(seq, grid, "semantic")
             present = [np.unique(f[f != 0]) for f in (inst[t] for t in range(frame_count))]
             ids = np.unique(np.concatenate(present)) if present else np.zeros(0, np.uint32)
-            actor_ids = _actor_ids(store, seq)
-            is_actor = np.isin(ids, actor_ids)
-            static = ids[~is_actor]
-            if len(static) > 999:
-                raise FormatError(f"{seq}: {len(static)} static instances, more than CarlaOcc npz's ids 1-999 hold")
-            new = np.zeros(len(ids), dtype=np.int64)
-            new[~is_actor] = np.arange(1, len(static) + 1)
-            new[is_actor] = 1000 + ids[is_actor].astype(np.int64) % 1000
-            if len(np.unique(new[is_actor])) != is_actor.sum():
-                raise FormatError(f"{seq}: two actors share an id modulo 1000 (CarlaOcc npz's 1000-1999 range)")
+            new = published_instance_ids(ids, _actor_ids(store, seq), seq)
             table = {int(o): int(n) for o, n in zip(ids.tolist(), new.tolist())}
-            (out / seq).mkdir(parents=True, exist_ok=True)
             atomic_write(out / seq / "instances.json",
                          lambda fh: fh.write(json.dumps({str(k): v for k, v in table.items()}, indent=1).encode()))
             for t in range(frame_count):
-                sem = occ.open(seq, grid, "semantic")[t]
-                f = inst[t]
-                if len(ids):  # every nonzero id of the frame is in ids (clip only guards zeros)
-                    compact = np.where(f == 0, 0, new[np.minimum(np.searchsorted(ids, f), len(ids) - 1)])
-                else:
-                    compact = np.zeros_like(f)
-                compact = compact.astype(np.uint32)
-                save_carlaocc_npz(out / seq / f"{t:06d}.npz", sem, compact, grid.voxel_size, grid.origin)
+                compact = remap_instances(inst[t], ids, new)
+                save_carlaocc_npz(out / seq / f"{t:06d}.npz", sem[t], compact, grid.voxel_size, grid.origin)
                 n_files += 1
                 n_frames += 1
                 if progress:
                     progress(1)
             continue
+        # the target grid, and how our LiDAR frame maps into its frame
+        target, to_target = {"occ3d": (OCC3D_NUSCENES, lidar_to_ego), "semantickitti": (SEMANTICKITTI_GRID, np.eye(4)),
+                             "surroundocc": (SURROUNDOCC_GRID, np.eye(4))}[fmt]
+        names = ("semantic", "mask_lidar", "mask_camera") if has_masks else ("semantic",)
+        # without visibility masks, "observed" = inside our region: the same for every frame
+        coverage = None if has_masks or fmt == "surroundocc" else _coverage(target, grid, to_target)
         for t in range(frame_count):
-            names = ("semantic", "mask_lidar", "mask_camera") if has_masks else ("semantic",)
             data = occ.read_frame(seq, grid, t, names)
-            masks = {k: data[k] for k in names[1:]}
+            labels, m = resample(data["semantic"], grid, target, to_target, {k: data[k] for k in names[1:]})
+            if coverage is not None:
+                m = dict.fromkeys(("mask_lidar", "mask_camera"), coverage)
             if fmt == "occ3d":
-                labels, m = resample(data["semantic"], grid, OCC3D_NUSCENES, lidar_to_ego, masks)
-                if not has_masks:  # no visibility: observed = inside our region
-                    m = dict.fromkeys(("mask_lidar", "mask_camera"), _coverage(OCC3D_NUSCENES, grid, lidar_to_ego))
                 frame = Occ3DFrame(labels, m["mask_lidar"].astype(np.uint8), m["mask_camera"].astype(np.uint8))
                 save_occ3d(out / "gts" / seq / f"{t:06d}" / "labels.npz", frame)
                 n_files += 1
             elif fmt == "semantickitti":
-                labels, m = resample(data["semantic"], grid, SEMANTICKITTI_GRID, np.eye(4), masks)
-                if not has_masks:  # no visibility: observed = inside our region
-                    m = dict.fromkeys(("mask_lidar", "mask_camera"), _coverage(SEMANTICKITTI_GRID, grid, np.eye(4)))
                 lidar_seen = m["mask_lidar"]
-                any_seen = lidar_seen | m["mask_camera"]
-                vox = SemanticKittiVoxels(occupied=labels != 0, invalid=~any_seen, occluded=~lidar_seen,
-                                          labels=to_raw(labels))
+                vox = SemanticKittiVoxels(occupied=labels != 0, invalid=~(lidar_seen | m["mask_camera"]),
+                                          occluded=~lidar_seen, labels=to_raw(labels))
                 save_semantickitti(out / "sequences" / seq / "voxels", f"{t:06d}", vox)
                 n_files += 4
             else:  # surroundocc
-                labels, _ = resample(data["semantic"], grid, SURROUNDOCC_GRID, np.eye(4))
-                save_surroundocc(out / seq / f"{t:06d}.npy", dense_to_surroundocc(labels, SURROUNDOCC_GRID.free_label))
+                save_surroundocc(out / seq / f"{t:06d}.npy", dense_to_surroundocc(labels, target.free_label))
                 n_files += 1
             n_frames += 1
             if progress:

@@ -92,8 +92,9 @@ def read_npz(path: PathLike, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
 # Public API, re-exported (defined after FormatError, which the modules import from here).
 from catalog.formats.carlaocc_npz import (
     CarlaOccFrame,
-    compact_instance_ids,
     load_carlaocc_npz,
+    published_instance_ids,
+    remap_instances,
     save_carlaocc_npz,
 )
 from catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
@@ -118,7 +119,8 @@ __all__ = [
     "PathLike",
     "SemanticKittiVoxels",
     "atomic_write",
-    "compact_instance_ids",
+    "published_instance_ids",
+    "remap_instances",
     "dense_to_surroundocc",
     "load_carlaocc_npz",
     "load_occ3d",

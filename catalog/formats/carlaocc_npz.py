@@ -15,8 +15,9 @@ choice; :func:`load_carlaocc_npz` accepts any real/integer dtype for them.)
 
 Internally instances are uint32 and never wrap (DESIGN.md); the 11-bit cap is an export concern:
 :func:`save_carlaocc_npz` **refuses** ids that do not fit rather than wrapping them, and
-:func:`compact_instance_ids` renumbers a sequence's instances to 1..K (consistently across its
-frames) so that they fit whenever a sequence has at most 2047 instances.
+:func:`published_instance_ids` gives a sequence's instances the published ids (static things
+1..999, actors 1000 + id mod 1000), stable across its frames, applied with
+:func:`remap_instances`.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ __all__ = [
     "MAX_INSTANCE",
     "MAX_SEMANTIC",
     "CarlaOccFrame",
-    "compact_instance_ids",
+    "published_instance_ids",
+    "remap_instances",
     "load_carlaocc_npz",
     "pack_ids",
     "save_carlaocc_npz",
@@ -121,7 +123,7 @@ def save_carlaocc_npz(
     if sem.size and sem.max() > MAX_SEMANTIC:
         raise _refuse(where, "semantic id", int(sem.max()), MAX_SEMANTIC, "5 bits")
     if inst.size and inst.max() > MAX_INSTANCE:
-        raise _refuse(where, "instance id", int(inst.max()), MAX_INSTANCE, "11 bits; see compact_instance_ids")
+        raise _refuse(where, "instance id", int(inst.max()), MAX_INSTANCE, "11 bits; see published_instance_ids")
     stray = instance.reshape(-1)[semantic.reshape(-1) == 0]
     if stray.size and stray.max() > 0:
         raise FormatError(f"{where}: instance id {int(stray.max())} on a free voxel (semantic 0) would be lost")
@@ -176,23 +178,33 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
     return CarlaOccFrame(semantic, instance, float(vs.reshape(())), origin)  # type: ignore[arg-type]
 
 
-def compact_instance_ids(
-    instance_frames: Sequence[np.ndarray],
-) -> tuple[list[np.ndarray], dict[int, int]]:
-    """Renumber the nonzero instance ids of a sequence to ``1..K``, the same way in every frame.
+def published_instance_ids(ids: np.ndarray, actor_ids: np.ndarray, where: str = "sequence") -> np.ndarray:
+    """The published CarlaOcc id of each of a sequence's instances (DESIGN.md): static things
+    numbered 1..999 in id order, simulated actors at 1000 + (id mod 1000).
 
-    Ids are ranked by original value (so the result is deterministic); 0 stays 0. Returns the
-    remapped frames (uint32, same shapes) and the table ``{original: new}``.
+    ``ids``: the sorted unique nonzero instance ids appearing in the sequence; ``actor_ids``: the
+    ids of its simulated actors. Returns int64 new ids aligned with ``ids``. Refuses
+    (:class:`FormatError` naming ``where``) more than 999 static things or two actors equal
+    modulo 1000 instead of wrapping.
     """
-    frames = [np.asarray(f) for f in instance_frames]
-    present = [np.unique(f) for f in frames]
-    ids = np.unique(np.concatenate(present)) if present else np.zeros(0, dtype=np.uint32)
-    ids = ids[ids != 0]
-    if ids.size and ids.min() < 0:
-        raise ValueError(f"negative instance id {int(ids.min())}")
-    table = {int(o): i + 1 for i, o in enumerate(ids.tolist())}
-    out = []
-    for f in frames:
-        new = np.searchsorted(ids, f) + 1  # rank among the nonzero ids
-        out.append(np.where(f == 0, 0, new).astype(np.uint32))
-    return out, table
+    ids = np.asarray(ids).astype(np.int64, copy=False)
+    is_actor = np.isin(ids, np.asarray(actor_ids).astype(np.int64, copy=False))
+    n_static = int((~is_actor).sum())
+    if n_static > 999:
+        raise FormatError(f"{where}: {n_static} static instances, more than CarlaOcc npz's ids 1-999 hold")
+    new = np.zeros(len(ids), dtype=np.int64)
+    new[~is_actor] = np.arange(1, n_static + 1)
+    new[is_actor] = 1000 + ids[is_actor] % 1000
+    if len(np.unique(new[is_actor])) != int(is_actor.sum()):
+        raise FormatError(f"{where}: two actors share an id modulo 1000 (CarlaOcc npz's 1000-1999 range)")
+    return new
+
+
+def remap_instances(instance: np.ndarray, ids: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """uint32 copy of ``instance`` with each id of the sorted ``ids`` replaced by ``new`` (0 stays
+    0; every nonzero value must be in ``ids``)."""
+    f = np.asarray(instance)
+    if len(ids) == 0:
+        return np.zeros(f.shape, dtype=np.uint32)
+    pos = np.minimum(np.searchsorted(ids, f), len(ids) - 1)  # the clip only guards zeros
+    return np.where(f == 0, 0, np.asarray(new)[pos]).astype(np.uint32)

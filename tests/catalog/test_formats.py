@@ -14,8 +14,9 @@ from hypothesis import strategies as st
 from catalog.formats import FormatError, atomic_write, occ3d, semantickitti, surroundocc
 from catalog.formats import carlaocc_npz as cnpz
 from catalog.formats.carlaocc_npz import (
-    compact_instance_ids,
     load_carlaocc_npz,
+    published_instance_ids,
+    remap_instances,
     save_carlaocc_npz,
 )
 from catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
@@ -316,27 +317,42 @@ def test_carlaocc_npz_loader_validates(tmp_path):
         load_carlaocc_npz(tmp_path / "d.npz")
 
 
-def test_compact_instance_ids_is_consistent_across_frames():
-    f0 = np.array([[0, 70000], [5, 5]], np.uint32)
-    f1 = np.array([[900, 0], [70000, 3_000_000_000]], np.uint32)
-    out, table = compact_instance_ids([f0, f1])
-    assert table == {5: 1, 900: 2, 70000: 3, 3_000_000_000: 4}
-    assert out[0].tolist() == [[0, 3], [1, 1]] and out[1].tolist() == [[2, 0], [3, 4]]
-    assert all(o.dtype == np.uint32 for o in out)
-    out, table = compact_instance_ids([np.zeros((2, 2), np.uint32)])
-    assert table == {} and out[0].tolist() == [[0, 0], [0, 0]]
-    assert compact_instance_ids([]) == ([], {})
+def test_published_instance_ids_static_then_actors_stable_across_frames():
+    ids = np.array([5, 900, 70001, 3_000_000_000], np.uint32)  # sorted unique, 70001 and 3e9 actors
+    new = published_instance_ids(ids, np.array([70001, 3_000_000_000]))
+    assert new.tolist() == [1, 2, 1001, 1000]
+    f0 = np.array([[0, 70001], [5, 5]], np.uint32)
+    f1 = np.array([[900, 0], [70001, 3_000_000_000]], np.uint32)
+    assert remap_instances(f0, ids, new).tolist() == [[0, 1001], [1, 1]]
+    assert remap_instances(f1, ids, new).tolist() == [[2, 0], [1001, 1000]]
+    assert remap_instances(f1, ids, new).dtype == np.uint32
+    assert remap_instances(np.zeros((2, 2), np.uint32), ids[:0], new[:0]).tolist() == [[0, 0], [0, 0]]
+
+
+def test_published_instance_ids_refuse_instead_of_wrapping():
+    with pytest.raises(FormatError, match="seq7: 1000 static instances"):
+        published_instance_ids(np.arange(1, 1001), [], "seq7")
+    with pytest.raises(FormatError, match="modulo 1000"):
+        published_instance_ids(np.array([1234, 2234]), [1234, 2234])
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.lists(st.lists(st.integers(0, 2**32 - 1), min_size=1, max_size=20), min_size=1, max_size=4))
-def test_compact_instance_ids_hypothesis(frames):
+@given(st.lists(st.lists(st.integers(0, 2**32 - 1), min_size=1, max_size=20), min_size=1, max_size=4),
+       st.integers(0, 2**32 - 1))
+def test_published_instance_ids_hypothesis(frames, actor_seed):
     arrays = [np.array(f, np.uint32) for f in frames]
-    out, table = compact_instance_ids(arrays)
-    assert sorted(table) == sorted({v for f in frames for v in f if v})
-    assert list(table.values()) == list(range(1, len(table) + 1))
-    for a, o in zip(arrays, out):
-        assert o.tolist() == [table.get(int(v), 0) for v in a]
+    ids = np.unique(np.concatenate(arrays))
+    ids = ids[ids != 0]
+    rng = np.random.default_rng(actor_seed)
+    actors = ids[rng.random(len(ids)) < 0.3]
+    actors = actors[np.unique(actors % 1000, return_index=True)[1]]  # no two equal modulo 1000
+    new = published_instance_ids(ids, actors)
+    static = ~np.isin(ids, actors)
+    assert new[static].tolist() == list(range(1, static.sum() + 1))
+    assert (new[~static] == 1000 + ids[~static].astype(np.int64) % 1000).all()
+    table = dict(zip(ids.tolist(), new.tolist()))
+    for a in arrays:
+        assert remap_instances(a, ids, new).tolist() == [table.get(int(v), 0) for v in a]
 
 
 # ------------------------------------------------------------------------ corrupt / truncated
