@@ -17,9 +17,14 @@ help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
 
 syslibs:
-	@if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then \
-	  echo "open3d needs the system library libusb-1.0-0, which is missing. Install it with:"; \
-	  echo "    sudo apt-get update && sudo apt-get install -y libusb-1.0-0"; \
+	@missing=""; \
+	for pair in libusb-1.0.so.0:libusb-1.0-0 libGL.so.1:libgl1 libgthread-2.0.so.0:libglib2.0-0 libxcb.so.1:libxcb1; do \
+	  ldconfig -p 2>/dev/null | grep -q "$${pair%%:*}" || missing="$$missing $${pair##*:}"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "open3d (libusb) and opencv-python for the d2nt normals (libGL, glib, xcb) need system"; \
+	  echo "libraries that are missing:$$missing. Install them with:"; \
+	  echo "    sudo apt-get update && sudo apt-get install -y$$missing"; \
 	  exit 1; \
 	fi
 
