@@ -116,6 +116,67 @@ class VoxelizeConfig(StageConfig):
         return GridSpec(region_min=self.region_min, region_max=self.region_max, voxel_size=voxel_size)
 
 
+class SimulatorArtifacts(StageConfig):
+    """What a UE5 CARLA camera gets wrong (paper, appendix "Sensor Artifacts Rectification"):
+    the model that turns clean ray-cast maps into the ``*_raw`` maps a simulator delivers, and
+    the renderer's known omissions that rectification repairs.
+
+    * translucent parts (ADMesh ``transparent``) are absent from the depth buffer and the
+      semantic pass: a pixel sees the first opaque surface behind them;
+    * unlabelled assets (the non-Nanite ones the semantic pass does not substitute) keep their
+      depth but get the empty label (0) and instance 0.
+    """
+
+    transparent: bool = Field(True, description="translucent parts are missing from raw depth and semantics")
+    unlabelled_classes: tuple[str, ...] = Field(
+        ("Terrain",), description="taxonomy classes whose meshes the semantic pass leaves unlabelled (0)")
+    unlabelled_fraction: float = Field(
+        0.05, ge=0.0, le=1.0, description="share of thing assets (chosen by a stable hash of the asset id and "
+        "seed) the semantic pass leaves unlabelled")
+    seed: int = 0
+
+    @model_validator(mode="after")
+    def _known_classes(self) -> SimulatorArtifacts:
+        from schemas import taxonomy
+
+        for name in self.unlabelled_classes:
+            try:
+                taxonomy.by_name(name)
+            except KeyError as exc:
+                raise ValueError(f"artifacts.unlabelled_classes: {exc.args[0]}") from None
+        return self
+
+
+class SensorsConfig(StageConfig):
+    """Ray-cast camera maps and LiDAR per frame, and the instance-guided rectification."""
+
+    source: Literal["raycast", "recorded"] = Field(
+        "raycast", description="raycast: render clean maps and simulate the raw ones; recorded: rectify the raw "
+        "maps a recorder wrote into sensors.zarr (depth_raw, semantic_raw[, instance_raw])")
+    cameras: tuple[str, ...] | None = Field(None, description="rig cameras to render (default: all)")
+    lidar: bool = Field(True, description="cast the rig's LiDAR (raycast source only)")
+    scene_range: float = Field(
+        120.0, gt=0.0, le=2000.0, description="half-width (m) of the box around the LiDAR whose scene the sensors "
+        "see; beyond it cameras see sky")
+    artifacts: SimulatorArtifacts = SimulatorArtifacts()
+    epsilon: float = Field(
+        0.05, gt=0.0, le=10.0, description="transparency threshold (m): raw depth at least this far behind the "
+        "rectified depth marks a pixel seen through a translucent surface")
+    normals: Literal["d2nt_basic", "d2nt_v2", "d2nt_v3"] = Field(
+        "d2nt_v2", description="D2NT version for the normal maps (v3 adds MRF refinement at 3x the cost)")
+    rig: RigConfig | None = Field(None, description="the ego rig; the pipeline sets it from scenes.rig")
+
+    def selected_cameras(self, rig: RigConfig) -> tuple:
+        """The rig's CameraSpecs to render, in rig order; unknown names are an error naming them."""
+        names = [c.name for c in rig.cameras]
+        if self.cameras is None:
+            return tuple(rig.cameras)
+        unknown = [n for n in self.cameras if n not in names]
+        if unknown:
+            raise ValueError(f"sensors.cameras: unknown cameras {unknown}; the rig has {names}")
+        return tuple(c for c in rig.cameras if c.name in self.cameras)
+
+
 class MetricsConfig(StageConfig):
     """Dataset-quality metrics."""
 
@@ -128,6 +189,7 @@ class DatasetConfig(StageConfig):
     ingest: IngestConfig = IngestConfig()
     scenes: ScenesConfig = ScenesConfig()
     voxelize: VoxelizeConfig = VoxelizeConfig()
+    sensors: SensorsConfig = SensorsConfig()
     metrics: MetricsConfig = MetricsConfig()
 
     @model_validator(mode="after")

@@ -47,6 +47,7 @@ class SceneMesh:
     closed: bool
     name: str = field(default="")
     transparent: bool = False  # glass and other see-through parts (cameras see past them)
+    asset_id: str = ""  # the ADMesh asset (or town stuff key) the mesh is a part of
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))

@@ -281,7 +281,7 @@ def _emit(
             vertices=V, faces=F, semantic_id=int(part.semantic_id),
             instance_id=0 if is_stuff else int(instance_id), is_stuff=is_stuff,
             closed=bool(closed) and not is_stuff, name=f"{name}/{part.name}",
-            transparent=bool(part.transparent),
+            transparent=bool(part.transparent), asset_id=geom.asset_id,
         ))  # fmt: skip
     return out
 

@@ -1,0 +1,16 @@
+"""Sensors stage compute: ray-cast camera maps and LiDAR, the simulator artifact model and the
+instance-guided rectification (paper, section 3.2 and its appendix)."""
+
+from stages.sensors.artifacts import unlabelled_meshes
+from stages.sensors.frame import (CameraFrame, CameraStats, SensorFrame, camera_poses, rectify_cameras,
+                                  recorded_stats, simulate_frame)
+from stages.sensors.normals import depth_normals
+from stages.sensors.raycast import (SKY, UNLABELLED, CameraMaps, RayScene, camera_ray_bundle, lidar_scan,
+                                    render_camera)
+from stages.sensors.rectify import Rectification, compact_mesh, rectify
+
+__all__ = [
+    "SKY", "UNLABELLED", "CameraFrame", "CameraMaps", "CameraStats", "RayScene", "Rectification", "SensorFrame",
+    "camera_poses", "camera_ray_bundle", "compact_mesh", "depth_normals", "lidar_scan", "recorded_stats",
+    "rectify", "rectify_cameras", "render_camera", "simulate_frame", "unlabelled_meshes",
+]

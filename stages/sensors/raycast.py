@@ -1,0 +1,202 @@
+"""Ray casting a frame's panoptic scene: camera depth/semantic/instance maps and LiDAR points.
+
+The scene is one :class:`~stages.scenes.assembly.PanopticMesh` (per-triangle semantic, instance
+and transparent flags) in the LiDAR frame (metres, x forward, y left, z up), cast through
+open3d's Embree-backed :class:`open3d.t.geometry.RaycastingScene`. A hit's triangle index turns
+into labels by one vectorized lookup per map.
+
+Cameras are pinhole, OpenCV optical frame (x right, y down, z forward), pixel ``(u, v)`` sampled
+at its centre ``(u + 0.5, v + 0.5)``. Ray directions are scaled so their optical-axis component
+is 1: the hit distance open3d returns is then the **planar depth** (z in the camera frame) the
+reference dataset stores, with no division afterwards.
+
+Conventions of the maps (:class:`CameraMaps`): depth float32 metres, 0 where no surface lies
+within range (sky); semantic uint8 (CarlaOcc taxonomy), :data:`SKY` where no surface; instance
+uint32, 0 for stuff and sky.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from schemas.rig import CameraSpec, LidarSpec
+from stages.scenes.assembly import PanopticMesh
+
+SKY = 11  # taxonomy id of Sky: the label of pixels whose ray meets no surface
+UNLABELLED = 0  # the empty label a simulator's semantic pass leaves on assets it does not render
+_MISS = np.int64(-1)
+_INVALID_ID = np.uint32(0xFFFFFFFF)  # open3d's RaycastingScene.INVALID_ID
+
+
+@dataclass(frozen=True)
+class CameraMaps:
+    """One camera image's maps: planar depth (float32, m, 0 = no surface), semantic (uint8,
+    :data:`SKY` where no surface) and instance (uint32, 0 = stuff or sky), all (H, W)."""
+
+    depth: np.ndarray
+    semantic: np.ndarray
+    instance: np.ndarray | None
+
+
+class RayScene:
+    """A panoptic mesh ready for ray casting: an Embree BVH over its triangles (built once, in
+    the constructor) plus the per-triangle labels.
+
+    ``unlabelled`` (per triangle, optional) marks triangles a simulator's semantic pass leaves
+    with the empty label (see :func:`render_camera`'s raw maps).
+    """
+
+    def __init__(self, mesh: PanopticMesh, unlabelled: np.ndarray | None = None, nthreads: int = 0):
+        import open3d as o3d
+
+        self.mesh = mesh
+        n = len(mesh.faces)
+        self.unlabelled = (np.zeros(n, dtype=bool) if unlabelled is None
+                           else np.ascontiguousarray(unlabelled, dtype=bool).reshape(-1))
+        if len(self.unlabelled) != n:
+            raise ValueError(f"unlabelled has {len(self.unlabelled)} entries for {n} triangles")
+        # per-triangle lookups, with one extra slot at the end for "no hit" (index -1)
+        self._semantic = np.append(mesh.semantic, np.uint8(SKY))
+        self._instance = np.append(mesh.instance, np.uint32(0))
+        self._transparent = np.append(mesh.transparent, False)
+        self._raw_semantic = np.append(np.where(self.unlabelled, np.uint8(UNLABELLED), mesh.semantic), np.uint8(SKY))
+        self._raw_instance = np.append(np.where(self.unlabelled, np.uint32(0), mesh.instance), np.uint32(0))
+        self._scene = o3d.t.geometry.RaycastingScene(nthreads=nthreads)
+        self.triangle_count = n
+        if n:
+            self._scene.add_triangles(
+                o3d.core.Tensor(np.ascontiguousarray(mesh.vertices, dtype=np.float32)),
+                o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32)),
+            )
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, nthreads: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """First hits of rays ``origins + t * directions`` (both (N, 3) or origins (3,); scene
+        frame, metres): ``t`` (N,) float32 in units of each direction's length (``inf`` on a
+        miss) and the hit triangle (N,) int64, -1 on a miss."""
+        import open3d as o3d
+
+        d = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
+        if self.triangle_count == 0 or len(d) == 0:
+            return np.full(len(d), np.inf, dtype=np.float32), np.full(len(d), _MISS)
+        rays = np.empty((len(d), 6), dtype=np.float32)
+        rays[:, :3] = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
+        rays[:, 3:] = d
+        hit = self._scene.cast_rays(o3d.core.Tensor(rays), nthreads=nthreads)
+        t = hit["t_hit"].numpy()
+        prim = hit["primitive_ids"].numpy()
+        face = np.where(prim == _INVALID_ID, _MISS, prim.astype(np.int64))
+        return t, face
+
+    def labels(self, face: np.ndarray, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(semantic uint8, instance uint32) of hit triangles (-1 = miss: SKY, 0); ``raw`` gives
+        the simulator's labels (unlabelled triangles -> 0, 0)."""
+        if raw:
+            return self._raw_semantic[face], self._raw_instance[face]
+        return self._semantic[face], self._instance[face]
+
+    def transparent(self, face: np.ndarray) -> np.ndarray:
+        """Whether each hit triangle is transparent (False on a miss)."""
+        return self._transparent[face]
+
+
+@lru_cache(maxsize=32)
+def _optical_directions(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    # pixel centres -> ((u + 0.5 - cx) / fx, (v + 0.5 - cy) / fy, 1), row-major (v outer, u inner)
+    u = (np.arange(width, dtype=np.float64) + 0.5 - cx) / fx
+    v = (np.arange(height, dtype=np.float64) + 0.5 - cy) / fy
+    d = np.empty((height, width, 3), dtype=np.float64)
+    d[..., 0] = u[None, :]
+    d[..., 1] = v[:, None]
+    d[..., 2] = 1.0
+    d = d.reshape(-1, 3)
+    d.setflags(write=False)
+    return d
+
+
+def camera_ray_bundle(camera: CameraSpec, camera_to_scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's pixel rays in the scene frame: its optical centre (3,) and (H*W, 3)
+    directions, row-major, each with unit component along the optical axis (so a hit distance
+    is the planar depth). ``camera_to_scene`` is the 4x4 pose of the OpenCV optical frame."""
+    K = np.asarray(camera.intrinsics, dtype=np.float64)
+    T = np.asarray(camera_to_scene, dtype=np.float64)
+    d = _optical_directions(camera.width, camera.height, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+    # rotate into the scene frame; the origin is the pose's translation
+    return T[:3, 3].copy(), d @ T[:3, :3].T
+
+
+def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarray, max_depth: float = np.inf,
+                  raw: bool = False, see_through: bool = True, nthreads: int = 0,
+                  max_layers: int = 8) -> tuple[CameraMaps, CameraMaps | None]:
+    """The clean maps of one camera (the first surface of any kind along each pixel ray) and,
+    with ``raw``, the maps a simulator delivers (the first *opaque* surface, with the
+    simulator's labels: unlabelled triangles give 0/0).
+
+    Depth beyond ``max_depth`` (planar, m) counts as no surface. Raw rays whose first hit is
+    transparent are continued from just past it (1e-4 m) through at most ``max_layers`` layers
+    of glass (a car seen through both its side windows is two); a ray still on glass after that
+    keeps the last layer's depth. ``see_through=False`` models a renderer that draws glass into
+    its depth and semantic passes (raw rays stop on it; only the unlabelled rule applies).
+    """
+    H, W = camera.height, camera.width
+    origin, dirs = camera_ray_bundle(camera, camera_to_scene)
+    # 1. first hits of every pixel ray
+    t, face = scene.cast(origin, dirs, nthreads=nthreads)
+    far = (face < 0) | ~(t <= max_depth)  # misses and hits beyond range
+    face = np.where(far, _MISS, face)
+    sem, inst = scene.labels(face)
+    clean = CameraMaps(np.where(far, 0.0, t).astype(np.float32).reshape(H, W),
+                       sem.reshape(H, W), inst.reshape(H, W))
+    if not raw:
+        return clean, None
+    # 2. continue the rays that stopped on glass, from just past the hit, until an opaque surface
+    t_raw, face_raw = t.astype(np.float64), face.copy()
+    todo = np.flatnonzero(scene.transparent(face_raw)) if see_through else np.zeros(0, dtype=np.int64)
+    step = 1e-4
+    for _ in range(max_layers):
+        if len(todo) == 0:
+            break
+        start = t_raw[todo] + step
+        t2, f2 = scene.cast(origin + start[:, None] * dirs[todo], dirs[todo], nthreads=nthreads)
+        t_raw[todo] = start + t2  # inf stays inf on a miss
+        face_raw[todo] = f2
+        todo = todo[scene.transparent(f2)]
+    far = (face_raw < 0) | ~(t_raw <= max_depth)
+    face_raw = np.where(far, _MISS, face_raw)
+    sem_r, inst_r = scene.labels(face_raw, raw=True)
+    raw_maps = CameraMaps(np.where(far, 0.0, t_raw).astype(np.float32).reshape(H, W),
+                          sem_r.reshape(H, W), inst_r.reshape(H, W))
+    return clean, raw_maps
+
+
+@lru_cache(maxsize=8)
+def _lidar_beams(lidar: LidarSpec) -> tuple[np.ndarray, np.ndarray]:
+    from stages.voxelize.visibility import lidar_directions
+
+    d = lidar_directions(lidar)
+    steps = len(d) // lidar.channels
+    channel = np.repeat(np.arange(lidar.channels, dtype=np.uint8), steps)
+    d.setflags(write=False)
+    channel.setflags(write=False)
+    return d, channel
+
+
+def lidar_scan(scene: RayScene, lidar: LidarSpec, nthreads: int = 0) -> dict[str, np.ndarray]:
+    """One sweep of the rig's LiDAR from the scene frame's origin (the scene is in the LiDAR
+    frame): the beams of :func:`~stages.voxelize.visibility.lidar_directions` (channels x
+    ``points_per_frame // channels`` azimuths), first hit of any surface within ``range_m``.
+
+    Returns columns x, y, z, distance (float32, m, LiDAR frame), semantic (uint8), instance
+    (uint32) and channel (uint8, 0 = top beam) of the beams that hit; beams that hit nothing in
+    range return no point (as CARLA's ray-cast LiDAR).
+    """
+    d, channel = _lidar_beams(lidar)
+    t, face = scene.cast(np.zeros(3), d, nthreads=nthreads)
+    # unit directions: the hit distance is the range
+    hit = np.flatnonzero(t <= lidar.range_m)
+    p = (d[hit] * t[hit, None]).astype(np.float32)
+    sem, inst = scene.labels(face[hit])
+    return {"x": p[:, 0].copy(), "y": p[:, 1].copy(), "z": p[:, 2].copy(), "distance": t[hit].astype(np.float32),
+            "semantic": sem, "instance": inst, "channel": channel[hit].copy()}
