@@ -8,9 +8,9 @@ driver before any task runs (:meth:`OccupancyStore.create`) and carry the grid s
 origin, frame and taxonomy version in their attributes.
 
 Writing: :meth:`OccupancyStore.write_tile` encodes whole chunks itself (C-order little-endian
-bytes, zstd: the arrays' declared codec pipeline ``bytes`` + ``zstd``) and stores each as one
-object, skipping zarr-python's per-chunk machinery (measured 2.1 s for one 0.05 m uint8 frame
-through ``arr[frame] = data`` against 0.3 s here). All-zero chunks are not stored (and removed
+bytes, zstd: the arrays' declared codec pipeline ``bytes`` + ``zstd``; :mod:`catalog.zarrio`)
+and stores each as one object, skipping zarr-python's per-chunk machinery (measured 2.1 s for
+one 0.05 m uint8 frame through ``arr[frame] = data`` against 0.3 s here). All-zero chunks are not stored (and removed
 when a re-run makes them empty), as zarr does with ``write_empty_chunks=False``; edge chunks are
 padded to the full chunk shape with the fill value, as the regular chunk grid requires. Reads go
 through zarr-python, and the tests read every written array back through it.
@@ -18,18 +18,14 @@ through zarr-python, and the tests read every written array back through it.
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
-
 import numpy as np
 import zarr
 from numba import njit
-from numcodecs import Zstd
 from zarr.codecs import ZstdCodec
-from zarr.storage import FsspecStore, LocalStore
 
 from catalog.store import OCCUPANCY_ZARR, Store
+from catalog.zarrio import (ZSTD_LEVEL, encode_chunk, frame_fingerprint, parse_frame_key, put_object,
+                            remove_object, zarr_store)
 from schemas.grid import GridSpec, resolution_key
 from schemas.taxonomy import TAXONOMY_VERSION
 
@@ -44,22 +40,15 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str, tuple[int, ...]]] = {
     "flow": ("float16", "velocity of the voxel's material point, m/s, world motion expressed in the LiDAR "
                         "frame's axes (x, y, z); 0 for free, stuff and static voxels", (3,)),
 }
-ZSTD_LEVEL = 1
 
 
 def parse_output_key(key: str) -> tuple[str, int] | None:
-    """``occupancy.zarr/<seq>/<res>/<name>[<frame>]`` -> (array path, frame); None otherwise."""
-    if not (key.startswith(OCCUPANCY_ZARR + "/") and key.endswith("]") and "[" in key):
+    """``occupancy.zarr/<seq>/<res>/<name>[<frame>]`` -> (array path, frame); None otherwise
+    (see :func:`catalog.zarrio.parse_frame_key` for the frame keys of any Zarr root)."""
+    parsed = parse_frame_key(key)
+    if parsed is None or parsed[0] != OCCUPANCY_ZARR:
         return None
-    path, frame = key[len(OCCUPANCY_ZARR) + 1 : -1].rsplit("[", 1)
-    return path, int(frame)
-
-
-def zarr_store(store: Store, name: str):
-    """A zarr store object over ``<root>/<name>`` (local directory or fsspec URL)."""
-    if store.is_local:
-        return LocalStore(store.path(name))
-    return FsspecStore.from_url(store.uri(name))
+    return parsed[1], parsed[2]
 
 
 @njit(cache=True, nogil=True)
@@ -247,75 +236,31 @@ class OccupancyStore:
             raise ValueError(f"{name}: tile shape {data.shape} does not match the array's {shape[1:]} beyond x")
         (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, grid, frame, name, x0, data.shape[0])
         cx, cy = chunks[1], chunks[2]
-        codec = Zstd(level=ZSTD_LEVEL)
         little = dtype.newbyteorder("<")
         padded = np.zeros(chunks[1:], dtype=little)
         # one pass over the tile finds the chunks that hold data (per-block .any() is ~10x slower)
         flags = chunk_flags(data, cx, cy)
         for ci, cj, key in keys:
             if not flags[ci - x0 // cx, cj]:
-                self._remove(key)
+                remove_object(self.store, key)
                 continue
             block = data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
             if block.shape != padded.shape:  # an edge chunk: pad with the fill value
                 padded[...] = 0
                 padded[:block.shape[0], :block.shape[1]] = block
                 block = padded
-            self._put(key, codec.encode(np.ascontiguousarray(block, dtype=little)))
+            put_object(self.store, key, encode_chunk(block, little))
 
     def clear_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, x0: int, nx: int) -> None:
         """Make voxels ``[x0, x0 + nx)`` of one frame of one array all zero (their chunks are
         removed); the same chunk rules as :meth:`write_tile`, without a zero volume in memory."""
         for _, _, key in self._tile_chunks(sequence_id, grid, frame, name, x0, nx)[1]:
-            self._remove(key)
-
-    def _put(self, key: str, payload: bytes) -> None:
-        if self.store.is_local:
-            # a temporary file renamed into place: a reader never sees half a chunk
-            path = self.store.path(key)
-            directory = os.path.dirname(path)
-            os.makedirs(directory, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=directory, prefix=".chunk-")
-            try:
-                with os.fdopen(fd, "wb") as f:
-                    f.write(payload)
-                os.replace(tmp, path)
-            except BaseException:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
-                raise
-        else:
-            self.store.fs.pipe_file(self.store.path(key), bytes(payload))
-
-    def _remove(self, key: str) -> None:
-        path = self.store.path(key)
-        if self.store.is_local:
-            try:
-                os.unlink(path)
-            except FileNotFoundError:
-                pass
-        elif self.store.fs.exists(path):
-            self.store.fs.rm_file(path)
+            remove_object(self.store, key)
 
     def frame_fingerprint(self, array_path: str, frame: int) -> str | None:
-        """Fingerprint of one frame as stored: the names and encoded bytes of its chunk files
-        (``<array>/c/<frame>/...``; all-empty chunks are not stored), plus the array metadata.
-        Cheap (compressed bytes) and sensitive to a deleted, truncated or rewritten chunk;
+        """Fingerprint of one frame as stored (see :func:`catalog.zarrio.frame_fingerprint`);
         None when the array does not exist."""
-        fs, base = self.store.fs, self.store.path(f"{OCCUPANCY_ZARR}/{array_path}")
-        try:
-            meta = fs.cat_file(f"{base}/zarr.json")
-        except FileNotFoundError:
-            return None
-        h = hashlib.sha256(meta)
-        prefix = f"{base}/c/{frame}"
-        files = sorted(fs.find(prefix)) if fs.exists(prefix) else []
-        for f in files:
-            if f.rsplit("/", 1)[-1].startswith("."):
-                continue  # a temporary chunk left by a crashed write is not part of the frame
-            h.update(f[len(prefix):].encode())
-            h.update(fs.cat_file(f))
-        return "sha256:" + h.hexdigest()[:24]
+        return frame_fingerprint(self.store, OCCUPANCY_ZARR, array_path, frame)
 
     def read_frame(self, sequence_id: str, grid: GridSpec, frame: int,
                    names: tuple[str, ...] = ("semantic", "instance")) -> dict[str, np.ndarray]:

@@ -28,10 +28,13 @@ TABLE_DIRS: dict[str, str] = {
     "sensor_poses": "scenes/sensor_poses",
     "actors": "scenes/actors",
     "quality": "metrics/quality",
+    "rectification": "metrics/rectification",
     "quality_classes": "metrics/quality_classes",
     "runs": "catalog/runs",
 }
 OCCUPANCY_ZARR = "occupancy.zarr"
+SENSORS_ZARR = "sensors.zarr"
+LIDAR_DIR = "lidar"
 ADMESH_MESHES = "admesh/meshes"
 SCENE_MESHES = "scenes/meshes"
 

@@ -651,6 +651,50 @@ def show_occupancy(
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 
 
+@show_app.command("sensors")
+def show_sensors(
+    seq: Annotated[str, typer.Option("--seq", help="sequence id (see: carlaocc catalog query 'select * from sequences')")],
+    frame: Annotated[int, typer.Option("--frame", min=0, help="frame index")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("sensors.png"),
+    camera: Annotated[Optional[list[str]], typer.Option("--camera", help="camera(s) to show (default: every camera stored)")] = None,
+    step: Annotated[int, typer.Option("--step", min=1, max=16, help="draw every n-th pixel row and column (2 halves 1408x376 images)")] = 2,
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+) -> None:
+    """Contact sheet of one frame's camera maps (no RGB: depth, normals, semantics, instances per
+    camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
+    transparency region tinted red and of the omission region blue (epsilon from the config)."""
+    from catalog.sensors import SensorStore
+    from stages.render_sensors import CameraView, sensor_sheet
+
+    cfg = load_config(config)
+    store = _store(root, writable=False)
+    sensors = SensorStore(store)
+    stored = sensors.cameras(seq)
+    if not stored:
+        fail(f"{seq} has no camera maps in {store.url}: run `carlaocc run --stages ingest,scenes,sensors`")
+    missing = [c for c in (camera or []) if c not in stored]
+    if missing:
+        fail(f"--camera {', '.join(missing)}: {seq} has maps of {', '.join(stored)} only")
+    views = []
+    for cam in camera or stored:
+        names = set(sensors.names(seq, cam))
+        n = sensors.open(seq, cam, "depth").shape[0] if "depth" in names else 0
+        if not 0 <= frame < n:
+            fail(f"{seq}/{cam} has frames 0..{n - 1}, not {frame}")
+
+        def read(name: str):
+            return sensors.read_image(seq, cam, frame, name) if name in names else None
+
+        if read("normal") is None:
+            fail(f"{seq}/{cam} has no normal map: run the sensors stage")
+        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
+                                read("depth_raw"), read("semantic_raw")))
+    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
+    _write_png(out, image)
+    typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
+
+
 @app.command("compare-resolutions")
 def compare_resolutions(
     fine: Annotated[float, typer.Option("--fine", help="the finer built resolution, e.g. 0.05")],

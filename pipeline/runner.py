@@ -21,8 +21,8 @@ from datetime import datetime, timezone
 from typing import Callable
 
 from catalog.lineage import LineageLog
-from catalog.occupancy import OccupancyStore, parse_output_key
 from catalog.store import Store
+from catalog.zarrio import frame_fingerprint, parse_frame_key
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
 from pipeline.stages import STAGES
 from schemas.configs import DatasetConfig, StageConfig
@@ -53,13 +53,14 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
                  kernel_threads: int | None = None) -> TaskResult:
     """Run one partition of a stage; never raises (a failure is a result with its error).
 
-    ``kernel_threads`` caps numba's threads in this process: a LocalCluster already runs one
-    worker process per core, so its kernels run single-threaded instead of oversubscribing.
+    ``kernel_threads`` caps the kernels' threads in this process (numba, open3d, OpenCV: see
+    :mod:`stages.threads`): a LocalCluster already runs one worker process per core, so its
+    kernels run single-threaded instead of oversubscribing.
     """
     if kernel_threads:
-        import numba
+        from stages.threads import set_kernel_threads
 
-        numba.set_num_threads(min(kernel_threads, numba.config.NUMBA_NUM_THREADS))
+        set_kernel_threads(kernel_threads)
     started = datetime.now(timezone.utc)
     try:
         outputs = task(Store(store_url), cfg, partition)
@@ -226,10 +227,9 @@ def file_fingerprint(path: str) -> str:
 def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
     """Every recorded output still has its recorded fingerprint (files by their bytes, Zarr
     frames by their encoded chunks)."""
-    occ = OccupancyStore(store)
     for key, fp in outputs.items():
-        frame = parse_output_key(key)
-        current = store.fingerprint(key) if frame is None else occ.frame_fingerprint(*frame)
+        frame = parse_frame_key(key)  # a frame of an array of occupancy.zarr, sensors.zarr...
+        current = store.fingerprint(key) if frame is None else frame_fingerprint(store, *frame)
         if current != fp:
             return False
     return True

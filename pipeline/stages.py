@@ -1,4 +1,4 @@
-"""The registered stages and their partitions: ingest -> scenes -> voxelize -> metrics."""
+"""The registered stages and their partitions: ingest -> scenes -> voxelize, sensors -> metrics."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ from catalog.store import StoreError
 from pipeline import tasks
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
 from schemas.records import SequenceRecord
-from schemas.configs import DatasetConfig, VoxelizeConfig
+from schemas.configs import DatasetConfig, SensorsConfig, VoxelizeConfig
 
 INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
 # code every task runs through besides its stage's compute: the contracts, the readers/writers and
 # the task wiring; editing any of it changes every stage's code version
-SHARED_CODE = ("schemas", "catalog.store", "catalog.parquet", "catalog.meshes", "catalog.occupancy",
+SHARED_CODE = ("schemas", "catalog.store", "catalog.parquet", "catalog.meshes", "catalog.occupancy", "catalog.zarrio",
                "pipeline.tasks", "stages.geometry")
 
 
@@ -99,6 +99,44 @@ def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Pa
     return invalid
 
 
+def sensors_config(config: DatasetConfig) -> SensorsConfig:
+    """The sensors stage's config: ``sensors`` with the rig of ``scenes``."""
+    return config.sensors.model_copy(update={"rig": config.scenes.rig})
+
+
+def _sensors_partitions(ctx: Context) -> list[Partition]:
+    return [Partition(f"{seq.sequence_id}/{t:04d}", {"sequence_id": seq.sequence_id, "frame_index": t},
+                      needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town)))
+            for seq in _sequences(ctx) for t in range(seq.frame_count)]
+
+
+def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
+    """Create the camera arrays of every sequence about to be written (intrinsics and extrinsics
+    in their attributes); a replaced array invalidates every frame of its sequence. The recorded
+    path creates only the arrays it writes and leaves the recorder's ``*_raw`` arrays alone."""
+    from catalog.sensors import SensorStore
+    from stages.sensors import camera_poses
+
+    cfg = sensors_config(ctx.config)
+    rig = cfg.rig
+    frames = {s.sequence_id: s.frame_count for s in _sequences(ctx)}
+    sensors = SensorStore(ctx.store)
+    to_lidar = camera_poses(rig)
+    invalid: set[str] = set()
+    for seq in sorted({p.params["sequence_id"] for p in to_run}):
+        replaced = False
+        for cam in cfg.selected_cameras(rig):
+            attrs = {"intrinsics": [list(r) for r in cam.intrinsics],
+                     "camera_to_ego": [list(r) for r in cam.camera_to_ego()],
+                     "camera_to_lidar": to_lidar[cam.name].tolist(),
+                     "camera_frame": "opencv: x right, y down, z forward", "source": cfg.source}
+            replaced |= sensors.create(seq, cam.name, cam.width, cam.height, frames[seq], tasks.sensor_arrays(cfg),
+                                       extra_attrs=attrs, keep_others=cfg.source == "recorded")
+        if replaced:
+            invalid |= {p.key for p in partitions if p.params["sequence_id"] == seq}
+    return invalid
+
+
 def _metrics_partitions(ctx: Context) -> list[Partition]:
     out = []
     vcfg = ctx.config.voxelize
@@ -149,6 +187,19 @@ STAGES: dict[str, StageSpec] = {
             task=tasks.voxelize_task,
             prepare=_voxelize_prepare,
             config_of=voxelize_config,
+        ),
+        StageSpec(
+            name="sensors",
+            description="ray-cast camera maps and LiDAR, simulator artifacts, instance-guided rectification, normals",
+            upstream=("ingest", "scenes"),
+            code_modules=("stages.sensors", "stages.scenes", "catalog.sensors", *SHARED_CODE),
+            reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)"),
+            writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "lidar/<seq>/",
+                    "metrics/rectification/"),
+            partitions=_sensors_partitions,
+            task=tasks.sensors_task,
+            prepare=_sensors_prepare,
+            config_of=sensors_config,
         ),
         StageSpec(
             name="metrics",

@@ -186,6 +186,27 @@ class SensorPoseRecord(Record):
     pose: Pose  # sensor-to-world, 4x4 row-major
 
 
+class RectificationRecord(Record):
+    """What the instance-guided rectification did to one camera image (pixel counts) and, for
+    ray-cast frames, how far its output is from the clean ray-cast maps (-1: not measured, the
+    raw maps were recorded)."""
+
+    TABLE: ClassVar[str] = "rectification"
+    sequence_id: str
+    frame_index: int
+    camera: str
+    source: Literal["raycast", "recorded"]
+    pixels: int
+    transparency: int  # Omega_t: raw depth >= epsilon behind the rectified depth
+    omission: int  # Omega_s: raw label empty
+    relabelled: int  # semantic or instance label changed by rectification
+    depth_changed: int
+    raw_semantic_wrong: int  # raw semantic != clean
+    semantic_mismatch: int  # rectified semantic != clean
+    instance_mismatch: int
+    depth_mismatch: int  # |rectified - clean| > 1 mm
+
+
 class QualityRecord(Record):
     """A dataset-quality score over one frame (frame_index set) or one sequence (frame_index None)."""
 

@@ -5,12 +5,12 @@ from stages.sensors.artifacts import unlabelled_meshes
 from stages.sensors.frame import (CameraFrame, CameraStats, SensorFrame, camera_poses, rectify_cameras,
                                   recorded_stats, simulate_frame)
 from stages.sensors.normals import depth_normals
-from stages.sensors.raycast import (SKY, UNLABELLED, CameraMaps, RayScene, camera_ray_bundle, lidar_scan,
+from stages.sensors.raycast import (SKY, UNLABELLED, CameraMaps, RayScene, camera_ray_bundle, covered_pixels, lidar_scan,
                                     render_camera)
 from stages.sensors.rectify import Rectification, compact_mesh, rectify
 
 __all__ = [
     "SKY", "UNLABELLED", "CameraFrame", "CameraMaps", "CameraStats", "RayScene", "Rectification", "SensorFrame",
-    "camera_poses", "camera_ray_bundle", "compact_mesh", "depth_normals", "lidar_scan", "recorded_stats",
+    "camera_poses", "camera_ray_bundle", "compact_mesh", "covered_pixels", "depth_normals", "lidar_scan", "recorded_stats",
     "rectify", "rectify_cameras", "render_camera", "simulate_frame", "unlabelled_meshes",
 ]

@@ -23,7 +23,7 @@ from stages.geometry import SceneMesh
 from stages.scenes.assembly import flatten
 from stages.sensors.artifacts import unlabelled_meshes
 from stages.sensors.normals import depth_normals
-from stages.sensors.raycast import CameraMaps, RayScene, lidar_scan, render_camera
+from stages.sensors.raycast import CameraMaps, RayScene, covered_pixels, lidar_scan, render_camera
 from stages.sensors.rectify import Rectification, compact_mesh, rectify
 
 
@@ -81,7 +81,8 @@ def rectify_cameras(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConf
     poses = camera_poses(rig)
     # 1. the compact mesh M, built once for all cameras
     flags = unlabelled_meshes(scene, cfg.artifacts)
-    compact = RayScene(compact_mesh(scene, flags), nthreads=nthreads)
+    m = compact_mesh(scene, flags)
+    compact = RayScene(m, nthreads=nthreads)
     out = {}
     for name, maps in raw.items():
         if name not in cams:
@@ -90,7 +91,8 @@ def rectify_cameras(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConf
         if maps.depth.shape != (cam.height, cam.width):
             raise ValueError(f"{name}: raw maps are {maps.depth.shape}, the camera is {cam.height}x{cam.width}")
         # 2. D_rc, S_rc, I_rc from M; 3. the paper's fusion; 4. normals of the rectified depth
-        cast, _ = render_camera(compact, cam, poses[name], nthreads=nthreads)
+        cast, _ = render_camera(compact, cam, poses[name], nthreads=nthreads,
+                                pixels=covered_pixels(m, cam, poses[name]))
         rect = rectify(maps, cast, cfg.epsilon)
         out[name] = (rect, depth_normals(rect.maps.depth, cam.intrinsics, cfg.normals))
     return out

@@ -76,18 +76,25 @@ class RayScene:
         """First hits of rays ``origins + t * directions`` (both (N, 3) or origins (3,); scene
         frame, metres): ``t`` (N,) float32 in units of each direction's length (``inf`` on a
         miss) and the hit triangle (N,) int64, -1 on a miss."""
-        import open3d as o3d
-
         d = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
-        if self.triangle_count == 0 or len(d) == 0:
-            return np.full(len(d), np.inf, dtype=np.float32), np.full(len(d), _MISS)
         rays = np.empty((len(d), 6), dtype=np.float32)
         rays[:, :3] = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
         rays[:, 3:] = d
-        hit = self._scene.cast_rays(o3d.core.Tensor(rays), nthreads=nthreads)
+        return self.cast_rays(rays, nthreads)
+
+    def cast_rays(self, rays: np.ndarray, nthreads: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`cast` of rays given as one (N, 6) float32 array ``[ox, oy, oz, dx, dy, dz]``."""
+        import open3d as o3d
+
+        n = len(rays)
+        if self.triangle_count == 0 or n == 0:
+            return np.full(n, np.inf, dtype=np.float32), np.full(n, _MISS)
+        hit = self._scene.cast_rays(o3d.core.Tensor.from_numpy(np.ascontiguousarray(rays, dtype=np.float32)),
+                                    nthreads=nthreads)
         t = hit["t_hit"].numpy()
         prim = hit["primitive_ids"].numpy()
-        face = np.where(prim == _INVALID_ID, _MISS, prim.astype(np.int64))
+        face = prim.astype(np.int64)
+        face[prim == _INVALID_ID] = _MISS
         return t, face
 
     def labels(self, face: np.ndarray, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -127,9 +134,66 @@ def camera_ray_bundle(camera: CameraSpec, camera_to_scene: np.ndarray) -> tuple[
     return T[:3, 3].copy(), d @ T[:3, :3].T
 
 
+@lru_cache(maxsize=16)
+def _camera_rays(camera: CameraSpec, pose_bytes: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # a rig camera's rays are the same every frame (the scene is in the LiDAR frame): build once
+    origin, dirs = camera_ray_bundle(camera, np.frombuffer(pose_bytes, dtype=np.float64).reshape(4, 4))
+    rays = np.empty((len(dirs), 6), dtype=np.float32)
+    rays[:, :3] = origin
+    rays[:, 3:] = dirs
+    for a in (origin, dirs, rays):
+        a.setflags(write=False)
+    return origin, dirs, rays
+
+
+def covered_pixels(mesh: PanopticMesh, camera: CameraSpec, camera_to_scene: np.ndarray, near: float = 1e-3) -> np.ndarray:
+    """Bool (H, W): pixels whose ray may meet a triangle of ``mesh`` (scene frame), a superset
+    from each triangle's screen bounding box. Rays outside it miss the mesh for certain, so a
+    small mesh (the rectification's compact mesh) is cast only where it can be seen."""
+    H, W = camera.height, camera.width
+    K = np.asarray(camera.intrinsics, dtype=np.float64)
+    if len(mesh.faces) == 0:
+        return np.zeros((H, W), dtype=bool)
+    # 1. vertices into the OpenCV camera frame
+    T = np.linalg.inv(np.asarray(camera_to_scene, dtype=np.float64))
+    P = mesh.vertices @ T[:3, :3].T + T[:3, 3]
+    tri = P[mesh.faces]  # (M, 3 corners, 3)
+    z = tri[..., 2]
+    # 2. the part of each triangle in front of the near plane: its corners there, plus the points
+    #    where its edges cross the plane (triangles wholly behind the camera drop out)
+    a, b = tri, np.roll(tri, -1, axis=1)
+    za, zb = a[..., 2], b[..., 2]
+    cross = (za > near) != (zb > near)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(cross, (near - za) / (zb - za), 0.0)
+    hit = a + s[..., None] * (b - a)
+    pts = np.concatenate([tri, hit], axis=1)  # (M, 6, 3)
+    ok = np.concatenate([z > near, cross], axis=1)
+    zz = np.where(ok, np.maximum(pts[..., 2], near), 1.0)
+    u = K[0, 0] * pts[..., 0] / zz + K[0, 2]
+    v = K[1, 1] * pts[..., 1] / zz + K[1, 2]
+    # 3. screen boxes in pixel indices (a pixel is sampled at its centre, index + 0.5), clipped
+    umin = np.where(ok, u, np.inf).min(axis=1)
+    umax = np.where(ok, u, -np.inf).max(axis=1)
+    vmin = np.where(ok, v, np.inf).min(axis=1)
+    vmax = np.where(ok, v, -np.inf).max(axis=1)
+    i0 = np.clip(np.floor(umin - 0.5) - 1, 0, W).astype(np.int64)
+    i1 = np.clip(np.ceil(umax - 0.5) + 2, 0, W).astype(np.int64)
+    j0 = np.clip(np.floor(vmin - 0.5) - 1, 0, H).astype(np.int64)
+    j1 = np.clip(np.ceil(vmax - 0.5) + 2, 0, H).astype(np.int64)
+    keep = ok.any(axis=1) & (i1 > i0) & (j1 > j0)
+    # 4. union of the boxes: a 2D difference array, summed along both axes
+    diff = np.zeros((H + 1, W + 1), dtype=np.int64)
+    np.add.at(diff, (j0[keep], i0[keep]), 1)
+    np.add.at(diff, (j0[keep], i1[keep]), -1)
+    np.add.at(diff, (j1[keep], i0[keep]), -1)
+    np.add.at(diff, (j1[keep], i1[keep]), 1)
+    return np.cumsum(np.cumsum(diff, axis=0), axis=1)[:H, :W] > 0
+
+
 def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarray, max_depth: float = np.inf,
                   raw: bool = False, see_through: bool = True, nthreads: int = 0,
-                  max_layers: int = 8) -> tuple[CameraMaps, CameraMaps | None]:
+                  max_layers: int = 8, pixels: np.ndarray | None = None) -> tuple[CameraMaps, CameraMaps | None]:
     """The clean maps of one camera (the first surface of any kind along each pixel ray) and,
     with ``raw``, the maps a simulator delivers (the first *opaque* surface, with the
     simulator's labels: unlabelled triangles give 0/0).
@@ -139,20 +203,31 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     of glass (a car seen through both its side windows is two); a ray still on glass after that
     keeps the last layer's depth. ``see_through=False`` models a renderer that draws glass into
     its depth and semantic passes (raw rays stop on it; only the unlabelled rule applies).
+    ``pixels`` (bool (H, W), e.g. :func:`covered_pixels`) casts only those rays; the others
+    count as misses.
     """
     H, W = camera.height, camera.width
-    origin, dirs = camera_ray_bundle(camera, camera_to_scene)
-    # 1. first hits of every pixel ray
-    t, face = scene.cast(origin, dirs, nthreads=nthreads)
+    pose = np.ascontiguousarray(camera_to_scene, dtype=np.float64)
+    origin, dirs, rays = _camera_rays(camera, pose.tobytes())
+    # 1. first hits of every pixel ray (or of the requested ones)
+    if pixels is None:
+        t, face = scene.cast_rays(rays, nthreads=nthreads)
+    else:
+        sel = np.flatnonzero(np.asarray(pixels, dtype=bool).reshape(-1))
+        t = np.full(H * W, np.inf, dtype=np.float32)
+        face = np.full(H * W, _MISS)
+        t[sel], face[sel] = scene.cast_rays(rays[sel], nthreads=nthreads)
     far = (face < 0) | ~(t <= max_depth)  # misses and hits beyond range
-    face = np.where(far, _MISS, face)
+    face[far] = _MISS
     sem, inst = scene.labels(face)
-    clean = CameraMaps(np.where(far, 0.0, t).astype(np.float32).reshape(H, W),
-                       sem.reshape(H, W), inst.reshape(H, W))
+    depth = t.copy()
+    depth[far] = 0.0
+    clean = CameraMaps(depth.reshape(H, W), sem.reshape(H, W), inst.reshape(H, W))
     if not raw:
         return clean, None
     # 2. continue the rays that stopped on glass, from just past the hit, until an opaque surface
     t_raw, face_raw = t.astype(np.float64), face.copy()
+    t_raw[far] = np.inf
     todo = np.flatnonzero(scene.transparent(face_raw)) if see_through else np.zeros(0, dtype=np.int64)
     step = 1e-4
     for _ in range(max_layers):
@@ -164,10 +239,11 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
         face_raw[todo] = f2
         todo = todo[scene.transparent(f2)]
     far = (face_raw < 0) | ~(t_raw <= max_depth)
-    face_raw = np.where(far, _MISS, face_raw)
+    face_raw[far] = _MISS
     sem_r, inst_r = scene.labels(face_raw, raw=True)
-    raw_maps = CameraMaps(np.where(far, 0.0, t_raw).astype(np.float32).reshape(H, W),
-                          sem_r.reshape(H, W), inst_r.reshape(H, W))
+    depth_raw = t_raw.astype(np.float32)
+    depth_raw[far] = 0.0
+    raw_maps = CameraMaps(depth_raw.reshape(H, W), sem_r.reshape(H, W), inst_r.reshape(H, W))
     return clean, raw_maps
 
 
