@@ -263,5 +263,6 @@ PERSISTED: tuple[type[Record], ...] = (
     ActorStateRecord,
     QualityRecord,
     ClassQualityRecord,
+    RectificationRecord,
     RunRecord,
 )

@@ -98,7 +98,7 @@ def test_catalog_tables_and_metrics(built):
     _, rows = query(built, "SELECT value FROM quality WHERE frame_index IS NULL AND metric = 'spatial_continuity'")
     assert len(rows) == n_seq and all(0.9 < r[0] <= 1.0 for r in rows)
     _, rows = query(built, "SELECT DISTINCT stage FROM runs WHERE status = 'completed' ORDER BY 1")
-    assert [r[0] for r in rows] == ["ingest", "metrics", "scenes", "voxelize"]
+    assert [r[0] for r in rows] == ["ingest", "metrics", "scenes", "sensors", "voxelize"]
     _, rows = query(built, "SELECT count(*) FROM quality_classes q JOIN classes c ON q.semantic_id = c.id WHERE c.name = 'Car'")
     assert rows[0][0] > 0
 
@@ -332,3 +332,104 @@ def test_second_resolution_pooling_report_and_multi_resolution_figure(built, tmp
     r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "0", "--res", f"{RES},0.8",
                          "--root", str(root), "--out", str(png)])
     assert r.exit_code == 0, r.output and png.stat().st_size > 1000
+
+
+# -- sensors ----------------------------------------------------------------------------------------
+def test_sensor_maps_lidar_and_rectification_records(built):
+    from catalog.sensors import SensorStore, LidarStore
+
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    frames = DatasetConfig().scenes.frame_count
+    sensors = SensorStore(built)
+    rig = DatasetConfig().scenes.rig
+    assert sensors.cameras(seq) == sorted(c.name for c in rig.cameras)
+    for cam in rig.cameras:
+        assert sensors.names(seq, cam.name) == sorted(["depth", "semantic", "instance", "normal", "depth_raw",
+                                                       "semantic_raw", "instance_raw"])
+        arr = sensors.open(seq, cam.name, "depth")
+        assert arr.shape == (frames, 376, 1408) and arr.chunks == (1, 376, 1408)
+        assert dict(arr.attrs)["intrinsics"][0][0] == pytest.approx(cam.focal_px)
+    depth = sensors.read_image(seq, "camera_00", 5, "depth")
+    sem = sensors.read_image(seq, "camera_00", 5, "semantic")
+    inst = sensors.read_image(seq, "camera_00", 5, "instance")
+    normal = sensors.read_image(seq, "camera_00", 5, "normal")
+    # the front camera sees the road ahead and sky above; the flat road's planar depth at image
+    # row v is camera height x focal / (v + 0.5 - cy), 1.55 m above the ground
+    assert (sem == taxonomy.by_name("Road").id).mean() > 0.05 and (sem == 11).mean() > 0.05
+    assert ((depth == 0) == (sem == 11)).all()
+    road = sem == taxonomy.by_name("Road").id
+    f = rig.cameras[0].focal_px
+    for v in (375, 330, 290):
+        assert road[v].sum() > 50
+        assert np.median(depth[v][road[v]]) == pytest.approx(1.55 * f / (v + 0.5 - 188), rel=0.02)
+    things = np.isin(sem, taxonomy.thing_ids())
+    assert (inst[~things] == 0).all() and (inst[things] > 0).mean() > 0.99
+    # normals are unit vectors; the flat road's is "up", -y in the OpenCV camera frame
+    n = normal.astype(np.float32)
+    ok = np.abs(np.linalg.norm(n[depth > 0], axis=-1) - 1) < 1e-2
+    assert ok.mean() > 0.9
+    near_road = n[290:][road[290:]]
+    assert (near_road[:, 1] < -0.99).mean() > 0.95
+    # rectification: artifacts present in the raw maps, gone after (glass within 5 cm of what is
+    # behind it is the only case the paper's rule leaves)
+    _, rows = query(built, "SELECT sum(pixels), sum(transparency), sum(omission), sum(raw_semantic_wrong), "
+                           "sum(semantic_mismatch), sum(depth_mismatch), count(*) FROM rectification")
+    pixels, transp, omis, raw_wrong, mismatch, depth_mis, n_rows = (int(x) for x in rows[0])
+    assert n_rows == frames * 6 * 3 and transp > 0 and omis > 0 and raw_wrong > 0.01 * pixels
+    assert mismatch < 1e-4 * pixels and depth_mis == 0
+    # LiDAR: one Parquet per frame, points within range, the road below the sensor
+    lidar = LidarStore(built)
+    assert lidar.frames(seq) == list(range(frames))
+    pts = lidar.load(seq, 5)
+    assert len(pts["x"]) > 5000 and pts["distance"].max() <= 80.0 + 1e-3
+    on_road = pts["semantic"] == taxonomy.by_name("Road").id
+    assert on_road.any() and np.all(pts["z"][on_road] < -1.0)
+    assert lidar.metadata(seq, 5)["lidar_to_world"]
+
+
+def test_recorded_path_rectifies_stored_raw_maps_like_the_raycast_path(built, tmp_path):
+    """A recorder's raw maps (here: the raw maps the raycast path stored) rectified by the
+    recorded path give the same bytes; the raw arrays are never touched; a missing raw map is an
+    error naming it."""
+    import shutil
+
+    from catalog.sensors import SensorStore
+    from catalog.store import StoreError
+    from pipeline.registry import Partition
+    from pipeline.stages import sensors_config
+    from pipeline.tasks import sensors_task
+
+    copy = Store(str(tmp_path / "copy"))
+    shutil.copytree(built.root, copy.root)
+    seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    cfg = sensors_config(DatasetConfig()).model_copy(update={"source": "recorded"})
+    sensors = SensorStore(copy)
+    raw_before = {c: sensors.fingerprints(seq, c, 4, ("depth_raw", "semantic_raw", "instance_raw"))
+                  for c in sensors.cameras(seq)}
+    for name in ("depth", "semantic", "instance", "normal"):
+        sensors.write_image(seq, "camera_03", 4, name, np.zeros_like(sensors.read_image(seq, "camera_03", 4, name)))
+    out = sensors_task(copy, cfg, Partition("x", {"sequence_id": seq, "frame_index": 4}))
+    assert not any(k.endswith("_raw[4]") for k in out)
+    for cam in sensors.cameras(seq):
+        for name in ("depth", "semantic", "instance", "normal"):
+            a = sensors.read_image(seq, cam, 4, name)
+            b = SensorStore(built).read_image(seq, cam, 4, name)
+            assert a.tobytes() == b.tobytes(), (cam, name)
+        assert sensors.fingerprints(seq, cam, 4, ("depth_raw", "semantic_raw", "instance_raw")) == raw_before[cam]
+    _, rows = query(copy, f"SELECT source, sum(transparency) FROM rectification WHERE sequence_id = '{seq}' "
+                          f"AND frame_index = 4 GROUP BY source")
+    assert rows[0][0] == "recorded" and rows[0][1] > 0
+    shutil.rmtree(f"{copy.root}/sensors.zarr/{seq}/camera_02/depth_raw/c/6")
+    with pytest.raises(StoreError, match="camera_02/depth_raw has no frame 6"):
+        sensors_task(copy, cfg, Partition("x", {"sequence_id": seq, "frame_index": 6}))
+
+
+def test_show_sensors_png(built, tmp_path):
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    out = tmp_path / "sensors.png"
+    r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--root", built.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "x1768" in r.output
+    r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--camera", "camera_09",
+                         "--root", built.url, "--out", str(out)])
+    assert r.exit_code == 2 and "camera_09" in r.output

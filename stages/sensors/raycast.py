@@ -46,7 +46,9 @@ class RayScene:
     the constructor) plus the per-triangle labels.
 
     ``unlabelled`` (per triangle, optional) marks triangles a simulator's semantic pass leaves
-    with the empty label (see :func:`render_camera`'s raw maps).
+    with the empty label (see :func:`render_camera`'s raw maps). The BVH is built on one thread
+    whatever ``nthreads`` says, so its structure (and which of two triangles meeting at an edge a
+    ray reports) cannot depend on the machine; ``nthreads`` applies to the casts.
     """
 
     def __init__(self, mesh: PanopticMesh, unlabelled: np.ndarray | None = None, nthreads: int = 0):
@@ -64,7 +66,7 @@ class RayScene:
         self._transparent = np.append(mesh.transparent, False)
         self._raw_semantic = np.append(np.where(self.unlabelled, np.uint8(UNLABELLED), mesh.semantic), np.uint8(SKY))
         self._raw_instance = np.append(np.where(self.unlabelled, np.uint32(0), mesh.instance), np.uint32(0))
-        self._scene = o3d.t.geometry.RaycastingScene(nthreads=nthreads)
+        self._scene = o3d.t.geometry.RaycastingScene(nthreads=1)
         self.triangle_count = n
         if n:
             self._scene.add_triangles(

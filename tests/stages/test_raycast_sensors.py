@@ -14,6 +14,7 @@ from schemas.rig import CameraSpec, LidarSpec, RigConfig
 from stages.geometry import SceneMesh
 from stages.scenes.assembly import flatten
 from stages.sensors import (SKY, UNLABELLED, CameraMaps, RayScene, camera_poses, camera_ray_bundle, compact_mesh,
+                            covered_pixels,
                             depth_normals, lidar_scan, rectify, render_camera, simulate_frame, unlabelled_meshes)
 from stages.sensors.artifacts import asset_fraction
 
@@ -247,3 +248,24 @@ def test_normals_of_a_tilted_plane_match_the_analytic_normal():
         assert (N[:6, :6] == 0).all()
     with pytest.raises(ValueError, match="version"):
         depth_normals(depth, K, "d2nt_v9")
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31))
+def test_covered_pixels_hold_every_hit(seed):
+    # random triangles around the camera, some straddling its plane or behind it: every pixel
+    # whose ray hits one lies in the covered set, so culled casting equals full casting
+    rng = np.random.default_rng(seed)
+    rig = front_rig(96, 32)
+    cam = rig.cameras[0]
+    pose = camera_poses(rig)[cam.name]
+    centre = rng.uniform([-3, -6, -3], [15, 6, 3], size=(12, 1, 3)) + pose[:3, 3]
+    V = (centre + rng.normal(scale=rng.uniform(0.2, 4.0), size=(12, 3, 3))).reshape(-1, 3)
+    mesh = SceneMesh(V, np.arange(36).reshape(12, 3), CAR, 3, False, False)
+    scene = RayScene(flatten([mesh]))
+    full, _ = render_camera(scene, cam, pose)
+    covered = covered_pixels(flatten([mesh]), cam, pose)
+    assert not ((full.depth > 0) & ~covered).any()
+    culled, _ = render_camera(scene, cam, pose, pixels=covered)
+    assert culled.depth.tobytes() == full.depth.tobytes()
+    assert culled.semantic.tobytes() == full.semantic.tobytes()
