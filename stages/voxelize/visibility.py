@@ -134,12 +134,15 @@ def _pack_occupancy(occ, nx, ny, nz, tx, ty, tz, words):
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _unswizzle_or(sw, pages, nx, ny, nz, tx, ty, tz, out):
+def _unswizzle_or(sw, sw64, pages, nx, ny, nz, tx, ty, tz, out):
     """OR the swizzled mask ``sw`` into ``out`` (flat C order), one 4x4x4 brick at a time.
 
     Inside a brick the 4 voxels along z of each (x, y) row are 4 consecutive bytes in both
     layouts (brick offset (x & 3) * 16 + (y & 3) * 4 + (z & 3)), so a brick is 16 runs of 4
-    bytes; bricks of unflagged pages are skipped. Parallel over x-blocks of 4 (disjoint rows)."""
+    bytes. Bricks of unflagged pages, and bricks no ray reached (their 64 bytes, read as 8
+    words, are all zero: most bricks of a LiDAR page), are skipped, and a run of zeros is
+    never written (``out``'s untouched pages stay unmapped). Parallel over x-blocks of 4
+    (disjoint rows)."""
     npy = (ny + _PAGE - 1) // _PAGE
     npz = (nz + _PAGE - 1) // _PAGE
     for i4 in prange((nx + 3) // 4):
@@ -154,14 +157,20 @@ def _unswizzle_or(sw, pages, nx, ny, nz, tx, ty, tz, out):
                 k0 = 4 * k4
                 if pages[prow + (k0 >> 4)] == 0:
                     continue
-                src = sij + tz[k0]
+                src = sij + tz[k0]  # a multiple of 64: the brick's first byte
+                w = src >> 3
+                if (sw64[w] | sw64[w + 1] | sw64[w + 2] | sw64[w + 3]
+                        | sw64[w + 4] | sw64[w + 5] | sw64[w + 6] | sw64[w + 7]) == 0:
+                    continue
                 nk = min(4, nz - k0)
                 for xi in range(ni):
                     for yi in range(nj):
                         base = ((i0 + xi) * ny + j0 + yi) * nz + k0
                         s0 = src + xi * 16 + yi * 4
                         for zi in range(nk):
-                            out[base + zi] |= sw[s0 + zi]
+                            v = sw[s0 + zi]
+                            if v:
+                                out[base + zi] |= v
 
 
 # ----------------------------------------------------------------------------------------------
@@ -352,7 +361,8 @@ class _Volume:
 
     def or_into(self, mask: tuple[np.ndarray, np.ndarray], out: np.ndarray) -> np.ndarray:
         """OR the swizzled ``mask`` into the C-order uint8 volume ``out`` (returned)."""
-        _unswizzle_or(mask[0], mask[1], *self.shape, self.tx, self.ty, self.tz, out.reshape(-1))
+        _unswizzle_or(mask[0], mask[0].view(np.uint64), mask[1], *self.shape, self.tx, self.ty, self.tz,
+                      out.reshape(-1))
         return out
 
 
