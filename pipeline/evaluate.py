@@ -1,0 +1,465 @@
+"""``carlaocc eval ssc|panoptic|depth|det``: score a model's predictions against ground truth.
+
+Reads prediction and ground-truth files, feeds them frame by frame to the accumulators of
+:mod:`stages.evaluation`, prints a table and optionally writes the full result as JSON.
+
+Inputs (``--pred`` and ``--gt`` are both files, or both directories):
+
+* Directories are paired by relative path **without the suffix** (``pred/seq/000.npy`` scores
+  against ``gt/seq/000.npz``); a ground-truth file without a prediction, a prediction without
+  ground truth, or two candidates for one key is an error naming the file (exit code 2).
+* ``ssc`` / ``panoptic``: ``.npz`` with an array ``semantics`` (and ``instances`` for panoptic)
+  of one shape, labels in the ``--map`` space; a ground-truth npz may add ``mask_camera`` /
+  ``mask_lidar`` (0/1), so an Occ3D ``labels.npz`` is ground truth as it is. A prediction may also
+  be an ``.npy`` or a one-array ``.npz`` holding the semantics. A published CarlaOcc ``.npz``
+  (``occupancy`` rows, ``sem << 11 | inst``) is read on either side and its CarlaOcc ids are
+  mapped into ``--map`` through the taxonomy.
+* ``depth``: ``.npy`` or ``.npz`` (array ``depth``, or a single array), float metres, ``(H, W)``;
+  ground truth 0 (or outside the cap) is invalid.
+* ``det``: JSON. A file holds ``{sample_id: [box, ...], ...}`` (optionally wrapped as
+  ``{"results": {...}}``, the nuScenes submission layout); in a directory each file is one sample,
+  a list of boxes, its id the relative path. A box is
+  ``{"center": [x, y, z], "size": [l, w, h], "yaw": rad, "label": "Car", "score": 0.9}`` or the
+  nuScenes form ``{"translation", "size": [w, l, h], "rotation": [qw, qx, qy, qz],
+  "detection_name", "detection_score"}``. Ground truth needs no score. Both files must list the
+  same samples.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import zipfile
+import zlib
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import numpy as np
+import typer
+
+__all__ = ["eval_app"]
+
+eval_app = typer.Typer(
+    help="Score a model trained on the data: semantic occupancy (IoU, mIoU), panoptic occupancy "
+    "(PQ, SQ, RQ), monocular depth (AbsRel ... delta) and 3D detection (nuScenes mAP, mATE, mASE, "
+    "mAOE). Prints a table; --json writes everything.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+
+PredOpt = Annotated[Path, typer.Option("--pred", help="prediction file or directory")]
+GtOpt = Annotated[Path, typer.Option("--gt", help="ground-truth file or directory (paired with --pred by relative path)")]
+MapOpt = Annotated[str, typer.Option("--map", help="label space: carlaocc (30, 0 = free) | benchmark (paper's 15 + 15 = free) | occ3d (18, 17 = free) | sscbench (19, 0 = empty) | semantickitti (20, 0 = empty)")]
+IgnoreOpt = Annotated[str, typer.Option("--ignore", help="comma-separated label ids to skip (ground truth: void; prediction: abstain)")]
+MaskOpt = Annotated[str, typer.Option("--mask", help="none | camera | lidar: score only voxels the ground truth's mask_camera / mask_lidar marks")]
+JsonOpt = Annotated[Optional[Path], typer.Option("--json", help="write the full result (per class, means, confusion) as JSON here")]
+
+
+class InputError(ValueError):
+    """A bad input file or argument; the CLI prints it as one line and exits with code 2."""
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+# --------------------------------------------------------------------------- pairing and reading
+
+
+def pair_files(pred: Path, gt: Path, suffixes: tuple[str, ...]) -> list[tuple[str, Path, Path]]:
+    """``(key, pred_file, gt_file)`` for two files, or for two directories paired by relative path
+    without suffix (files with other suffixes are not considered)."""
+    for opt, p in (("--pred", pred), ("--gt", gt)):
+        if not p.exists():
+            raise InputError(f"{opt} {p} does not exist")
+    if pred.is_file() and gt.is_file():
+        return [(gt.stem, pred, gt)]
+    if not (pred.is_dir() and gt.is_dir()):
+        raise InputError(f"--pred {pred} and --gt {gt} must both be files or both be directories")
+
+    def index(root: Path, opt: str) -> dict[str, Path]:
+        out: dict[str, Path] = {}
+        for f in sorted(root.rglob("*")):
+            if f.is_file() and f.suffix.lower() in suffixes:
+                key = f.relative_to(root).with_suffix("").as_posix()
+                if key in out:
+                    raise InputError(f"{opt}: {out[key]} and {f} both pair with {key!r}")
+                out[key] = f
+        return out
+
+    p_files, g_files = index(pred, "--pred"), index(gt, "--gt")
+    if not g_files:
+        raise InputError(f"--gt {gt} holds no {' / '.join(suffixes)} files")
+    for key in sorted(g_files):
+        if key not in p_files:
+            raise InputError(f"no prediction for {g_files[key]} (expected {pred / key}{g_files[key].suffix} or another of {', '.join(suffixes)})")
+    for key in sorted(p_files):
+        if key not in g_files:
+            raise InputError(f"prediction {p_files[key]} has no ground truth under {gt}")
+    return [(k, p_files[k], g_files[k]) for k in sorted(g_files)]
+
+
+def _load_arrays(path: Path, occupancy_ok: bool = False) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` (or ``{"": array}`` of an ``.npy``), no pickles; errors name the
+    file. With ``occupancy_ok``, a CarlaOcc npz returns ``{"occupancy": None}`` unread."""
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if isinstance(loaded, np.ndarray):
+            return {"": loaded}
+        with loaded as z:
+            if occupancy_ok and "occupancy" in z.files:
+                return {"occupancy": None}  # type: ignore[dict-item]
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise InputError(f"{path}: unreadable ({type(exc).__name__}: {exc})") from exc
+
+
+def load_occupancy(path: Path, lm, instances: bool) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]]:
+    """``(semantics, instances or None, masks)`` of one occupancy file in ``lm``'s label space."""
+    arrays = _load_arrays(path, occupancy_ok=True)
+    if "occupancy" in arrays:  # a published CarlaOcc npz: CarlaOcc ids, mapped into lm
+        from catalog.formats import FormatError, load_carlaocc_npz
+
+        try:
+            frame = load_carlaocc_npz(path)
+            return lm.convert_carlaocc(frame.semantic), frame.instance, {}
+        except (FormatError, ValueError) as exc:
+            raise InputError(f"{path}: {exc}") from exc
+    if "semantics" in arrays:
+        sem = arrays["semantics"]
+    elif len(arrays) == 1:
+        sem = next(iter(arrays.values()))
+    else:
+        raise InputError(f"{path}: no 'semantics' array (found {sorted(arrays)})")
+    inst = None
+    if instances:
+        if "instances" not in arrays:
+            raise InputError(f"{path}: no 'instances' array for panoptic scoring (found {sorted(arrays)})")
+        inst = arrays["instances"]
+        if inst.shape != sem.shape:
+            raise InputError(f"{path}: instances {inst.shape} and semantics {sem.shape} differ in shape")
+    for name, a in (("semantics", sem), ("instances", inst)):
+        if a is not None and not np.issubdtype(a.dtype, np.integer):
+            raise InputError(f"{path}: {name} must be integers, got {a.dtype}")
+    masks = {k: arrays[k] for k in ("mask_camera", "mask_lidar") if k in arrays}
+    return sem, inst, masks
+
+
+def _pick_mask(mask: str, masks: dict[str, np.ndarray], shape, path: Path) -> np.ndarray | None:
+    if mask == "none":
+        return None
+    key = f"mask_{mask}"
+    if key not in masks:
+        raise InputError(f"{path}: --mask {mask} needs a '{key}' array in the ground truth")
+    m = masks[key]
+    if m.shape != shape:
+        raise InputError(f"{path}: {key} {m.shape} and semantics {shape} differ in shape")
+    return m.astype(bool)
+
+
+def _ids(text: str, opt: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise InputError(f"{opt} {text!r}: expected comma-separated integer label ids") from None
+
+
+def _label_map(name: str):
+    from stages.evaluation import label_map
+
+    try:
+        return label_map(name)
+    except ValueError as exc:
+        raise InputError(f"--map: {exc}") from None
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _pct(v: float | None) -> str:
+    return "     -" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:6.2f}"
+
+
+def _write_json(out: Path | None, data: dict[str, Any]) -> None:
+    if out is None:
+        return
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+    except OSError as exc:
+        raise InputError(f"--json {out}: cannot write: {exc.strerror or exc}") from exc
+
+
+def _run(fn) -> None:
+    """Run ``fn``; bad input becomes a one-line error with exit code 2."""
+    try:
+        fn()
+    except InputError as exc:
+        _fail(str(exc))
+    except FileNotFoundError as exc:
+        _fail(f"{exc.filename}: no such file")
+
+
+def _frame_error(key: str, exc: ValueError) -> InputError:
+    return InputError(f"{key}: {exc}")
+
+
+# --------------------------------------------------------------------------- commands
+
+
+@eval_app.command("ssc")
+def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: IgnoreOpt = "255",
+            mask: MaskOpt = "none", json_out: JsonOpt = None) -> None:  # fmt: skip
+    """Semantic occupancy: per-class IoU, mIoU (classes absent from both sides are left out) and
+    geometry IoU / precision / recall (occupied vs free), summed over all frames.
+
+    Inputs: two .npz files, or two directories paired by relative path without suffix. An npz
+    holds an integer array 'semantics' with labels in --map (a prediction may also be an .npy or a
+    one-array npz); ground truth may add 0/1 'mask_camera' / 'mask_lidar', so an Occ3D
+    labels.npz is ground truth as it is. A CarlaOcc npz ('occupancy' rows, sem << 11 | inst) is
+    read on either side, its CarlaOcc ids mapped into --map. Missing counterpart: exit code 2."""
+
+    def go() -> None:
+        from stages.evaluation import SSCAccumulator
+
+        lm = _label_map(map_name)
+        if mask not in ("none", "camera", "lidar"):
+            raise InputError(f"--mask must be none, camera or lidar, got {mask!r}")
+        acc = SSCAccumulator(lm, _ids(ignore, "--ignore"))
+        pairs = pair_files(pred, gt, (".npz", ".npy"))
+        for key, pf, gf in pairs:
+            p_sem, _, _ = load_occupancy(pf, lm, False)
+            g_sem, _, masks = load_occupancy(gf, lm, False)
+            if p_sem.shape != g_sem.shape:
+                raise InputError(f"{pf}: shape {p_sem.shape} differs from ground truth {gf} {g_sem.shape}")
+            try:
+                acc.update(p_sem, g_sem, _pick_mask(mask, masks, g_sem.shape, gf))
+            except ValueError as exc:
+                raise _frame_error(str(pf), exc) from exc
+        res = acc.result()
+        data = res.to_dict() | {"pred": str(pred), "gt": str(gt), "ignore": list(acc.ignore), "mask": mask}
+        _write_json(json_out, data)
+        typer.echo(f"{'class':<22} {'IoU %':>6} {'gt voxels':>12}")
+        for row in data["classes"]:
+            typer.echo(f"{row['name']:<22} {_pct(row['iou'])} {row['tp'] + row['fn']:>12,}")
+        typer.echo(f"{'mIoU':<22} {_pct(data['miou'])}")
+        g = data["geometry"]
+        typer.echo(f"{'geometry IoU':<22} {_pct(g['iou'])}   precision {_pct(g['precision'])}   recall {_pct(g['recall'])}")
+        typer.echo(f"{res.frames} frame(s), {res.voxels:,} voxels scored, map {lm.name}")
+
+    _run(go)
+
+
+@eval_app.command("panoptic")
+def panoptic_cmd(
+    pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: IgnoreOpt = "255", mask: MaskOpt = "none",
+    min_size: Annotated[int, typer.Option("--min-size", min=0, help="voxels: unmatched segments smaller than this are neither FN nor FP")] = 0,
+    things: Annotated[Optional[str], typer.Option("--things", help="comma-separated thing label ids (default: the map's, from the taxonomy)")] = None,
+    json_out: JsonOpt = None,
+) -> None:  # fmt: skip
+    """Panoptic occupancy: PQ, SQ, RQ per class and over all / thing / stuff classes (IoU > 0.5
+    matching; void = ground truth in --ignore; a prediction mostly on void is not an FP; stuff
+    segment = a class's voxels in a frame, thing segment = (class, instance)).
+
+    Inputs: as for `eval ssc` (.npz only), plus an integer array 'instances' of the same shape
+    on both sides; a CarlaOcc npz carries both."""
+
+    def go() -> None:
+        from stages.evaluation import PanopticAccumulator
+
+        lm = _label_map(map_name)
+        if mask not in ("none", "camera", "lidar"):
+            raise InputError(f"--mask must be none, camera or lidar, got {mask!r}")
+        try:
+            acc = PanopticAccumulator(lm, _ids(ignore, "--ignore"), min_size,
+                                      None if things is None else _ids(things, "--things"))  # fmt: skip
+        except ValueError as exc:
+            raise InputError(f"--things: {exc}") from None
+        for key, pf, gf in pair_files(pred, gt, (".npz",)):
+            p_sem, p_inst, _ = load_occupancy(pf, lm, True)
+            g_sem, g_inst, masks = load_occupancy(gf, lm, True)
+            if p_sem.shape != g_sem.shape:
+                raise InputError(f"{pf}: shape {p_sem.shape} differs from ground truth {gf} {g_sem.shape}")
+            try:
+                acc.update(p_sem, p_inst, g_sem, g_inst, _pick_mask(mask, masks, g_sem.shape, gf))
+            except ValueError as exc:
+                raise _frame_error(str(pf), exc) from exc
+        res = acc.result()
+        data = res.to_dict() | {"pred": str(pred), "gt": str(gt), "ignore": list(acc.ignore), "mask": mask}
+        _write_json(json_out, data)
+        typer.echo(f"{'class':<22} {'kind':<6} {'PQ %':>6} {'SQ %':>6} {'RQ %':>6} {'TP':>7} {'FP':>7} {'FN':>7}")
+        for r in data["classes"]:
+            typer.echo(f"{r['name']:<22} {'thing' if r['thing'] else 'stuff':<6} {_pct(r['pq'])} {_pct(r['sq'])} "
+                       f"{_pct(r['rq'])} {r['tp']:>7} {r['fp']:>7} {r['fn']:>7}")
+        for suffix, name in (("", "all"), ("_things", "things"), ("_stuff", "stuff")):
+            typer.echo(f"{'mean ' + name:<29} {_pct(data['pq' + suffix])} {_pct(data['sq' + suffix])} {_pct(data['rq' + suffix])}")
+        typer.echo(f"{res.frames} frame(s), map {lm.name}, min segment size {min_size} voxels")
+
+    _run(go)
+
+
+def _load_depth(path: Path) -> np.ndarray:
+    arrays = _load_arrays(path)
+    if "depth" in arrays:
+        d = arrays["depth"]
+    elif len(arrays) == 1:
+        d = next(iter(arrays.values()))
+    else:
+        raise InputError(f"{path}: no 'depth' array (found {sorted(arrays)})")
+    if d.ndim != 2 or not np.issubdtype(d.dtype, np.number):
+        raise InputError(f"{path}: depth must be a 2-D (H, W) numeric array in metres, got {d.shape} {d.dtype}")
+    return d
+
+
+@eval_app.command("depth")
+def depth_cmd(
+    pred: PredOpt, gt: GtOpt,
+    min_depth: Annotated[float, typer.Option("--min-depth", help="metres: ground truth at or below is invalid; predictions are clipped up to it")] = 1e-3,
+    max_depth: Annotated[float, typer.Option("--max-depth", help="metres: ground truth at or beyond is invalid; predictions are clipped down to it")] = 80.0,
+    scale: Annotated[str, typer.Option("--scale", help="none | median: per-image median scaling for relative-depth models")] = "none",
+    json_out: JsonOpt = None,
+) -> None:  # fmt: skip
+    """Monocular depth: AbsRel, SqRel, RMSE, RMSElog, delta < 1.25^k over valid pixels
+    (min < gt < max), pooled over all pixels and as the mean of per-image values.
+
+    Inputs: two files or two directories paired by relative path without suffix; each an .npy,
+    or an .npz with an array 'depth' (or a single array): (H, W) float metres, ground truth 0 =
+    no depth."""
+
+    def go() -> None:
+        from stages.evaluation import DepthAccumulator
+
+        try:
+            acc = DepthAccumulator(min_depth, max_depth, scale)  # type: ignore[arg-type]
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        for key, pf, gf in pair_files(pred, gt, (".npy", ".npz")):
+            p, g = _load_depth(pf), _load_depth(gf)
+            if p.shape != g.shape:
+                raise InputError(f"{pf}: shape {p.shape} differs from ground truth {gf} {g.shape}")
+            try:
+                acc.update(p, g)
+            except ValueError as exc:
+                raise _frame_error(str(pf), exc) from exc
+        res = acc.result()
+        data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
+        _write_json(json_out, data)
+        names = ("AbsRel", "SqRel", "RMSE", "RMSElog", "d<1.25", "d<1.25^2", "d<1.25^3")
+        typer.echo(f"{'average':<8} " + " ".join(f"{n:>9}" for n in names))
+        for avg in ("pixel", "image"):
+            vals = [data[avg][k] for k in data[avg]]
+            typer.echo(f"{avg:<8} " + " ".join("        -" if v is None else f"{v:9.4f}" for v in vals))
+        typer.echo(f"{res.images} image(s) ({res.valid_images} with valid pixels), {res.pixels:,} valid pixels, "
+                   f"cap ({min_depth:g}, {max_depth:g}) m, scale {scale}")
+
+    _run(go)
+
+
+def _box(obj: Any, where: str, need_score: bool):
+    from stages.evaluation import Box3D
+
+    if not isinstance(obj, dict):
+        raise InputError(f"{where}: a box must be a JSON object, got {type(obj).__name__}")
+    try:
+        if "center" in obj:
+            center, size, yaw, label = obj["center"], obj["size"], obj["yaw"], obj["label"]
+            score = obj.get("score")
+        else:  # nuScenes: size is (w, l, h), rotation a (w, x, y, z) quaternion
+            center, (w, l, h), label = obj["translation"], obj["size"], obj["detection_name"]
+            size = (l, w, h)
+            qw, qx, qy, qz = (float(v) for v in obj["rotation"])
+            yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+            score = obj.get("detection_score")
+        if need_score and score is None:
+            raise InputError(f"{where}: a predicted box needs a score")
+        return Box3D(tuple(float(v) for v in center), tuple(float(v) for v in size), float(yaw), str(label),
+                     1.0 if score is None else float(score))  # fmt: skip
+    except KeyError as exc:
+        raise InputError(f"{where}: box lacks {exc}; expected center/size/yaw/label[/score] or "
+                         f"translation/size/rotation/detection_name[/detection_score]") from None
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{where}: bad box: {exc}") from None
+
+
+def load_boxes(path: Path, need_score: bool, sample: str | None = None) -> dict[str, list]:
+    """``{sample: [Box3D]}`` from a JSON file; with ``sample``, the file is that one sample's list."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not readable JSON ({exc})") from exc
+    if sample is not None:
+        if isinstance(data, dict) and "boxes" in data:
+            data = data["boxes"]
+        data = {sample: data}
+    elif isinstance(data, dict) and isinstance(data.get("results"), dict):
+        data = data["results"]
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected an object mapping sample ids to box lists")
+    out: dict[str, list] = {}
+    for s, boxes in data.items():
+        if not isinstance(boxes, list):
+            raise InputError(f"{path}: sample {s!r}: expected a list of boxes")
+        out[str(s)] = [_box(b, f"{path}: sample {s!r} box {i}", need_score) for i, b in enumerate(boxes)]
+    return out
+
+
+@eval_app.command("det")
+def det_cmd(
+    pred: PredOpt, gt: GtOpt,
+    classes: Annotated[Optional[str], typer.Option("--classes", help="comma-separated class names to score (default: those in the ground truth)")] = None,
+    json_out: JsonOpt = None,
+) -> None:  # fmt: skip
+    """3D detection, nuScenes protocol: AP at BEV centre distances 0.5/1/2/4 m (101-point,
+    min recall/precision 0.1), mATE / mASE / mAOE at 2 m (no range filter, no velocity/attributes).
+
+    Inputs: two JSON files {sample_id: [box, ...]} (or nuScenes' {"results": {...}}), both
+    listing the same samples; or two directories of one JSON box list per sample, paired by
+    relative path. A box: {"center": [x, y, z], "size": [l, w, h], "yaw": rad, "label": name,
+    "score": s} or nuScenes' {"translation", "size": [w, l, h], "rotation": [qw, qx, qy, qz],
+    "detection_name", "detection_score"}; ground-truth boxes need no score."""
+
+    def go() -> None:
+        from stages.evaluation import DetectionAccumulator
+
+        if pred.is_file() and gt.is_file():
+            p_all, g_all = load_boxes(pred, True), load_boxes(gt, False)
+            for s in g_all:
+                if s not in p_all:
+                    raise InputError(f"{pred}: no entry for sample {s!r} of {gt} (use [] for no detections)")
+            for s in p_all:
+                if s not in g_all:
+                    raise InputError(f"{pred}: sample {s!r} is not in the ground truth {gt}")
+        else:
+            p_all, g_all = {}, {}
+            for key, pf, gf in pair_files(pred, gt, (".json",)):
+                p_all |= load_boxes(pf, True, key)
+                g_all |= load_boxes(gf, False, key)
+        cls = None if classes is None else tuple(c.strip() for c in classes.split(",") if c.strip())
+        acc = DetectionAccumulator(classes=cls or None)
+        if not cls and not any(g_all.values()):
+            raise InputError(f"--gt {gt} holds no boxes: nothing to score (name --classes to score false positives)")
+        for s in g_all:
+            acc.update(s, p_all[s], g_all[s])
+        res = acc.result()
+        data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
+        _write_json(json_out, data)
+        typer.echo(f"{'class':<18} {'AP':>6} {'ATE m':>7} {'ASE':>6} {'AOE rad':>8} {'gt':>7} {'pred':>7}")
+        for r in data["classes"]:
+            typer.echo(f"{r['name']:<18} {r['ap']:6.3f} {r['ate']:7.3f} {r['ase']:6.3f} {r['aoe']:8.3f} {r['gt']:>7} {r['pred']:>7}")
+        typer.echo(f"{'mean':<18} {res.mean_ap:6.3f} {res.mate:7.3f} {res.mase:6.3f} {res.maoe:8.3f}")
+        typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}")
+
+    _run(go)
+
+
+def main() -> None:  # pragma: no cover - ``python -m pipeline.evaluate``
+    os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
+    eval_app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
