@@ -515,31 +515,74 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
 
 # -- metrics --------------------------------------------------------------------------------------
 def metrics_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, str]:
-    """Spatial continuity per frame and per sequence, per class counts, into metrics/."""
-    from stages.metrics import sequence_continuity, spatial_continuity_counts
+    """Spatial continuity per frame and per sequence, per class counts, and temporal consistency
+    per frame pair and per sequence, into metrics/.
+
+    Temporal consistency warps each frame t+1 into frame t with the frames' LiDAR poses (the grids
+    are in the LiDAR frame; ``scenes/frames``). Its visibility mask is ``mask_camera | mask_lidar``
+    (observed by any sensor of the rig): whichever of the two arrays the sequence has; no mask
+    when it has neither."""
+    from stages.metrics import (empty_temporal_counts, sequence_continuity, sequence_temporal,
+                                spatial_continuity_counts, temporal_consistency_counts)
 
     seq_id, res = part.params["sequence_id"], part.params["resolution"]
     grid = GridSpec.model_validate(part.params["grid"])
     occ = OccupancyStore(store)
     arr = occ.open(seq_id, grid, "semantic")
-    per_frame = []
+    n_frames = arr.shape[0]
+    # LiDAR-to-world pose of every frame
+    poses = {f.frame_index: np.asarray(f.lidar_pose, dtype=np.float64).reshape(4, 4)
+             for f in ParquetTable(store, FrameRecord).load([seq_id])}
+    missing = [t for t in range(n_frames) if t not in poses]
+    if missing and n_frames > 1:
+        raise StoreError(f"sequence {seq_id}: no LiDAR pose for frame(s) {missing[:5]} in scenes/frames; "
+                         f"re-run the scenes stage")
+    masks = [occ.open(seq_id, grid, n) for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
+
+    def observed(t: int) -> np.ndarray | None:
+        if not masks:
+            return None
+        out = masks[0][t].astype(np.bool_)
+        for m in masks[1:]:
+            out |= m[t].astype(np.bool_)
+        return out
+
+    per_frame, per_pair = [], []
     quality, classes = [], []
-    for t in range(arr.shape[0]):
-        counts = spatial_continuity_counts(arr[t])
+    prev = None  # (semantic, observed mask) of frame t - 1
+    for t in range(n_frames):
+        sem = arr[t]
+        counts = spatial_continuity_counts(sem)
         per_frame.append(counts)
+        occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
         quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=t,
                                      metric="spatial_continuity", value=counts.score,
-                                     occupied=int(counts.occupied[1:].sum()),
-                                     isolated=int(counts.isolated[1:].sum())))
+                                     occupied=occupied, isolated=isolated,
+                                     numerator=occupied - isolated, denominator=occupied))
         for c in np.flatnonzero(counts.occupied):
             classes.append(ClassQualityRecord(sequence_id=seq_id, resolution=res, frame_index=t,
                                               semantic_id=int(c), occupied=int(counts.occupied[c]),
                                               isolated=int(counts.isolated[c])))
+        mask = observed(t) if n_frames > 1 else None
+        if prev is not None:
+            # the pair (t - 1, t): frame t warped into frame t - 1
+            tc = temporal_consistency_counts(prev[0], sem, poses[t - 1], poses[t], grid.voxel_size, grid.origin,
+                                             mask_t=prev[1], mask_t1=mask)
+            per_pair.append(tc)
+            quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=t - 1,
+                                         metric="temporal_consistency", value=tc.score,
+                                         numerator=tc.total_intersection, denominator=tc.total_union))
+        prev = (sem, mask)
     total = sequence_continuity(per_frame)
+    occupied, isolated = int(total.occupied[1:].sum()), int(total.isolated[1:].sum())
     quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=None,
                                  metric="spatial_continuity", value=total.score,
-                                 occupied=int(total.occupied[1:].sum()),
-                                 isolated=int(total.isolated[1:].sum())))
+                                 occupied=occupied, isolated=isolated,
+                                 numerator=occupied - isolated, denominator=occupied))
+    tc_total = sequence_temporal(per_pair) if per_pair else empty_temporal_counts()
+    quality.append(QualityRecord(sequence_id=seq_id, resolution=res, frame_index=None,
+                                 metric="temporal_consistency", value=tc_total.score,
+                                 numerator=tc_total.total_intersection, denominator=tc_total.total_union))
     key = f"{seq_id}/{grid.key}"
     t_q, t_c = ParquetTable(store, QualityRecord), ParquetTable(store, ClassQualityRecord)
     return {t_q.path(key): t_q.save(key, quality), t_c.path(key): t_c.save(key, classes)}

@@ -6,10 +6,24 @@ from stages.metrics.continuity import (
     sequence_continuity,
     spatial_continuity_counts,
 )
+from stages.metrics.temporal import (
+    TemporalCounts,
+    empty_temporal_counts,
+    relative_pose,
+    sequence_temporal,
+    static_table,
+    temporal_consistency_counts,
+)
 
 __all__ = [
     "ContinuityCounts",
+    "TemporalCounts",
+    "empty_temporal_counts",
     "isolated_mask_reference",
+    "relative_pose",
     "sequence_continuity",
+    "sequence_temporal",
     "spatial_continuity_counts",
+    "static_table",
+    "temporal_consistency_counts",
 ]

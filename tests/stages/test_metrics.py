@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -52,3 +53,99 @@ def test_sequence_sums_frames():
     b[0, 0, :] = 1
     total = sequence_continuity([spatial_continuity_counts(a), spatial_continuity_counts(b)])
     assert total.occupied[1] == 4 and total.isolated[1] == 1 and total.score == 0.75
+
+
+# -- the metrics stage's task: s_sc and s_tc per frame, pair and sequence from the store --------
+def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
+    """A sequence's occupancy frames and LiDAR poses in ``store`` (grid 1 m over 6 x 5 x 3 m)."""
+    from catalog.occupancy import OccupancyStore
+    from catalog.parquet import ParquetTable
+    from schemas.grid import GridSpec
+    from schemas.records import FrameRecord
+
+    grid = GridSpec(region_min=(0, 0, 0), region_max=(6, 5, 3), voxel_size=1.0)
+    occ = OccupancyStore(store)
+    names = ("semantic", "mask_camera", "mask_lidar") if masks is not None else ("semantic",)
+    occ.create(seq, grid, len(frames), 4, names=names)
+    for t, sem in enumerate(frames):
+        arrays = {"semantic": sem}
+        if masks is not None:
+            arrays |= {"mask_camera": masks[t][0], "mask_lidar": masks[t][1]}
+        occ.write_frame(seq, grid, t, arrays)
+    rows = [FrameRecord(sequence_id=seq, frame_index=t, timestamp=0.1 * t, ego_pose=np.eye(4).ravel().tolist(),
+                        lidar_pose=np.asarray(p, float).ravel().tolist()) for t, p in enumerate(poses)]
+    ParquetTable(store, FrameRecord).save(seq, rows)
+    return grid
+
+
+def _run_metrics(store, grid, seq="seq0"):
+    from catalog.parquet import ParquetTable
+    from pipeline.registry import Partition
+    from pipeline.tasks import metrics_task
+    from schemas.configs import MetricsConfig
+    from schemas.records import QualityRecord
+
+    part = Partition(f"{seq}/{grid.key}", {"sequence_id": seq, "resolution": grid.voxel_size,
+                                            "grid": grid.model_dump(mode="json")})
+    metrics_task(store, MetricsConfig(), part)
+    rows = ParquetTable(store, QualityRecord).load()
+    return {(r.metric, r.frame_index): r for r in rows}
+
+
+def _moving_street(shift):
+    """The same static street seen from a LiDAR ``shift`` voxels further along x."""
+    world = np.zeros((12, 5, 3), np.uint8)
+    world[:, :, 0] = 1  # road
+    world[3:5, 0:2, 1:3] = 3  # a building
+    world[8, 4, 1] = 9  # a lone bush
+    return world[shift:shift + 6].copy()
+
+
+def test_metrics_task_writes_temporal_consistency(store):
+    frames = [_moving_street(s) for s in (0, 1, 3)]
+    poses = [np.eye(4) for _ in frames]
+    for p, s in zip(poses, (0, 1, 3)):
+        p[0, 3] = float(s)
+    car = 14
+    frames[1][0, 2, 1] = car  # a car appears: dynamic, excluded from s_tc
+    grid = _write_sequence(store, frames, poses)
+    rows = _run_metrics(store, grid)
+    # a static world seen with the right poses is perfectly consistent, per pair and overall
+    for key in (("temporal_consistency", 0), ("temporal_consistency", 1), ("temporal_consistency", None)):
+        assert rows[key].value == 1.0 and rows[key].numerator == rows[key].denominator > 0
+    assert ("temporal_consistency", 2) not in rows
+    pair = [rows[("temporal_consistency", t)].denominator for t in (0, 1)]
+    assert rows[("temporal_consistency", None)].denominator == sum(pair)
+    # spatial continuity rows carry their ratio terms too
+    sc = rows[("spatial_continuity", 1)]
+    assert sc.numerator == sc.occupied - sc.isolated and sc.denominator == sc.occupied and sc.isolated == 1  # the car
+
+
+def test_metrics_task_uses_poses_and_the_mask_union(store):
+    frames = [_moving_street(0), _moving_street(1)]
+    frames[1][4, 4, 1] = 5  # a fence voxel frame t never saw ...
+    ones = np.ones(frames[0].shape, np.uint8)
+    hidden = ones.copy()
+    hidden[4, 4, 1] = 0
+    # ... frame t+1 did not see it either: observed in neither camera nor LiDAR mask
+    masks = [(ones, ones), (hidden, hidden)]
+    moved = np.eye(4)
+    moved[0, 3] = 1.0
+    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks)
+    assert _run_metrics(store, grid)[("temporal_consistency", 0)].value == 1.0
+    # seen by the LiDAR only: the union of the masks counts it, and the pair disagrees there
+    masks = [(ones, ones), (hidden, ones)]
+    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks)
+    row = _run_metrics(store, grid)[("temporal_consistency", 0)]
+    assert row.denominator - row.numerator == 1
+    # with wrong poses (no motion) the same frames disagree along every moved boundary
+    grid = _write_sequence(store, frames, [np.eye(4), np.eye(4)], masks=masks)
+    assert _run_metrics(store, grid)[("temporal_consistency", 0)].value < 0.9
+
+
+def test_metrics_task_names_a_missing_pose(store):
+    from catalog.store import StoreError
+
+    grid = _write_sequence(store, [_moving_street(0), _moving_street(1)], [np.eye(4)])
+    with pytest.raises(StoreError, match=r"no LiDAR pose for frame\(s\) \[1\]"):
+        _run_metrics(store, grid)

@@ -1,0 +1,320 @@
+"""Temporal Consistency Score (paper, section 4.2), with the conventions the paper leaves loose.
+
+Inputs: two consecutive semantic grids ``O_t`` and ``O_{t+1}`` (uint8, ``[x, y, z]``, 0 = free),
+the grids' geometry (``origin`` = minimum corner of voxel (0, 0, 0) and ``voxel_size``, metres, in
+the frame the grid is expressed in: the LiDAR frame for CarlaOcc) and the two **sensor-to-world**
+4x4 poses ``P_t``, ``P_{t+1}`` of that frame.
+
+Convention (exact):
+
+1. **Pose order.** ``T = inv(P_{t+1}) @ P_t`` maps frame-t sensor coordinates into frame t+1
+   (the paper writes ``T_t T_{t+1}^{-1}``, which is the same map when its ``T`` are
+   world-to-sensor).
+2. **Warp.** Every voxel ``v = (i, j, k)`` of grid t has the centre
+   ``x(v) = origin_t + (v + 0.5) * voxel_t``; its image is ``p = T x(v)``.
+3. **Nearest sampling** ``Pi``: the frame-(t+1) voxel containing ``p``,
+   ``u = floor((p - origin_{t+1}) / voxel_{t+1})``; the warped label is ``W(v) = O_{t+1}(u)``
+   (so ``Ṽ_t^(c) = {v | W(v) = c}``, a set of frame-t voxels, like ``V_t^(c) = {v | O_t(v) = c}``).
+   A centre exactly on a voxel face (measure zero) goes wherever float rounding puts it.
+4. **Valid mask** ``M_t``: voxels ``v`` with ``u`` inside grid t+1 (centres leaving the region are
+   excluded), with a static class in both frames (``static[O_t(v)]`` and ``static[W(v)]``; free,
+   class 0, counts as static, dynamic classes are the taxonomy's road users) and, when visibility
+   masks are given, observed in both frames (``mask_t(v)`` and ``mask_{t+1}(u)`` nonzero).
+5. **Counts** per class ``c >= 1`` (free is not a class: free/free agreement adds nothing, free
+   against an occupied class adds to that class's union):
+   ``I_c = |{v in M_t | O_t(v) = c and W(v) = c}|``,
+   ``U_c = |{v in M_t | O_t(v) = c or W(v) = c}|``.
+6. **Aggregation.** The paper's equation pools the sums:
+   ``s_tc = sum_t sum_c I_c / sum_t sum_c U_c`` over pairs ``(t, t+1)`` and classes ``c >= 1``
+   (:attr:`TemporalCounts.score`); NaN when the union is empty. The per-class counts are kept, so
+   the class-averaged variant (mean over classes of ``sum_t I_c / sum_t U_c``,
+   :meth:`TemporalCounts.mean_class_iou`) is available too; it is not the paper's score.
+
+A static scene seen from a sensor moved by whole voxels (or rotated by multiples of 90 degrees
+about a voxel-lattice axis) scores exactly 1.
+
+Speed: the per-voxel loop is compiled (numba) and visits, per (i, j) column of grid t, only the z
+range that can contribute (voxels where both ``O_t(v)`` and ``W(v)`` are free add nothing): the hull
+of the column's occupied range and of the back-warped occupied ranges of the frame-(t+1) columns
+the warped column passes through.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from schemas.taxonomy import dynamic_ids
+
+N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
+
+
+@dataclass(frozen=True)
+class TemporalCounts:
+    """Per-class intersection and union voxel counts (index = class id; class 0, free, stays 0)."""
+
+    intersection: np.ndarray  # (256,) int64
+    union: np.ndarray  # (256,) int64
+
+    @property
+    def total_intersection(self) -> int:
+        return int(self.intersection[1:].sum())
+
+    @property
+    def total_union(self) -> int:
+        return int(self.union[1:].sum())
+
+    @property
+    def score(self) -> float:
+        """The paper's ``s_tc``: pooled ``sum I / sum U`` over classes >= 1; NaN when ``U`` is 0."""
+        u = self.total_union
+        return float("nan") if u == 0 else self.total_intersection / u
+
+    def class_iou(self) -> np.ndarray:
+        """(256,) float64 IoU per class (NaN where the class's union is empty, and for class 0)."""
+        iou = np.full(N_CLASSES, np.nan)
+        has = self.union > 0
+        has[0] = False
+        iou[has] = self.intersection[has] / self.union[has]
+        return iou
+
+    def mean_class_iou(self) -> float:
+        """Alternative aggregation (not the paper's): mean IoU over classes with a nonempty union."""
+        iou = self.class_iou()
+        return float("nan") if np.isnan(iou).all() else float(np.nanmean(iou))
+
+    def __add__(self, other: TemporalCounts) -> TemporalCounts:
+        return TemporalCounts(self.intersection + other.intersection, self.union + other.union)
+
+
+def empty_temporal_counts() -> TemporalCounts:
+    return TemporalCounts(np.zeros(N_CLASSES, np.int64), np.zeros(N_CLASSES, np.int64))
+
+
+def sequence_temporal(per_pair: Iterable[TemporalCounts]) -> TemporalCounts:
+    """Counts summed over frame pairs (the paper's sums over t)."""
+    total = empty_temporal_counts()
+    for c in per_pair:
+        total = total + c
+    return total
+
+
+def static_table(dynamic: Iterable[int] | None = None) -> np.ndarray:
+    """(256,) bool lookup: True for static class ids. ``dynamic`` defaults to the CarlaOcc
+    taxonomy's dynamic classes (the road users); every other id, free included, is static."""
+    table = np.ones(N_CLASSES, dtype=np.bool_)
+    ids = np.asarray(list(dynamic_ids() if dynamic is None else dynamic), dtype=np.int64)
+    if ids.size and (ids.min() < 0 or ids.max() >= N_CLASSES):
+        raise ValueError(f"dynamic class ids must be 0..255, got {ids.tolist()}")
+    table[ids] = False
+    return table
+
+
+def relative_pose(pose_t: np.ndarray, pose_t1: np.ndarray) -> np.ndarray:
+    """``inv(P_{t+1}) @ P_t``: frame-t sensor coordinates -> frame-(t+1) sensor coordinates."""
+    p0, p1 = _pose(pose_t, "pose_t"), _pose(pose_t1, "pose_t1")
+    return np.linalg.inv(p1) @ p0
+
+
+def _pose(pose, name: str) -> np.ndarray:
+    p = np.asarray(pose, dtype=np.float64)
+    if p.shape == (16,):
+        p = p.reshape(4, 4)
+    if p.shape != (4, 4):
+        raise ValueError(f"{name} must be a 4x4 matrix (or 16 row-major floats), got shape {p.shape}")
+    if not np.isfinite(p).all():
+        raise ValueError(f"{name} must be finite")
+    if not np.allclose(p[3], (0.0, 0.0, 0.0, 1.0)):
+        raise ValueError(f"{name}: last row must be (0, 0, 0, 1), got {p[3].tolist()}")
+    if abs(np.linalg.det(p[:3, :3]) - 1.0) > 1e-3:
+        raise ValueError(f"{name}: rotation part is not a rotation (det {np.linalg.det(p[:3, :3]):.4g})")
+    return p
+
+
+def _semantic(a, name: str) -> np.ndarray:
+    sem = np.asarray(a)
+    if sem.ndim != 3:
+        raise ValueError(f"{name} must be 3D (x, y, z), got shape {sem.shape}")
+    if sem.dtype != np.uint8:
+        if not np.issubdtype(sem.dtype, np.integer):
+            raise ValueError(f"{name} must hold integer class ids, got {sem.dtype}")
+        if sem.size and (sem.min() < 0 or sem.max() > 255):
+            raise ValueError(f"{name}: class ids must fit uint8 (0..255)")
+        sem = sem.astype(np.uint8)
+    return np.ascontiguousarray(sem)
+
+
+def _mask(m, shape: tuple[int, ...], name: str) -> np.ndarray:
+    arr = np.asarray(m)
+    if arr.shape != shape:
+        raise ValueError(f"{name} has shape {arr.shape}, its semantic grid has {shape}")
+    return np.ascontiguousarray(arr.astype(np.bool_, copy=False)).view(np.uint8)
+
+
+@numba.njit(cache=True, nogil=True)
+def _column_ranges(sem):  # pragma: no cover - numba
+    """Per (i, j) column: the lowest and highest k with a nonzero label (lo > hi when none)."""
+    X, Y, Z = sem.shape
+    lo = np.full((X, Y), Z, dtype=np.int32)
+    hi = np.full((X, Y), -1, dtype=np.int32)
+    for i in range(X):
+        for j in range(Y):
+            for k in range(Z):
+                if sem[i, j, k] != 0:
+                    lo[i, j] = k
+                    break
+            if lo[i, j] < Z:
+                for k in range(Z - 1, -1, -1):
+                    if sem[i, j, k] != 0:
+                        hi[i, j] = k
+                        break
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def _tc_kernel(sem0, sem1, m0, m1, use_mask, static, A, c, lo0, hi0, lo1, hi1):  # pragma: no cover - numba
+    """Count per-class intersections and unions. ``q = A @ (i, j, k) + c`` is voxel (i, j, k)'s
+    centre warped into frame t+1's continuous voxel coordinates (voxel u spans [u, u + 1))."""
+    X0, Y0, Z0 = sem0.shape
+    X1, Y1, Z1 = sem1.shape
+    inter = np.zeros(256, dtype=np.int64)
+    union = np.zeros(256, dtype=np.int64)
+    a02, a12, a22 = A[0, 2], A[1, 2], A[2, 2]
+    for i in range(X0):
+        for j in range(Y0):
+            # warped centre of (i, j, 0); the column is the line bx + k * a02 ...
+            bx = A[0, 0] * i + A[0, 1] * j + c[0]
+            by = A[1, 0] * i + A[1, 1] * j + c[1]
+            bz = A[2, 0] * i + A[2, 1] * j + c[2]
+            # k range to visit: start with the column's own occupied range
+            k_lo = lo0[i, j]
+            k_hi = hi0[i, j]
+            # frame-(t+1) columns the warped line crosses: bounding box of its end points
+            ex, ey = bx + a02 * (Z0 - 1), by + a12 * (Z0 - 1)
+            ix0 = int(math.floor(min(bx, ex)))
+            ix1 = int(math.floor(max(bx, ex)))
+            iy0 = int(math.floor(min(by, ey)))
+            iy1 = int(math.floor(max(by, ey)))
+            ix0, iy0 = max(ix0, 0), max(iy0, 0)
+            ix1, iy1 = min(ix1, X1 - 1), min(iy1, Y1 - 1)
+            if ix0 <= ix1 and iy0 <= iy1:
+                zlo, zhi = Z1, -1
+                for ii in range(ix0, ix1 + 1):
+                    for jj in range(iy0, iy1 + 1):
+                        if lo1[ii, jj] < zlo:
+                            zlo = lo1[ii, jj]
+                        if hi1[ii, jj] > zhi:
+                            zhi = hi1[ii, jj]
+                if zlo <= zhi:
+                    if abs(a22) > 0.25:
+                        # q_z(k) in [zlo, zhi + 1)  <=>  k between these two bounds (one voxel margin)
+                        ka = (zlo - bz) / a22
+                        kb = (zhi + 1 - bz) / a22
+                        klo = int(math.floor(min(ka, kb))) - 1
+                        khi = int(math.ceil(max(ka, kb))) + 1
+                    else:  # the column lies across frame t+1's z axis: visit all of it
+                        klo, khi = 0, Z0 - 1
+                    if klo < k_lo:
+                        k_lo = klo
+                    if khi > k_hi:
+                        k_hi = khi
+            k_lo = max(k_lo, 0)
+            k_hi = min(k_hi, Z0 - 1)
+            for k in range(k_lo, k_hi + 1):
+                a = sem0[i, j, k]
+                if not static[a]:
+                    continue
+                if use_mask and m0[i, j, k] == 0:
+                    continue
+                # nearest voxel of frame t+1: floor of the continuous coordinates, inside the grid
+                qx = bx + a02 * k
+                qy = by + a12 * k
+                qz = bz + a22 * k
+                if qx < 0.0 or qy < 0.0 or qz < 0.0:
+                    continue
+                u = int(qx)
+                w = int(qy)
+                s = int(qz)
+                if u >= X1 or w >= Y1 or s >= Z1:
+                    continue
+                b = sem1[u, w, s]
+                if not static[b]:
+                    continue
+                if use_mask and m1[u, w, s] == 0:
+                    continue
+                # per-class intersection and union over classes >= 1
+                if a == b:
+                    if a != 0:
+                        inter[a] += 1
+                        union[a] += 1
+                else:
+                    if a != 0:
+                        union[a] += 1
+                    if b != 0:
+                        union[b] += 1
+    return inter, union
+
+
+def warp_to_voxels(relative: np.ndarray, origin_t: Sequence[float], voxel_t: float,
+                   origin_t1: Sequence[float], voxel_t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(A, c)`` with ``q = A @ v + c``: the centre of grid-t voxel ``v`` (integer index vector)
+    mapped by ``relative`` (frame t -> frame t+1) into grid t+1's continuous voxel coordinates,
+    ``q = (R (origin_t + (v + 0.5) voxel_t) + t - origin_t1) / voxel_t1``."""
+    R, t = relative[:3, :3], relative[:3, 3]
+    o0, o1 = np.asarray(origin_t, np.float64), np.asarray(origin_t1, np.float64)
+    A = R * (voxel_t / voxel_t1)
+    c = (R @ (o0 + 0.5 * voxel_t) + t - o1) / voxel_t1
+    return np.ascontiguousarray(A), np.ascontiguousarray(c)
+
+
+def temporal_consistency_counts(
+    semantic_t: np.ndarray,
+    semantic_t1: np.ndarray,
+    pose_t: np.ndarray,
+    pose_t1: np.ndarray,
+    voxel_size: float,
+    origin: Sequence[float],
+    *,
+    mask_t: np.ndarray | None = None,
+    mask_t1: np.ndarray | None = None,
+    static: np.ndarray | None = None,
+    voxel_size_t1: float | None = None,
+    origin_t1: Sequence[float] | None = None,
+) -> TemporalCounts:
+    """Per-class ``|I_c|`` and ``|U_c|`` within ``M_t`` of the pair (t, t+1) (module docstring).
+
+    ``semantic_*``: uint8 (or integer 0..255) ``(X, Y, Z)`` grids, 0 = free. ``pose_*``: 4x4
+    sensor-to-world poses of the grids' frame. ``voxel_size`` (m) and ``origin`` (m, minimum corner
+    of voxel (0, 0, 0)) describe grid t and, unless ``voxel_size_t1`` / ``origin_t1`` are given,
+    grid t+1 too. ``mask_*``: visibility (nonzero = observed), both or neither. ``static``: (256,)
+    bool table (:func:`static_table`; default: the CarlaOcc taxonomy).
+    """
+    sem0, sem1 = _semantic(semantic_t, "semantic_t"), _semantic(semantic_t1, "semantic_t1")
+    if (mask_t is None) != (mask_t1 is None):
+        raise ValueError("give both visibility masks (mask_t and mask_t1) or neither")
+    use_mask = mask_t is not None
+    if use_mask:
+        m0, m1 = _mask(mask_t, sem0.shape, "mask_t"), _mask(mask_t1, sem1.shape, "mask_t1")
+    else:
+        m0 = m1 = np.zeros((1, 1, 1), np.uint8)
+    table = static_table() if static is None else np.asarray(static, dtype=np.bool_)
+    if table.shape != (N_CLASSES,):
+        raise ValueError(f"static must be a (256,) bool table, got shape {table.shape}")
+    vs1 = voxel_size if voxel_size_t1 is None else voxel_size_t1
+    o1 = origin if origin_t1 is None else origin_t1
+    for name, v in (("voxel_size", voxel_size), ("voxel_size_t1", vs1)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive finite number of metres, got {v!r}")
+    for name, o in (("origin", origin), ("origin_t1", o1)):
+        if len(o) != 3 or not all(math.isfinite(float(x)) for x in o):
+            raise ValueError(f"{name} must be 3 finite numbers, got {o!r}")
+    A, c = warp_to_voxels(relative_pose(pose_t, pose_t1), origin, float(voxel_size), o1, float(vs1))
+    # per-column occupied z ranges bound the work to voxels where O_t or W is occupied
+    lo0, hi0 = _column_ranges(sem0)
+    lo1, hi1 = _column_ranges(sem1)
+    inter, union = _tc_kernel(sem0, sem1, m0, m1, use_mask, table, A, c, lo0, hi0, lo1, hi1)
+    return TemporalCounts(inter, union)
