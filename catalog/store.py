@@ -30,6 +30,8 @@ TABLE_DIRS: dict[str, str] = {
     "quality": "metrics/quality",
     "rectification": "metrics/rectification",
     "quality_classes": "metrics/quality_classes",
+    "statistics_classes": "metrics/statistics_classes",
+    "statistics_assets": "metrics/statistics_assets",
     "runs": "catalog/runs",
 }
 OCCUPANCY_ZARR = "occupancy.zarr"

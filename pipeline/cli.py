@@ -44,6 +44,9 @@ app.add_typer(scenes_app, name="scenes")
 show_app = typer.Typer(help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
                        rich_markup_mode=None)
 app.add_typer(show_app, name="show")
+from pipeline.evaluate import eval_app  # noqa: E402  (carlaocc eval ssc|panoptic|depth|det)
+
+app.add_typer(eval_app, name="eval")
 
 RootOpt = Annotated[str, typer.Option("--root", help="dataset root: a directory or an fsspec URL (memory://...)")]
 ResOpt = Annotated[str, typer.Option("--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05")]
@@ -323,7 +326,7 @@ def catalog_query(
     fmt: Annotated[str, typer.Option("--format", help="table, csv or json")] = "table",
 ) -> None:
     """Run read-only SQL. Views: assets, parts, quarantine, placements, sequences, frames, actors,
-    runs, quality, quality_classes, classes."""
+    runs, quality, quality_classes, statistics_classes, statistics_assets, classes."""
     from catalog.sql import QueryError, QueryRefused, query
 
     if fmt not in ("table", "csv", "json"):
@@ -753,6 +756,11 @@ def _write_bytes(out: Path, data: bytes) -> None:
         tmp.replace(out)
     except OSError as exc:
         fail(f"cannot write {out}: {exc.strerror or exc}")
+
+
+from pipeline.audit import audit_cli  # noqa: E402  (after app: the audit command lives in its module)
+
+app.command("audit")(audit_cli)
 
 
 def main() -> None:

@@ -6,9 +6,10 @@ from catalog.occupancy import OccupancyStore
 from catalog.parquet import ParquetTable
 from catalog.store import StoreError
 from pipeline import tasks
+from pipeline.report import report_task
 from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
 from schemas.records import SequenceRecord
-from schemas.configs import DatasetConfig, SensorsConfig, VoxelizeConfig
+from schemas.configs import DatasetConfig, MetricsConfig, SensorsConfig, VoxelizeConfig
 
 INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
 # code every task runs through besides its stage's compute: the contracts, the readers/writers and
@@ -143,13 +144,39 @@ def _metrics_partitions(ctx: Context) -> list[Partition]:
     for seq in _sequences(ctx):
         for res in ctx.resolutions:
             grid = vcfg.grid(res)
+            # every frame's occupancy, and the town's scenes partition (the frames' LiDAR poses)
             needs = tuple(("voxelize", f"{seq.sequence_id}/{grid.key}/{t:04d}") for t in range(seq.frame_count))
+            needs += (("scenes", seq.town),)
             out.append(Partition(
                 f"{seq.sequence_id}/{grid.key}",
                 {"sequence_id": seq.sequence_id, "resolution": res, "grid": grid.model_dump(mode="json")},
                 needs=needs,
             ))
     return out
+
+
+def report_config(config: DatasetConfig) -> MetricsConfig:
+    """The report stage's config: the metrics section (the report is the metrics' presentation)."""
+    return config.metrics
+
+
+def _report_partitions(ctx: Context) -> list[Partition]:
+    """One partition over the whole dataset at the requested resolutions: it reads every metrics
+    partition and what they read (every occupancy frame), the scenes and ingest partitions, and
+    every sensors partition once the sensors stage has run (the report shows cameras then)."""
+    from catalog.lineage import LineageLog
+
+    needs: set[tuple[str, str]] = set()
+    for p in _scenes_partitions(ctx):
+        needs |= {("scenes", p.key), *p.needs}
+    for p in _metrics_partitions(ctx):
+        needs |= {("metrics", p.key), *p.needs}
+    if LineageLog(ctx.store).latest("sensors"):
+        needs |= {("sensors", p.key) for p in _sensors_partitions(ctx)}
+    grids = [ctx.config.voxelize.grid(res) for res in ctx.resolutions]
+    return [Partition("dataset", {"grids": [g.model_dump(mode="json") for g in grids],
+                                  "sequences": [s.sequence_id for s in _sequences(ctx)]},
+                      needs=tuple(sorted(needs)))]
 
 
 STAGES: dict[str, StageSpec] = {
@@ -203,13 +230,29 @@ STAGES: dict[str, StageSpec] = {
         ),
         StageSpec(
             name="metrics",
-            description="spatial continuity score per frame, per sequence and per class",
-            upstream=("voxelize",),
+            description="spatial continuity per frame, sequence and class; temporal consistency per frame pair "
+                        "and sequence",
+            upstream=("voxelize", "scenes"),
             code_modules=("stages.metrics", *SHARED_CODE),
-            reads=("occupancy.zarr/",),
+            reads=("occupancy.zarr/", "scenes/frames/"),
             writes=("metrics/quality/", "metrics/quality_classes/"),
             partitions=_metrics_partitions,
             task=tasks.metrics_task,
+        ),
+        StageSpec(
+            name="report",
+            description="statistics (voxels, instances, assets per class), plots and metrics/report.html",
+            upstream=("ingest", "scenes", "voxelize", "sensors", "metrics"),
+            code_modules=("stages.metrics", "stages.render_occupancy", "stages.render_sensors", "stages.render",
+                          "catalog.admesh", "catalog.lineage", "catalog.images", "catalog.sensors", "catalog.usage",
+                          "pipeline.report", *SHARED_CODE),
+            reads=("admesh/assets/", "scenes/", "occupancy.zarr/", "sensors.zarr/", "metrics/quality/",
+                   "catalog/runs/"),
+            writes=("metrics/statistics_classes/", "metrics/statistics_assets/", "metrics/plots/",
+                    "metrics/report.html"),
+            partitions=_report_partitions,
+            task=report_task,
+            config_of=report_config,
         ),
     )
 }

@@ -208,7 +208,14 @@ class RectificationRecord(Record):
 
 
 class QualityRecord(Record):
-    """A dataset-quality score over one frame (frame_index set) or one sequence (frame_index None)."""
+    """A dataset-quality score over one frame (frame_index set) or one sequence (frame_index None).
+
+    ``metric`` "spatial_continuity": ``value = 1 - isolated / occupied``; numerator = occupied -
+    isolated (connected voxels), denominator = occupied. ``metric`` "temporal_consistency": one row
+    per frame pair (t, t+1) with ``frame_index = t`` and one per sequence; ``value = numerator /
+    denominator`` = intersection / union voxels summed over classes (within the valid mask M_t);
+    occupied and isolated are 0. Sums of numerators over denominators aggregate any set of rows.
+    """
 
     TABLE: ClassVar[str] = "quality"
     sequence_id: str
@@ -216,8 +223,10 @@ class QualityRecord(Record):
     frame_index: int | None
     metric: str
     value: float
-    occupied: int
-    isolated: int
+    occupied: int = 0  # spatial_continuity only
+    isolated: int = 0  # spatial_continuity only
+    numerator: int | None = None  # None in rows written before these fields existed
+    denominator: int | None = None
 
 
 class ClassQualityRecord(Record):
@@ -230,6 +239,31 @@ class ClassQualityRecord(Record):
     semantic_id: int
     occupied: int
     isolated: int
+
+
+class ClassStatisticsRecord(Record):
+    """Voxels and instances of one class in one sequence at one resolution (the report stage's
+    statistics: voxels summed over the sequence's frames; instances are distinct (instance id,
+    class) pairs among its voxels, of which ``moving_instances`` are dynamic actors)."""
+
+    TABLE: ClassVar[str] = "statistics_classes"
+    sequence_id: str
+    resolution: float
+    semantic_id: int
+    frames: int
+    voxels: int
+    instances: int
+    moving_instances: int
+
+
+class AssetStatisticsRecord(Record):
+    """ADMesh assets of one category from one source (duplicates counted once)."""
+
+    TABLE: ClassVar[str] = "statistics_assets"
+    source: str
+    category_id: int
+    category: str
+    assets: int
 
 
 class RunRecord(Record):
@@ -264,5 +298,7 @@ PERSISTED: tuple[type[Record], ...] = (
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,
+    ClassStatisticsRecord,
+    AssetStatisticsRecord,
     RunRecord,
 )

@@ -98,9 +98,27 @@ def test_catalog_tables_and_metrics(built):
     _, rows = query(built, "SELECT value FROM quality WHERE frame_index IS NULL AND metric = 'spatial_continuity'")
     assert len(rows) == n_seq and all(0.9 < r[0] <= 1.0 for r in rows)
     _, rows = query(built, "SELECT DISTINCT stage FROM runs WHERE status = 'completed' ORDER BY 1")
-    assert [r[0] for r in rows] == ["ingest", "metrics", "scenes", "sensors", "voxelize"]
+    assert [r[0] for r in rows] == ["ingest", "metrics", "report", "scenes", "sensors", "voxelize"]
     _, rows = query(built, "SELECT count(*) FROM quality_classes q JOIN classes c ON q.semantic_id = c.id WHERE c.name = 'Car'")
     assert rows[0][0] > 0
+
+
+def test_report_and_statistics_tables(built):
+    """The report stage: statistics tables agree with the occupancy, and report.html opens offline."""
+    import re
+
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    occ = OccupancyStore(built)
+    sem = occ.open(seq, GridSpec(voxel_size=RES), "semantic")[:]
+    _, rows = query(built, f"SELECT semantic_id, voxels, instances FROM statistics_classes WHERE sequence_id = '{seq}'")
+    voxels = {r[0]: r[1] for r in rows}
+    assert voxels == {int(c): int((sem == c).sum()) for c in np.unique(sem)}
+    assert dict((r[0], r[2]) for r in rows)[taxonomy.by_name("Car").id] >= 3
+    _, rows = query(built, "SELECT sum(assets) FROM statistics_assets")
+    assert rows[0][0] == query(built, "SELECT count(*) FROM assets")[1][0][0]
+    page = built.read_bytes("metrics/report.html").decode()
+    assert not re.search(r"""(src|href)\s*=\s*["']?(https?:|//)""", page) and "<script" not in page
+    assert page.count("data:image/png;base64,") >= 6 and "sensors.zarr" in page and 'id="lineage"' in page
 
 
 def test_scene_tables(built):
@@ -162,7 +180,9 @@ def test_local_cluster_output_is_byte_identical(built, tmp_path):
     r = cli.invoke(app, ["run", "--res", str(RES), "--root", str(root), "--workers", "2"])
     assert r.exit_code == 0, r.output
     a, b = _snapshot(built), _snapshot(Store(str(root)))
-    strip = lambda snap, base: {k[len(base):]: v[1] for k, v in snap.items() if "/catalog/runs/" not in k}
+    # lineage differs (run ids, times), and so does the report's lineage section
+    strip = lambda snap, base: {k[len(base):]: v[1] for k, v in snap.items()
+                                if "/catalog/runs/" not in k and not k.endswith("/metrics/report.html")}
     sa, sb = strip(a, built.root), strip(b, str(root))
     assert sa.keys() == sb.keys()
     assert [k for k in sa if sa[k] != sb[k]] == []

@@ -1,0 +1,205 @@
+"""The report stage on a tiny synthetic store: statistics against hand counts, the plots, a
+self-contained report page, its partition's needs, and the lineage and size sections."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+from datetime import datetime, timedelta, timezone
+
+import numpy as np
+import pytest
+
+from catalog.lineage import LineageLog
+from catalog.occupancy import OccupancyStore
+from catalog.parquet import ParquetTable
+from catalog.sql import query
+from catalog.store import Store
+from catalog.usage import store_usage
+from pipeline.registry import Context, Partition
+from pipeline.report import PLOTS_DIR, REPORT_HTML, SECTIONS, report_task, stage_lineage
+from pipeline.stages import STAGES
+from schemas import taxonomy
+from schemas.configs import DatasetConfig, MetricsConfig
+from schemas.grid import GridSpec
+from schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, QualityRecord, RunRecord,
+                             SequenceRecord)
+
+CAR, BUILDING, ROAD = (taxonomy.by_name(n).id for n in ("Car", "Building", "Road"))
+GRID = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(6.4, 6.4, 1.6), voxel_size=0.4)  # 16 x 16 x 4
+SEQS = ("town00_low_seq000", "town00_high_seq000")
+FRAMES = 3
+POSE = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
+T0 = datetime(2025, 1, 2, 3, 4, 5, tzinfo=timezone.utc)
+
+
+def _frame(t: int, seq_index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Road slab (256 voxels), building id 1 (2x2x3 = 12 voxels), parked car id 2 (2 voxels) and
+    a moving car id 10 (2 voxels) one voxel further each frame; sequence 1 has no parked car."""
+    sem = np.zeros(GRID.shape, np.uint8)
+    inst = np.zeros(GRID.shape, np.uint32)
+    sem[:, :, 0] = ROAD
+    sem[0:2, 0:2, 1:4], inst[0:2, 0:2, 1:4] = BUILDING, 1
+    if seq_index == 0:
+        sem[5, 5:7, 1], inst[5, 5:7, 1] = CAR, 2
+    sem[8 + t, 10:12, 1], inst[8 + t, 10:12, 1] = CAR, 10
+    return sem, inst
+
+
+def _asset(aid: str, source: str, cat: str) -> AssetRecord:
+    c = taxonomy.by_name(cat)
+    return AssetRecord(asset_id=aid, source=source, source_path=f"{source}://{aid}", licence="CC0-1.0",
+                       category_id=c.id, category=c.name, subclass="x", extent=[1.0, 1.0, 1.0], vertex_count=8,
+                       face_count=12, part_count=1, transparent_part_count=0, surface_area=6.0, volume=1.0,
+                       watertight=True, geometry_hash=aid, mesh_path=f"admesh/meshes/{aid}.glb")
+
+
+def _run(stage: str, partition: str, outputs: dict, inputs: dict | None = None, run_id: str = "20250102T030405Z-abc",
+         status: str = "completed") -> RunRecord:
+    return RunRecord(run_id=run_id, stage=stage, partition=partition, code_version="c0de", config_hash="cf6",
+                     cache_key="k", input_fingerprints=json.dumps(inputs or {}),
+                     output_fingerprints=json.dumps(outputs),
+                     status=status, started_at=T0, ended_at=T0 + timedelta(seconds=2), host="h")
+
+
+@pytest.fixture
+def small(store: Store) -> Store:
+    occ = OccupancyStore(store)
+    for i, s in enumerate(SEQS):
+        ParquetTable(store, SequenceRecord).save(s, [SequenceRecord(
+            sequence_id=s, town="town00", seed=1, frame_count=FRAMES, rate_hz=10.0,
+            traffic_level="low" if i == 0 else "high", ego_asset_id="ego")])
+    actors = ParquetTable(store, ActorStateRecord)
+    for i, seq in enumerate(SEQS):
+        occ.create(seq, GRID, FRAMES, 6)  # 16 = 6 + 6 + 4: padded edge chunks
+        for t in range(FRAMES):
+            sem, inst = _frame(t, i)
+            occ.write_frame(seq, GRID, t, {"semantic": sem, "instance": inst})
+        actors.save(seq, [ActorStateRecord(sequence_id=seq, frame_index=t, instance_id=10, asset_id="car",
+                                           semantic_id=CAR, pose=POSE, box_center=[0.0, 0.0, 0.0],
+                                           box_size=[4.0, 2.0, 1.5], yaw=0.0, velocity=[1.0, 0.0, 0.0],
+                                           angular_velocity=[0.0, 0.0, 0.0]) for t in range(FRAMES)])
+    ParquetTable(store, AssetRecord).save("source=procedural/procedural", [
+        _asset("a", "procedural", "Car"), _asset("b", "procedural", "Car"), _asset("c", "procedural", "Building")])
+    ParquetTable(store, AssetRecord).save("source=folder/f", [_asset("d", "folder", "Car")])
+    ParquetTable(store, QualityRecord).save("q", [
+        QualityRecord(sequence_id=s, resolution=0.4, frame_index=f, metric=m, value=v, occupied=10, isolated=0)
+        for s in SEQS for f in (None, 0, 1) for m, v in (("spatial_continuity", 0.99), ("temporal_consistency", 0.95))])
+    LineageLog(store).append("voxelize", "r1", [
+        _run("voxelize", f"{s}/0.4/{t:04d}", {f"occupancy.zarr/{s}/0.4/semantic[{t}]": "sha256:aa",
+                                               f"occupancy.zarr/{s}/0.4/instance[{t}]": "sha256:bb"},
+             {"ingest/procedural": "x1", "scenes/town00": "x2"}) for s in SEQS for t in range(FRAMES)])
+    LineageLog(store).append("metrics", "r1", [
+        _run("metrics", f"{s}/0.4", {f"metrics/quality/{s}/0.4.parquet": "sha256:cc"}) for s in SEQS])
+    return store
+
+
+def _partition() -> Partition:
+    return Partition("dataset", {"grids": [GRID.model_dump(mode="json")], "sequences": list(SEQS)})
+
+
+def test_report_task_writes_statistics_plots_and_page(small):
+    stale = f"{PLOTS_DIR}/class_voxels_9.9.png"
+    small.write_bytes(stale, b"old")
+    outputs = report_task(small, MetricsConfig(), _partition())
+    # outputs are fingerprinted files that exist; the stale plot of another resolution is gone
+    assert REPORT_HTML in outputs and not small.exists(stale)
+    for rel, fp in outputs.items():
+        assert small.fingerprint(rel) == fp, rel
+    plots = {rel for rel in outputs if rel.startswith(PLOTS_DIR)}
+    assert plots == {f"{PLOTS_DIR}/{n}.png" for n in ("class_voxels_0.4", "instances_0.4", "motion_0.4", "assets",
+                                                      "quality", "frame")}  # no cameras: no sensors sheet
+    for rel in plots:
+        assert small.read_bytes(rel)[:8] == b"\x89PNG\r\n\x1a\n"
+    # class statistics against hand counts
+    rows = {(r.sequence_id, r.semantic_id): r for r in ParquetTable(small, ClassStatisticsRecord).load()}
+    a, b = SEQS
+    assert rows[(a, ROAD)].voxels == FRAMES * 256 and rows[(a, ROAD)].instances == 0
+    assert rows[(a, BUILDING)].voxels == FRAMES * 12 and rows[(a, BUILDING)].instances == 1
+    assert (rows[(a, CAR)].voxels, rows[(a, CAR)].instances, rows[(a, CAR)].moving_instances) == (12, 2, 1)
+    assert (rows[(b, CAR)].voxels, rows[(b, CAR)].instances, rows[(b, CAR)].moving_instances) == (6, 1, 1)
+    assert rows[(a, 0)].voxels == FRAMES * (16 * 16 * 4) - FRAMES * (256 + 12 + 4)
+    assert all(r.frames == FRAMES and r.resolution == 0.4 for r in rows.values())
+    # queryable through the catalog views
+    cols, got = query(small, "SELECT category, sum(assets) FROM statistics_assets GROUP BY 1 ORDER BY 1")
+    assert got == [("Building", 1), ("Car", 3)]
+    _, got = query(small, "SELECT sum(instances) FROM statistics_classes s JOIN classes c ON s.semantic_id = c.id "
+                          "WHERE c.name = 'Car'")
+    assert got[0][0] == 3
+
+
+def test_report_page_is_self_contained(small):
+    report_task(small, MetricsConfig(), _partition())
+    page = small.read_bytes(REPORT_HTML).decode()
+    # nothing loaded from outside the file: no remote or relative src/href/url(), no scripts
+    assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:|//|file:)""", page, re.I)
+    assert not re.search(r"""src\s*=\s*["'](?!data:)""", page, re.I)
+    assert not re.search(r"""href\s*=\s*["'](?!#)""", page, re.I)
+    assert "<script" not in page.lower() and "@import" not in page and "url(" not in page
+    for section in SECTIONS:
+        assert f'id="{section}"' in page, section
+    # every plot inlined as a PNG data URI
+    images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    assert len(images) == 6
+    assert all(base64.b64decode(i)[:8] == b"\x89PNG\r\n\x1a\n" for i in images)
+    # the content: sizes, sequences, scores, lineage
+    for text in ("occupancy.zarr", "town00_high_seq000", "0.99000", "temporal consistency", "voxelize",
+                 "c0de", "cf6", "20250102T030405Z-abc", "occupancy.zarr/semantic ×6"):
+        assert text in page, text
+
+
+def test_report_partition_needs_every_upstream_output(small):
+    ctx = Context(small, DatasetConfig(), (0.4,))
+    assert list(STAGES)[-1] == "report" and STAGES["report"].upstream[-1] == "metrics"
+    (part,) = STAGES["report"].partitions(ctx)
+    needs = set(part.needs)
+    for seq in SEQS:
+        assert ("metrics", f"{seq}/0.4") in needs
+        assert {("voxelize", f"{seq}/0.4/{t:04d}") for t in range(FRAMES)} <= needs
+    assert ("scenes", "town00") in needs and ("ingest", "procedural") in needs
+    assert not any(s == "sensors" for s, _ in needs)
+    assert part.params["sequences"] == sorted(SEQS)
+    # once the sensors stage has run, the report reads its frames too
+    LineageLog(small).append("sensors", "r2", [_run("sensors", f"{SEQS[0]}/0000", {})])
+    (part,) = STAGES["report"].partitions(ctx)
+    assert {("sensors", f"{s}/{t:04d}") for s in SEQS for t in range(FRAMES)} <= set(part.needs)
+
+
+def test_read_tile_agrees_with_zarr(small):
+    """The report's fast chunk reader returns what zarr-python reads, edge chunks and missing
+    (all-zero) chunks included."""
+    occ = OccupancyStore(small)
+    for name in ("semantic", "instance"):
+        arr = occ.open(SEQS[0], GRID, name)
+        for t in range(FRAMES):
+            for x0, nx in ((0, 16), (0, 6), (6, 10), (12, 4)):
+                tile = occ.read_tile(SEQS[0], GRID, t, name, x0, nx)
+                assert tile.dtype == arr.dtype
+                np.testing.assert_array_equal(tile, arr[t, x0:x0 + nx])
+    with pytest.raises(ValueError, match="whole chunks"):
+        occ.read_tile(SEQS[0], GRID, 0, "semantic", 3, 6)
+
+
+def test_stage_lineage_collapses_partitions():
+    recs = [_run("voxelize", "s/0.4/0000", {"occupancy.zarr/s/0.4/semantic[0]": "a", "metrics/x/y.parquet": "b"},
+                 {"scenes/town00": "1", "file:/x.xodr": "2"}, run_id="r1"),
+            _run("voxelize", "s/0.4/0000", {"occupancy.zarr/s/0.4/semantic[0]": "c"}, {"scenes/town00": "1"},
+                 run_id="r2"),
+            _run("voxelize", "s/0.4/0001", {}, {}, run_id="r1", status="failed")]
+    (L,) = stage_lineage(recs)
+    assert (L.stage, L.partitions, L.completed, L.run_ids) == ("voxelize", 2, 1, ["r1", "r2"])
+    assert L.inputs == {"scenes": 1} and L.outputs == {"occupancy.zarr/semantic": 1}
+    assert L.task_seconds == pytest.approx(4.0)
+
+
+def test_store_usage_counts_parts(tmp_path):
+    store = Store(str(tmp_path / "root"))
+    assert store_usage(store) == []
+    store.write_bytes("admesh/assets/x.parquet", b"12345")
+    store.write_bytes("admesh/meshes/a.glb", b"1")
+    store.write_bytes("metrics/report.html", b"123")
+    store.write_bytes("notes.txt", b"12")
+    (tmp_path / "root" / "admesh" / ".tmp-x").write_bytes(b"999")
+    usage = {u.part: (u.files, u.bytes) for u in store_usage(store, exclude=("metrics/report.html",))}
+    assert usage == {"admesh": (2, 6), "other": (1, 2)}
