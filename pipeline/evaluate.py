@@ -370,6 +370,11 @@ def _box(obj: Any, where: str, need_score: bool):
             center, (w, l, h), label = obj["translation"], obj["size"], obj["detection_name"]
             size = (l, w, h)
             qw, qx, qy, qz = (float(v) for v in obj["rotation"])
+            # the yaw of the normalised quaternion (the devkit normalises through pyquaternion)
+            norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+            if not (math.isfinite(norm) and norm > 0):
+                raise InputError(f"{where}: rotation {obj['rotation']} is not a rotation quaternion")
+            qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
             yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
             score = obj.get("detection_score")
         if need_score and score is None:

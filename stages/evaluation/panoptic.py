@@ -89,7 +89,11 @@ def frame_counts(
     if mask is not None:
         rel &= np.asarray(mask, dtype=bool).reshape(-1)
     idx = np.flatnonzero(rel)
-    gs, gi, ps, pi = gs[idx].astype(np.int64), gi[idx].astype(np.int64), ps[idx].astype(np.int64), pi[idx].astype(np.int64)
+    gs, ps = gs[idx].astype(np.int64), ps[idx].astype(np.int64)
+    # instance ids renumbered densely per side (only equality matters), so any id range (uint64
+    # included) fits the 32 low bits of the segment key below
+    gi = np.unique(gi[idx], return_inverse=True)[1].reshape(-1).astype(np.int64)
+    pi = np.unique(pi[idx], return_inverse=True)[1].reshape(-1).astype(np.int64)
     void, gt_ok, pr_ok = void[idx], gt_ok[idx], pr_ok[idx]
 
     # 2. segment keys: class << 32 | instance, instance forced to 0 on stuff classes

@@ -177,3 +177,14 @@ def test_det_both_box_forms(tmp_path):
     (tmp_path / "pred.json").write_text(json.dumps({"s0": [{"center": [0, 0, 0], "size": [4, 2, 1], "yaw": 0, "label": "car"}], "s1": []}))
     r = _run("det", "--pred", tmp_path / "pred.json", "--gt", tmp_path / "gt.json")
     assert r.exit_code == 2 and "needs a score" in r.output
+    # a quaternion that is not unit length is normalised (the devkit's pyquaternion does); a zero
+    # one is refused, naming the box
+    pred = {"results": {"s0": [{**pred["results"]["s0"][0], "rotation": [3 * v for v in q]}], "s1": []}}
+    (tmp_path / "pred.json").write_text(json.dumps(pred))
+    r = _run("det", "--pred", tmp_path / "pred.json", "--gt", tmp_path / "gt.json", "--json", out)
+    assert r.exit_code == 0, r.output
+    assert json.loads(out.read_text())["classes"][0]["aoe"] == pytest.approx(0.2)
+    pred["results"]["s0"][0]["rotation"] = [0, 0, 0, 0]
+    (tmp_path / "pred.json").write_text(json.dumps(pred))
+    r = _run("det", "--pred", tmp_path / "pred.json", "--gt", tmp_path / "gt.json")
+    assert r.exit_code == 2 and "is not a rotation quaternion" in r.output

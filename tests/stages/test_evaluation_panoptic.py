@@ -152,6 +152,19 @@ def test_permuting_instance_ids_keeps_pq(data, shape, perm_p, perm_g):
     np.testing.assert_array_equal(ra.tp, rb.tp)
 
 
+def test_instance_ids_beyond_32_bits_stay_distinct():
+    # two perfect cars; the prediction names them 7 and 7 + 2^33 (ids that share their low 32
+    # bits, and whose high bits would spill into the class of a class << 32 | id key)
+    gs = np.array([2, 2, 2, 2, 0], np.uint8)
+    gi = np.array([1, 1, 2, 2, 0], np.uint64)
+    pi = np.array([7, 7, 7 + (2 << 32), 7 + (2 << 32), 0], np.uint64)
+    acc = PanopticAccumulator(SMALL)
+    acc.update(gs, pi, gs, gi)
+    r = acc.result()
+    car = r.class_names.index("car")
+    assert (r.tp[car], r.fp[car], r.fn[car]) == (2, 0, 0) and r.means["pq"] == 1.0
+
+
 def test_frames_accumulate_and_mask_drops_voxels():
     frame = _hand_frame()
     acc = PanopticAccumulator(SMALL)
