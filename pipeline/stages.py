@@ -171,6 +171,8 @@ def _report_partitions(ctx: Context) -> list[Partition]:
         needs |= {("scenes", p.key), *p.needs}
     for p in _metrics_partitions(ctx):
         needs |= {("metrics", p.key), *p.needs}
+    # the ADMesh plot counts the whole library: every ingested item, whichever source
+    needs |= {("ingest", k) for k, r in LineageLog(ctx.store).latest("ingest").items() if r.status == "completed"}
     if LineageLog(ctx.store).latest("sensors"):
         needs |= {("sensors", p.key) for p in _sensors_partitions(ctx)}
     grids = [ctx.config.voxelize.grid(res) for res in ctx.resolutions]
@@ -233,7 +235,8 @@ STAGES: dict[str, StageSpec] = {
             description="spatial continuity per frame, sequence and class; temporal consistency per frame pair "
                         "and sequence",
             upstream=("voxelize", "scenes"),
-            code_modules=("stages.metrics", *SHARED_CODE),
+            # the scores' modules only: the report's statistics and plots live in the same package
+            code_modules=("stages.metrics.continuity", "stages.metrics.temporal", *SHARED_CODE),
             reads=("occupancy.zarr/", "scenes/frames/"),
             writes=("metrics/quality/", "metrics/quality_classes/"),
             partitions=_metrics_partitions,

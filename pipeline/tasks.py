@@ -537,21 +537,27 @@ def metrics_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str,
     if missing and n_frames > 1:
         raise StoreError(f"sequence {seq_id}: no LiDAR pose for frame(s) {missing[:5]} in scenes/frames; "
                          f"re-run the scenes stage")
-    masks = [occ.open(seq_id, grid, n) for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
+    masks = [n for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
+    nx = int(arr.shape[1])
+
+    def read(name: str, t: int) -> np.ndarray:
+        # a whole frame, chunks decoded directly (about 4x faster than slicing through zarr)
+        return occ.read_tile(seq_id, grid, t, name, 0, nx)
 
     def observed(t: int) -> np.ndarray | None:
         if not masks:
             return None
-        out = masks[0][t].astype(np.bool_)
-        for m in masks[1:]:
-            out |= m[t].astype(np.bool_)
+        # the stored masks are uint8 0/1: viewed as bool, OR-ed in place (no 0.05 m temporaries)
+        out = read(masks[0], t).view(np.bool_)
+        for name in masks[1:]:
+            np.logical_or(out, read(name, t).view(np.bool_), out=out)
         return out
 
     per_frame, per_pair = [], []
     quality, classes = [], []
     prev = None  # (semantic, observed mask) of frame t - 1
     for t in range(n_frames):
-        sem = arr[t]
+        sem = read("semantic", t)
         counts = spatial_continuity_counts(sem)
         per_frame.append(counts)
         occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())

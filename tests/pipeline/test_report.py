@@ -164,6 +164,10 @@ def test_report_partition_needs_every_upstream_output(small):
     LineageLog(small).append("sensors", "r2", [_run("sensors", f"{SEQS[0]}/0000", {})])
     (part,) = STAGES["report"].partitions(ctx)
     assert {("sensors", f"{s}/{t:04d}") for s in SEQS for t in range(FRAMES)} <= set(part.needs)
+    # an item ingested from another source (not one the scenes use) is in the library plot too
+    LineageLog(small).append("ingest", "r3", [_run("ingest", "folder:abc123/chair.obj", {})])
+    (part,) = STAGES["report"].partitions(ctx)
+    assert ("ingest", "folder:abc123/chair.obj") in set(part.needs)
 
 
 def test_read_tile_agrees_with_zarr(small):
