@@ -21,18 +21,50 @@ class; CarlaOcc: its ids). Results are reported with the dataset's own ids and n
 computed on the labels as published (SemanticKITTI's invalid voxels included: the score is about
 the ground truth grid, not its evaluation mask). Dynamic classes excluded from ``s_tc``: the road
 users (Occ3D/SurroundOcc bicycle, bus, car, construction_vehicle, motorcycle, pedestrian, trailer,
-truck; SemanticKITTI car ... motorcyclist; CarlaOcc the taxonomy's dynamic classes).
+truck; SemanticKITTI car ... motorcyclist; CarlaOcc the taxonomy's dynamic classes). An occ3d
+file must be Occ3D-nuScenes' (200, 200, 16) grid with ids 0..17 (the geometry above is assumed):
+another shape or a larger id is refused, naming the file.
 
-Paths: each PATH is a file of the format or a directory searched recursively; a directory's files
-are sorted by path, PATH arguments keep their order, and the resulting order is taken as the
-temporal order (``s_tc`` compares consecutive frames).
+Paths and sequences: each PATH is a file of the format or a directory searched recursively (a
+file found twice is audited once). The files are split into **sequences** and ``s_tc`` only pairs
+consecutive frames of one sequence (its counts are summed over the sequences):
 
-``--poses``: one 4x4 grid-frame-to-world pose per frame, in the same order: ``.npy`` of shape
-(N, 4, 4), (N, 3, 4), (N, 16) or (N, 12); ``.json`` a list of such matrices (nested or flat
-row-major), or ``{"poses": [...]}``; any other file is text with one pose per line, 12 (3x4, KITTI
-``poses.txt``) or 16 (4x4) numbers row-major (blank and ``#`` lines skipped). KITTI's
-``poses.txt`` holds camera-0 poses: give ``--calib calib.txt`` (its ``Tr`` line, velodyne to
-camera 0) and they are turned into LiDAR poses ``inv(Tr) @ P @ Tr``.
+* occ3d: the scene directory, ``gts/<scene>/<sample_token>/labels.npz`` (the grandparent of the
+  file). Sample tokens are random hex: a path carries **no time order**, so ``s_tc`` takes the
+  order from the keyed ``--poses`` form below;
+* semantickitti: the ``voxels`` directory of one sequence (the file's parent);
+* surroundocc, carlaocc-npz: the file's parent directory.
+
+Sequences are listed in the order of their first file (directories sorted by path, PATH
+arguments in their order). Within a sequence the files of semantickitti, surroundocc and
+carlaocc-npz are sorted numerically by their frame number (the file name without its ending,
+``000005.label`` -> 5) when every name is a number, else kept in path order; occ3d files are
+listed in path order. That listing is the per-frame table's order and the order of the first
+``--poses`` form.
+
+``--poses`` (grid-frame-to-world 4x4 poses; a pose is a 4x4 or 3x4 matrix, or 16 or 12 numbers
+row-major) in one of two forms:
+
+* **Keyed** (required for occ3d sequences of more than one frame): a ``.json`` list of
+  ``{"frame": F, "pose": [...]}`` in **time order** (or ``{"poses": [that list]}``). ``F`` is the
+  sample token (occ3d: the name of the directory holding ``labels.npz``; other formats: the file
+  name without its ending, e.g. ``000005``), or the file's path relative to the PATH argument it
+  was found under (``scene-0001/0b22/labels.npz``), or the path as listed. The frames of each
+  sequence are ordered as the list orders them; frames without an entry are left out of ``s_tc``
+  (counted as ``frames_without_pose``; they still count for ``s_sc``); entries naming no audited
+  file are ignored (``poses_unmatched``), but at least one must match.
+* **One pose per frame in the order the files are listed** (above): ``.npy`` of shape (N, 4, 4),
+  (N, 3, 4), (N, 16) or (N, 12); ``.json`` a list of such matrices or ``{"poses": [...]}``; any
+  other file is text with one pose per line, 12 (3x4, KITTI ``poses.txt``) or 16 (4x4) numbers
+  row-major (blank and ``#`` lines skipped). Refused for occ3d when a scene has more than one
+  frame (no time order: use the keyed form). For formats whose file names are frame numbers
+  (semantickitti, surroundocc, carlaocc-npz) a list **longer** than the frames of a single
+  sequence is indexed by the frame number: frame ``000005`` takes pose 5. That is KITTI's
+  ``poses.txt``, one pose per LiDAR scan, while SemanticKITTI's voxel labels exist only for every
+  5th scan (000000, 000005, ...).
+
+KITTI's ``poses.txt`` holds camera-0 poses: give ``--calib calib.txt`` (its ``Tr`` line, velodyne
+to camera 0) and they are turned into LiDAR poses ``inv(Tr) @ P @ Tr`` (either form).
 """
 
 from __future__ import annotations
@@ -40,7 +72,8 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable, Iterable, Iterator, Sequence
+import re
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Optional
@@ -50,7 +83,7 @@ import typer
 
 from catalog.formats import (FormatError, load_carlaocc_npz, load_occ3d, load_semantickitti, load_surroundocc,
                              surroundocc_to_dense, to_learning)
-from catalog.formats.occ3d import OCC3D_FREE, OCC3D_RANGE, OCC3D_VOXEL_SIZE
+from catalog.formats.occ3d import OCC3D_FREE, OCC3D_RANGE, OCC3D_SHAPE, OCC3D_VOXEL_SIZE
 from catalog.formats.semantickitti import SEMANTICKITTI_RANGE, SEMANTICKITTI_VOXEL_SIZE
 from catalog.formats.surroundocc import SURROUNDOCC_RANGE, SURROUNDOCC_SHAPE, SURROUNDOCC_VOXEL_SIZE
 from schemas import taxonomy
@@ -88,6 +121,22 @@ class DatasetFormat:
     dynamic: tuple[int, ...]  # internal ids of the moving classes
     mask: str  # what the visibility mask is, for the report
     accept: Callable[[Path], bool] = lambda p: True  # filter of the files found in directories
+    sequence: Callable[[Path], Path] = lambda p: p.parent  # the directory of the file's sequence
+    numbered: bool = True  # file names are frame numbers (their time order)
+    token: Callable[[Path], str] | None = None  # a frame's short name for keyed poses (default: its stem)
+
+    def stem(self, path: Path) -> str:
+        """The file name without the format's ending (``000005.label`` -> ``000005``)."""
+        name = path.name
+        return name[: -len(self.suffix)] if name.endswith(self.suffix) and name != self.suffix else path.stem
+
+    def frame_number(self, path: Path) -> int | None:
+        """The frame number in the file name, or None when the name is not a number."""
+        s = self.stem(path)
+        return int(s) if re.fullmatch(r"[0-9]+", s) else None
+
+    def frame_token(self, path: Path) -> str:
+        return self.token(path) if self.token is not None else self.stem(path)
 
 
 _NUSC_DYNAMIC = ("bicycle", "bus", "car", "construction_vehicle", "motorcycle", "pedestrian", "trailer", "truck")
@@ -100,8 +149,13 @@ def _origin(rng: Sequence[float]) -> tuple[float, float, float]:
 def _read_occ3d(path: Path) -> AuditFrame:
     f = load_occ3d(path)
     sem = f.semantics
-    if sem.size and int(sem.max()) >= 255:
-        raise FormatError(f"{path}: Occ3D id {int(sem.max())} does not fit the audit's uint8 ids (0..254)")
+    # the reader takes any Occ3D variant; the audit's geometry and names are Occ3D-nuScenes'
+    if sem.shape != OCC3D_SHAPE:
+        raise FormatError(f"{path}: Occ3D-nuScenes grids are {OCC3D_SHAPE} (0.4 m from {OCC3D_RANGE[:3]}), "
+                          f"got {sem.shape}")
+    if sem.size and int(sem.max()) > OCC3D_FREE:
+        raise FormatError(f"{path}: Occ3D-nuScenes ids are 0..{OCC3D_FREE} ({OCC3D_FREE} = free), "
+                          f"found {int(sem.max())}")
     # free (17) -> 0, class k -> k + 1
     lut = (np.arange(256) + 1).astype(np.uint8)
     lut[OCC3D_FREE] = 0
@@ -141,7 +195,9 @@ _SURROUNDOCC_NAMES = ("noise",) + _OCC3D_NAMES[1:17]  # nuScenes-lidarseg learni
 FORMATS: dict[str, DatasetFormat] = {
     "occ3d": DatasetFormat(
         "occ3d", "Occ3D-nuScenes", "labels.npz", _read_occ3d, _OCC3D_NAMES, lambda i: i - 1,
-        tuple(_OCC3D_NAMES.index(n) + 1 for n in _NUSC_DYNAMIC), "mask_camera"),
+        tuple(_OCC3D_NAMES.index(n) + 1 for n in _NUSC_DYNAMIC), "mask_camera",
+        # gts/<scene>/<sample_token>/labels.npz: the scene is the sequence, the token names the frame
+        sequence=lambda p: p.parent.parent, numbered=False, token=lambda p: p.parent.name),
     "semantickitti": DatasetFormat(
         "semantickitti", "SemanticKITTI", ".label", _read_semantickitti, taxonomy.SEMANTICKITTI_NAMES,
         lambda i: i, tuple(range(1, 9)), "not .invalid",
@@ -163,34 +219,66 @@ def dataset_format(name: str) -> DatasetFormat:
         raise AuditError(f"unknown format {name!r}; choose one of {', '.join(FORMATS)}") from None
 
 
-def collect_files(fmt: DatasetFormat, paths: Iterable[str | os.PathLike]) -> list[Path]:
+@dataclass(frozen=True)
+class InputFile:
+    """One collected file and the PATH argument it was found under (for keyed poses)."""
+
+    path: Path
+    root: Path
+
+
+def collect_inputs(fmt: DatasetFormat, paths: Iterable[str | os.PathLike]) -> list[InputFile]:
     """The format's files under ``paths`` (files as given, directories searched recursively and
-    sorted), in order; an error names a missing path or a directory without any file."""
-    out: list[Path] = []
+    sorted by path), each once, in that order; an error names a missing path or a directory
+    without any file."""
+    out: list[InputFile] = []
+    seen: set[str] = set()
     for raw in paths:
         p = Path(raw)
         if p.is_file():
-            out.append(p)
+            found = [p]
         elif p.is_dir():
             found = sorted(q for q in p.rglob("*") if q.is_file() and q.name.endswith(fmt.suffix) and fmt.accept(q))
             if not found:
                 raise AuditError(f"no {fmt.name} files (*{fmt.suffix}) under {p}")
-            out.extend(found)
         else:
             raise AuditError(f"{p}: no such file or directory")
+        for q in found:
+            key = os.path.normcase(os.path.abspath(q))
+            if key not in seen:  # a file under two PATH arguments is one frame
+                seen.add(key)
+                out.append(InputFile(q, p))
     if not out:
         raise AuditError("no input paths given")
     return out
 
 
-def read_frames(fmt: DatasetFormat, files: Sequence[Path]) -> Iterator[AuditFrame]:
-    """Read the files one at a time; an unreadable one raises :class:`AuditError` naming it."""
-    for path in files:
-        try:
-            yield fmt.read(path)
-        except (FormatError, OSError, ValueError) as exc:
-            msg = str(exc)
-            raise AuditError(msg if str(path) in msg else f"{path}: {msg}") from None
+def group_sequences(fmt: DatasetFormat, files: Sequence[Path]) -> list[tuple[str, list[Path]]]:
+    """``(sequence directory, files)`` per sequence (module docstring), in the order of each
+    sequence's first file; numbered files sorted by frame number, others kept in the given order."""
+    groups: dict[str, tuple[str, list[Path]]] = {}
+    for f in files:
+        seq = fmt.sequence(f)
+        key = os.path.normcase(os.path.abspath(seq))
+        groups.setdefault(key, (str(seq), []))[1].append(f)
+    out = []
+    for name, fs in groups.values():
+        numbers = [fmt.frame_number(f) for f in fs]
+        if fmt.numbered and None not in numbers:
+            fs = [f for _, f in sorted(zip(numbers, fs), key=lambda nf: nf[0])]  # stable: ties keep path order
+        out.append((name, fs))
+    return out
+
+
+def read_frame(fmt: DatasetFormat, path: Path) -> AuditFrame:
+    """Read one file; an unreadable one raises :class:`AuditError` naming it once (a reader's
+    message that names it, or another file of its scan, is not prefixed)."""
+    try:
+        return fmt.read(path)
+    except (FormatError, OSError, ValueError) as exc:
+        msg = str(exc)
+        named = str(path) in msg or str(path.with_name(fmt.stem(path))) in msg
+        raise AuditError(msg if named else f"{path}: {msg}") from None
 
 
 # -- poses -----------------------------------------------------------------------------------------
@@ -214,8 +302,41 @@ def _as_poses(values, where: str) -> np.ndarray:
     return a
 
 
-def load_poses(path: str | os.PathLike) -> np.ndarray:
-    """(N, 4, 4) poses from a ``.npy``, ``.json`` or text file (module docstring)."""
+@dataclass(frozen=True)
+class KeyedPoses:
+    """The keyed ``--poses`` form: ``frames[i]`` (a sample token or a path) has ``poses[i]``
+    (4x4, grid frame to world), listed in time order."""
+
+    frames: tuple[str, ...]
+    poses: np.ndarray  # (N, 4, 4) float64
+
+
+def _keyed_poses(entries: list, where: str) -> KeyedPoses:
+    """:class:`KeyedPoses` from a JSON list of ``{"frame": str, "pose": 4x4 | 3x4 | 16 | 12 numbers}``."""
+    frames, flat, seen = [], [], set()
+    for n, e in enumerate(entries):
+        if not isinstance(e, dict) or not {"frame", "pose"} <= e.keys():
+            raise AuditError(f"{where}: entry {n} must be {{\"frame\": ..., \"pose\": ...}}, got {str(e)[:60]}")
+        if not isinstance(e["frame"], str) or not e["frame"]:
+            raise AuditError(f"{where}: entry {n}: \"frame\" must be a sample token or a path (a string), "
+                             f"got {e['frame']!r}")
+        try:
+            values = np.asarray(e["pose"], dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            values = np.zeros(0)
+        if values.size not in (12, 16):
+            raise AuditError(f"{where}: entry {n} ({e['frame']}): a pose is a 4x4 or 3x4 matrix or 16 or 12 numbers")
+        if e["frame"] in seen:
+            raise AuditError(f"{where}: frame {e['frame']!r} is listed more than once")
+        seen.add(e["frame"])
+        frames.append(e["frame"])
+        flat.append(values if values.size == 16 else np.concatenate([values, [0.0, 0.0, 0.0, 1.0]]))
+    return KeyedPoses(tuple(frames), _as_poses(flat, where))
+
+
+def load_poses(path: str | os.PathLike) -> np.ndarray | KeyedPoses:
+    """(N, 4, 4) poses, one per listed frame, from a ``.npy``, ``.json`` or text file, or
+    :class:`KeyedPoses` from a JSON list of ``{"frame", "pose"}`` objects (module docstring)."""
     p = Path(path)
     try:
         if p.suffix == ".npy":
@@ -232,6 +353,8 @@ def load_poses(path: str | os.PathLike) -> np.ndarray:
             if "poses" not in data:
                 raise AuditError(f"{p}: a JSON object must hold the poses under \"poses\"")
             data = data["poses"]
+        if isinstance(data, list) and data and isinstance(data[0], dict):
+            return _keyed_poses(data, str(p))
         return _as_poses(data, str(p))
     rows = []
     for n, line in enumerate(text.splitlines(), 1):
@@ -264,14 +387,118 @@ def load_kitti_calib(path: str | os.PathLike) -> np.ndarray:
     raise AuditError(f"{p}: no 'Tr:' line (velodyne to camera 0)")
 
 
+# -- sequences and their poses --------------------------------------------------------------------
+@dataclass(frozen=True)
+class AuditSequence:
+    """The frames of one sequence: those with a pose first, in time order, then those without
+    (left out of s_tc). ``poses`` is None when the audit has no poses at all."""
+
+    name: str
+    files: tuple[Path, ...]
+    poses: tuple[np.ndarray | None, ...] | None = None
+
+
+_FIVE = "SemanticKITTI voxel files are every 5th scan (000000, 000005, ...), KITTI poses.txt has one pose per scan"
+
+
+def _by_frame_number(fmt: DatasetFormat, files: list[Path], poses: np.ndarray, where: str) -> list[np.ndarray]:
+    """Pose ``int(stem)`` of a per-scan pose list for each numbered file."""
+    out = []
+    for f in files:
+        k = fmt.frame_number(f)
+        if k is None:
+            raise AuditError(f"{where}: {len(poses)} poses for fewer {fmt.name} frames, and {f.name} has no frame "
+                             f"number to pick its pose by")
+        if k >= len(poses):
+            raise AuditError(f"{where}: {len(poses)} poses, none for frame {k} ({f}); {_FIVE}: give that "
+                             f"sequence's full poses.txt")
+        out.append(poses[k])
+    return out
+
+
+def _ordered(fmt: DatasetFormat, groups: list[tuple[str, list[Path]]], poses: np.ndarray,
+             where: str) -> list[AuditSequence]:
+    """Poses given one per listed frame (or, for numbered files of one sequence, one per scan)."""
+    n = sum(len(fs) for _, fs in groups)
+    if not fmt.numbered and any(len(fs) > 1 for _, fs in groups):
+        name, fs = next(g for g in groups if len(g[1]) > 1)
+        raise AuditError(f"{where}: {fmt.name} paths carry no time order ({len(fs)} frames in {name}): give --poses "
+                         f"as a .json list of {{\"frame\": <sample token>, \"pose\": <4x4>}} in time order")
+    if len(poses) == n:
+        it = iter(poses)
+        return [AuditSequence(name, tuple(fs), tuple(next(it) for _ in fs)) for name, fs in groups]
+    if fmt.numbered and len(poses) > n and len(groups) == 1:
+        name, fs = groups[0]
+        return [AuditSequence(name, tuple(fs), tuple(_by_frame_number(fmt, fs, poses, where)))]
+    hint = "one pose per frame, in the order the files are listed"
+    if fmt.numbered:
+        hint += (" (or, for one sequence, one pose per scan picked by the file's frame number: "
+                 f"{_FIVE}; with several sequences use the keyed .json form)")
+    raise AuditError(f"{where}: {len(poses)} poses for {n} {fmt.name} frames: give {hint}")
+
+
+def _keyed(fmt: DatasetFormat, groups: list[tuple[str, list[Path]]], inputs: Sequence[InputFile],
+           keyed: KeyedPoses, where: str) -> tuple[list[AuditSequence], int]:
+    """Frames ordered by the keyed poses; returns the sequences and how many entries matched no file."""
+    roots = {os.path.normcase(os.path.abspath(i.path)): i.root for i in inputs}
+    names: dict[str, list[Path]] = {}  # every name a frame answers to -> its files
+    for _, fs in groups:
+        for f in fs:
+            root = roots.get(os.path.normcase(os.path.abspath(f)), f)
+            keys = {fmt.frame_token(f), f.as_posix(), str(f)}
+            if root != f:
+                keys.add(f.relative_to(root).as_posix())
+            for k in keys:
+                names.setdefault(k, []).append(f)
+    posed: dict[Path, np.ndarray] = {}
+    order: dict[Path, int] = {}
+    unmatched = 0
+    for i, (key, pose) in enumerate(zip(keyed.frames, keyed.poses)):
+        hits = list(dict.fromkeys(names.get(key, [])))  # one file may answer to a key twice
+        if not hits:
+            unmatched += 1
+            continue
+        if len(hits) > 1:
+            raise AuditError(f"{where}: frame {key!r} names {len(hits)} files ({hits[0]}, {hits[1]}, ...): "
+                             f"give its path relative to PATH instead")
+        if hits[0] in posed:
+            raise AuditError(f"{where}: {hits[0]} has two poses (frames {keyed.frames[order[hits[0]]]!r} and {key!r})")
+        posed[hits[0]], order[hits[0]] = pose, i
+    if not posed:
+        example = next(iter(groups))[1][0]
+        raise AuditError(f"{where}: none of its {len(keyed.frames)} frames names an audited {fmt.name} file; "
+                         f"\"frame\" is the sample token ({fmt.frame_token(example)!r}) or the path relative to PATH")
+    out = []
+    for name, fs in groups:
+        timed = sorted((f for f in fs if f in posed), key=order.__getitem__)
+        rest = [f for f in fs if f not in posed]
+        out.append(AuditSequence(name, tuple(timed + rest), tuple([posed[f] for f in timed] + [None] * len(rest))))
+    return out, unmatched
+
+
+def plan_sequences(fmt: DatasetFormat, inputs: Sequence[InputFile], poses: np.ndarray | KeyedPoses | None = None,
+                   where: str = "--poses") -> tuple[list[AuditSequence], int]:
+    """The audit's sequences, each frame with its pose (module docstring); returns them and the
+    number of keyed pose entries that name no audited file."""
+    groups = group_sequences(fmt, [i.path for i in inputs])
+    if poses is None:
+        return [AuditSequence(name, tuple(fs)) for name, fs in groups], 0
+    if isinstance(poses, KeyedPoses):
+        return _keyed(fmt, groups, inputs, poses, where)
+    return _ordered(fmt, groups, poses, where), 0
+
+
 # -- the audit ---------------------------------------------------------------------------------------
 @dataclass
 class AuditResult:
     """Scores of one audited set of frames; counts indexed by internal id."""
 
     fmt: DatasetFormat
-    frames: list[dict] = field(default_factory=list)  # path, s_sc, occupied, isolated
-    pairs: list[dict] = field(default_factory=list)  # t, s_tc, intersection, union
+    frames: list[dict] = field(default_factory=list)  # path, sequence, s_sc, occupied, isolated, pose
+    pairs: list[dict] = field(default_factory=list)  # t, t1 (frame indices), sequence, s_tc, intersection, union
+    sequences: int = 0
+    without_pose: int = 0  # frames left out of s_tc for want of a pose (keyed poses)
+    poses_unmatched: int = 0  # keyed pose entries naming no audited file
     continuity: ContinuityCounts | None = None
     temporal: TemporalCounts | None = None  # None without poses
 
@@ -307,6 +534,10 @@ class AuditResult:
             "format": self.fmt.name,
             "dataset": self.fmt.dataset,
             "frames": len(self.frames),
+            "sequences": self.sequences,
+            "pairs": len(self.pairs),
+            "frames_without_pose": None if t is None else self.without_pose,
+            "poses_unmatched": None if t is None else self.poses_unmatched,
             "s_sc": _nan_to_none(self.s_sc),
             "occupied": int(c.occupied[1:].sum()),
             "isolated": int(c.isolated[1:].sum()),
@@ -325,35 +556,46 @@ def _nan_to_none(v: float) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
-def audit(fmt: DatasetFormat, files: Sequence[Path], poses: np.ndarray | None = None) -> AuditResult:
-    """s_sc per frame and over the set; with ``poses`` (one per file), s_tc per consecutive pair
-    and over the set. Frames are read and scored one at a time (two in memory)."""
+def audit(fmt: DatasetFormat, sequences: Sequence[AuditSequence]) -> AuditResult:
+    """s_sc per frame and over all frames; where the sequences carry poses, s_tc per pair of
+    consecutive frames with a pose **within** one sequence, and over all pairs (counts summed over
+    the sequences). Frames are read and scored one at a time (two in memory)."""
     from stages.metrics import (empty_temporal_counts, sequence_continuity, spatial_continuity_counts,
                                 static_table, temporal_consistency_counts)
 
-    if poses is not None and len(poses) != len(files):
-        raise AuditError(f"{len(poses)} poses for {len(files)} frames: give one pose per frame, in order")
     static = static_table(fmt.dynamic)
-    result = AuditResult(fmt)
+    has_poses = any(s.poses is not None for s in sequences)
+    result = AuditResult(fmt, sequences=len(sequences))
     counts, pair_counts = [], []
-    prev: AuditFrame | None = None
-    for t, frame in enumerate(read_frames(fmt, files)):
-        c = spatial_continuity_counts(frame.semantic)
-        counts.append(c)
-        result.frames.append({"path": frame.path, "s_sc": _nan_to_none(c.score),
-                              "occupied": int(c.occupied[1:].sum()), "isolated": int(c.isolated[1:].sum())})
-        if poses is not None and prev is not None:
-            use_mask = prev.mask is not None and frame.mask is not None
-            tc = temporal_consistency_counts(
-                prev.semantic, frame.semantic, poses[t - 1], poses[t], prev.voxel_size, prev.origin,
-                mask_t=prev.mask if use_mask else None, mask_t1=frame.mask if use_mask else None,
-                static=static, voxel_size_t1=frame.voxel_size, origin_t1=frame.origin)
-            pair_counts.append(tc)
-            result.pairs.append({"t": t - 1, "s_tc": _nan_to_none(tc.score),
-                                 "intersection": tc.total_intersection, "union": tc.total_union})
-        prev = frame
+    for seq in sequences:
+        poses = seq.poses if seq.poses is not None else (None,) * len(seq.files)
+        if len(poses) != len(seq.files):
+            raise AuditError(f"{seq.name}: {len(poses)} poses for {len(seq.files)} frames")
+        prev: tuple[int, AuditFrame, np.ndarray] | None = None  # the last frame with a pose
+        for path, pose in zip(seq.files, poses):
+            frame = read_frame(fmt, path)
+            t = len(result.frames)
+            c = spatial_continuity_counts(frame.semantic)
+            counts.append(c)
+            result.frames.append({"path": frame.path, "sequence": seq.name, "s_sc": _nan_to_none(c.score),
+                                  "occupied": int(c.occupied[1:].sum()), "isolated": int(c.isolated[1:].sum()),
+                                  "pose": pose is not None})
+            if pose is None:
+                result.without_pose += has_poses
+                continue
+            if prev is not None:
+                t0, f0, p0 = prev
+                use_mask = f0.mask is not None and frame.mask is not None
+                tc = temporal_consistency_counts(
+                    f0.semantic, frame.semantic, p0, pose, f0.voxel_size, f0.origin,
+                    mask_t=f0.mask if use_mask else None, mask_t1=frame.mask if use_mask else None,
+                    static=static, voxel_size_t1=frame.voxel_size, origin_t1=frame.origin)
+                pair_counts.append(tc)
+                result.pairs.append({"t": t0, "t1": t, "sequence": seq.name, "s_tc": _nan_to_none(tc.score),
+                                     "intersection": tc.total_intersection, "union": tc.total_union})
+            prev = (t, frame, pose)
     result.continuity = sequence_continuity(counts)
-    if poses is not None:
+    if has_poses:
         result.temporal = sum(pair_counts, empty_temporal_counts())
     return result
 
@@ -363,19 +605,27 @@ def _fmt(v: float | None, digits: int = 4) -> str:
 
 
 def format_table(result: AuditResult, per_frame: bool = False) -> str:
-    """The paper's Table 4 columns (dataset, frames, s_sc, s_tc) plus the voxel counts."""
+    """The paper's Table 4 columns (dataset, frames, s_sc, s_tc) plus the voxel counts, and a line
+    saying what s_tc was computed over."""
     c = result.continuity
     lines = []
     if per_frame:
-        lines.append(f"{'frame':>6}  {'s_sc':>7}  {'occupied':>12}  {'isolated':>10}  {'s_tc (t, t+1)':>13}  path")
+        lines.append(f"{'frame':>6}  {'s_sc':>7}  {'occupied':>12}  {'isolated':>10}  {'s_tc (t, next)':>14}  path")
         tc = {p["t"]: p["s_tc"] for p in result.pairs}
         for t, f in enumerate(result.frames):
             lines.append(f"{t:>6}  {_fmt(f['s_sc']):>7}  {f['occupied']:>12,}  {f['isolated']:>10,}  "
-                         f"{_fmt(tc.get(t)):>13}  {f['path']}")
+                         f"{_fmt(tc.get(t)):>14}  {f['path']}")
         lines.append("")
     lines.append(f"{'dataset':<16} {'frames':>7} {'s_sc':>7} {'s_tc':>7} {'occupied':>14} {'isolated':>12}")
     lines.append(f"{result.fmt.dataset:<16} {len(result.frames):>7} {_fmt(result.s_sc):>7} {_fmt(result.s_tc):>7} "
                  f"{int(c.occupied[1:].sum()):>14,} {int(c.isolated[1:].sum()):>12,}")
+    if result.temporal is not None:
+        note = f"s_tc over {len(result.pairs)} pairs of consecutive frames within {result.sequences} sequence(s)"
+        if result.without_pose:
+            note += f"; {result.without_pose} frame(s) without a pose left out"
+        if result.poses_unmatched:
+            note += f"; {result.poses_unmatched} pose(s) naming no audited file ignored"
+        lines.append(note)
     return "\n".join(lines)
 
 
@@ -389,17 +639,19 @@ def audit_command(
 ) -> tuple[AuditResult, str]:
     """The CLI's work: (result, printed table). Raises :class:`AuditError` on bad input."""
     spec = dataset_format(fmt)
-    files = collect_files(spec, paths)
-    pose_array = load_poses(poses) if poses is not None else None
+    inputs = collect_inputs(spec, paths)
+    pose_spec = load_poses(poses) if poses is not None else None
     if calib is not None:
-        if pose_array is None:
+        if pose_spec is None:
             raise AuditError("--calib converts --poses from camera 0 to the LiDAR: give --poses too")
         tr = load_kitti_calib(calib)
-        pose_array = np.linalg.inv(tr) @ pose_array @ tr
-    if pose_array is not None and len(pose_array) != len(files):
-        raise AuditError(f"{poses}: {len(pose_array)} poses for {len(files)} {spec.name} frames "
-                         f"(one pose per frame, in order)")
-    result = audit(spec, files, pose_array)
+        if isinstance(pose_spec, KeyedPoses):
+            pose_spec = KeyedPoses(pose_spec.frames, np.linalg.inv(tr) @ pose_spec.poses @ tr)
+        else:
+            pose_spec = np.linalg.inv(tr) @ pose_spec @ tr
+    sequences, unmatched = plan_sequences(spec, inputs, pose_spec, str(poses))
+    result = audit(spec, sequences)
+    result.poses_unmatched = unmatched
     if json_out is not None:
         out = Path(json_out)
         try:
@@ -415,10 +667,15 @@ def audit_command(
 def audit_cli(
     fmt: Annotated[str, typer.Argument(metavar="FORMAT", help=f"one of: {', '.join(FORMATS)}")],
     paths: Annotated[list[str], typer.Argument(metavar="PATH...", help="files of the format or directories "
-                                               "(searched recursively, sorted); their order is the frame order")],
-    poses: Annotated[Optional[str], typer.Option("--poses", help="one 4x4 grid-frame-to-world pose per frame: "
-                                                 ".npy (N,4,4)/(N,3,4), .json, or text with 12/16 numbers a line "
-                                                 "(KITTI poses.txt); enables s_tc")] = None,
+                                               "(searched recursively, sorted by path)")],
+    poses: Annotated[Optional[str], typer.Option("--poses", help="grid-frame-to-world 4x4 poses; enables s_tc. "
+                                                 "Keyed: .json list of {\"frame\": sample token or path relative "
+                                                 "to PATH, \"pose\": 4x4 or 16/12 numbers} in time order (needed "
+                                                 "for occ3d scenes of several frames). Or one pose per frame in the "
+                                                 "order the files are listed: .npy (N,4,4)/(N,3,4), .json, or text "
+                                                 "with 12/16 numbers a line; a longer list for one numbered "
+                                                 "sequence is indexed by frame number (KITTI poses.txt: one pose "
+                                                 "per scan, SemanticKITTI voxels every 5th scan)")] = None,
     calib: Annotated[Optional[str], typer.Option("--calib", help="KITTI calib.txt: turn camera-0 --poses into "
                                                  "LiDAR poses with its Tr")] = None,
     json_out: Annotated[Optional[str], typer.Option("--json", help="write the scores (per frame, pair, class) "
@@ -427,7 +684,14 @@ def audit_cli(
 ) -> None:
     """Quality scores of another dataset: spatial continuity s_sc, and temporal consistency s_tc
     with --poses (paper section 4.2, Table 4). Formats: occ3d, semantickitti, surroundocc,
-    carlaocc-npz."""
+    carlaocc-npz.
+
+    s_tc pairs consecutive frames only within one sequence and sums the counts over sequences. A
+    sequence is: occ3d, the scene directory (gts/SCENE/TOKEN/labels.npz); semantickitti, the
+    voxels directory; surroundocc and carlaocc-npz, the file's directory. In a sequence, files
+    named by frame numbers (semantickitti, surroundocc, carlaocc-npz) are in numeric order; occ3d
+    sample tokens carry no time order, so its frames take the order of the keyed --poses list.
+    Frames without a keyed pose are left out of s_tc (the summary line counts them)."""
     try:
         _, table = audit_command(fmt, paths, poses, calib, json_out, per_frame)
     except AuditError as exc:

@@ -20,12 +20,24 @@ from schemas.grid import GridSpec
 
 RES = 0.4
 cli = CliRunner()
+# the embedded default with shorter sequences (3 x 8 frames instead of 3 x 20): every stage and
+# every path of the default, at a fraction of the suite's time (`make test-all` builds the full
+# default at 0.05 m)
+E2E = DatasetConfig.model_validate({"scenes": {"frame_count": 8}})
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
+def config_file(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("e2e_config") / "e2e.json"
+    path.write_text(E2E.model_dump_json())
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory, config_file):
     root = tmp_path_factory.mktemp("e2e") / "data"
-    r = cli.invoke(app, ["run", "--res", str(RES), "--root", str(root), "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", str(root),
+                         "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     return Store(str(root))
 
@@ -43,7 +55,7 @@ def test_occupancy_arrays(built):
     occ = OccupancyStore(built)
     sem_arr = occ.open(seq, grid, "semantic")
     inst_arr = occ.open(seq, grid, "instance")
-    frames = DatasetConfig().scenes.frame_count
+    frames = E2E.scenes.frame_count
     # region and attributes
     assert sem_arr.shape == inst_arr.shape == (frames, *grid.shape)
     assert sem_arr.dtype == np.uint8 and inst_arr.dtype == np.uint32
@@ -91,7 +103,7 @@ def test_catalog_tables_and_metrics(built):
     _, rows = query(built, "SELECT count(*), count(DISTINCT category) FROM assets")
     n_assets, n_categories = rows[0]
     assert n_assets >= 50 and n_categories >= 9
-    scenes = DatasetConfig().scenes
+    scenes = E2E.scenes
     n_seq = sum(len(t.traffic_levels) * t.sequences_per_level for t in scenes.towns)
     _, rows = query(built, "SELECT count(*) FROM frames")
     assert rows[0][0] == scenes.frame_count * n_seq
@@ -165,19 +177,19 @@ def test_town_and_frame_mesh_exports(built, tmp_path):
     assert r.exit_code == 2 and "no frame 999" in r.output
 
 
-def test_rerun_with_nothing_changed_writes_nothing(built):
+def test_rerun_with_nothing_changed_writes_nothing(config_file, built):
     before = _snapshot(built)
-    r = cli.invoke(app, ["run", "--res", str(RES), "--root", built.url, "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", built.url, "--scheduler", "synchronous"])
     assert r.exit_code == 0 and "nothing to do" in r.output
     assert _snapshot(built) == before
-    r = cli.invoke(app, ["status", "--res", str(RES), "--root", built.url])
+    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", built.url])
     assert r.exit_code == 0 and "stale" not in r.output
 
 
-def test_local_cluster_output_is_byte_identical(built, tmp_path):
+def test_local_cluster_output_is_byte_identical(config_file, built, tmp_path):
     """The same graph on a distributed LocalCluster writes the same bytes as the synchronous run."""
     root = tmp_path / "dist"
-    r = cli.invoke(app, ["run", "--res", str(RES), "--root", str(root), "--workers", "2"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", str(root), "--workers", "2"])
     assert r.exit_code == 0, r.output
     a, b = _snapshot(built), _snapshot(Store(str(root)))
     # lineage differs (run ids, times), and so does the report's lineage section
@@ -186,9 +198,14 @@ def test_local_cluster_output_is_byte_identical(built, tmp_path):
     sa, sb = strip(a, built.root), strip(b, str(root))
     assert sa.keys() == sb.keys()
     assert [k for k in sa if sa[k] != sb[k]] == []
+    # the page: everything from the sequences to the lineage section is the same (the size table
+    # above it counts the lineage files, the lineage section has run ids and times)
+    body = lambda snap: (lambda html: html[html.index(b'<h2 id="sequences">'):html.index(b'<h2 id="lineage">')])(
+        next(v[1] for k, v in snap.items() if k.endswith("/metrics/report.html")))
+    assert body(a) == body(b) and b"<img" in body(a)
 
 
-def test_tampered_frame_is_detected_and_rebuilt(built, tmp_path):
+def test_tampered_frame_is_detected_and_rebuilt(config_file, built, tmp_path):
     """Deleting one chunk of one frame makes exactly that frame stale; a run rebuilds it."""
     import shutil
 
@@ -199,16 +216,16 @@ def test_tampered_frame_is_detected_and_rebuilt(built, tmp_path):
     chunk_dir = f"{copy.root}/occupancy.zarr/{seq}/{grid.key}/semantic/c/3"
     victim = sorted(copy.fs.find(chunk_dir))[0]
     copy.fs.rm(victim)
-    r = cli.invoke(app, ["status", "--res", str(RES), "--root", copy.url, "-v"])
+    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", copy.url, "-v"])
     assert "voxelize  stale 1/" in r.output and f"{seq}/{grid.key}/0003: outputs missing or modified" in r.output
-    r = cli.invoke(app, ["run", "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
     # the rebuilt frame is byte-identical, so what metrics read is unchanged: it stays up to date
     assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "metrics: 3 up to date" in r.output
     np.testing.assert_array_equal(OccupancyStore(copy).read_frame(seq, grid, 3)["semantic"],
                                   OccupancyStore(built).read_frame(seq, grid, 3)["semantic"])
 
 
-def test_swap_makes_a_sequence_that_voxelizes(built, tmp_path):
+def test_swap_makes_a_sequence_that_voxelizes(config_file, built, tmp_path):
     """``scenes swap`` on a copy: the edited sequence keeps the trajectories (same instances in
     the same places) with other car models, and the pipeline voxelizes it."""
     import shutil
@@ -219,7 +236,7 @@ def test_swap_makes_a_sequence_that_voxelizes(built, tmp_path):
     r = cli.invoke(app, ["scenes", "swap", "--class", "Car", "--seed", "5", "--sequence", seq, "--root", copy.url])
     assert r.exit_code == 0 and "Car instance(s) swapped" in r.output, r.output
     new = query(copy, f"SELECT sequence_id FROM sequences WHERE parent_sequence_id = '{seq}'")[1][0][0]
-    r = cli.invoke(app, ["run", "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     grid = GridSpec(voxel_size=RES)
     a, b = OccupancyStore(copy).read_frame(seq, grid, 0), OccupancyStore(copy).read_frame(new, grid, 0)
@@ -280,7 +297,7 @@ def test_export_formats_read_back(built, tmp_path, fmt):
     r = cli.invoke(app, ["export", fmt, "--res", str(RES), "--root", built.url, "--out", str(out),
                          "--sequence", seq])
     assert r.exit_code == 0, r.output
-    frames = DatasetConfig().scenes.frame_count
+    frames = E2E.scenes.frame_count
     car = taxonomy.by_name("Car")
     if fmt == "occ3d":
         f = formats.load_occ3d(out / "gts" / seq / "000003" / "labels.npz")
@@ -330,12 +347,12 @@ def test_export_refuses_a_resolution_not_built(built, tmp_path):
     assert r.exit_code == 2 and "0.8" in r.output
 
 
-def test_second_resolution_pooling_report_and_multi_resolution_figure(built, tmp_path):
+def test_second_resolution_pooling_report_and_multi_resolution_figure(config_file, built, tmp_path):
     import shutil
 
     root = tmp_path / "data"
     shutil.copytree(built.root, root)
-    r = cli.invoke(app, ["run", "--stages", "voxelize", "--res", "0.8", "--root", str(root), "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--stages", "voxelize", "--res", "0.8", "--root", str(root), "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / "pool.json"
@@ -343,7 +360,7 @@ def test_second_resolution_pooling_report_and_multi_resolution_figure(built, tmp
                          "--sequence", seq, "--json", str(out)])
     assert r.exit_code == 0, r.output
     rows = json.loads(out.read_text())
-    assert len(rows) == DatasetConfig().scenes.frame_count
+    assert len(rows) == E2E.scenes.frame_count
     # closed-box overlap nests: a triangle meets a 0.8 m box iff it meets one of its eight 0.4 m
     # boxes, so pooled occupancy equals the direct one (fills, decided at voxel centres, could
     # differ); labels differ where class priority and elevation order disagree (measured ~4 %)
@@ -359,9 +376,9 @@ def test_sensor_maps_lidar_and_rectification_records(built):
     from catalog.sensors import SensorStore, LidarStore
 
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
-    frames = DatasetConfig().scenes.frame_count
+    frames = E2E.scenes.frame_count
     sensors = SensorStore(built)
-    rig = DatasetConfig().scenes.rig
+    rig = E2E.scenes.rig
     assert sensors.cameras(seq) == sorted(c.name for c in rig.cameras)
     for cam in rig.cameras:
         assert sensors.names(seq, cam.name) == sorted(["depth", "semantic", "instance", "normal", "depth_raw",
@@ -422,7 +439,7 @@ def test_recorded_path_rectifies_stored_raw_maps_like_the_raycast_path(built, tm
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)
     seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
-    cfg = sensors_config(DatasetConfig()).model_copy(update={"source": "recorded"})
+    cfg = sensors_config(E2E).model_copy(update={"source": "recorded"})
     sensors = SensorStore(copy)
     raw_before = {c: sensors.fingerprints(seq, c, 4, ("depth_raw", "semantic_raw", "instance_raw"))
                   for c in sensors.cameras(seq)}

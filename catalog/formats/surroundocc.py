@@ -60,6 +60,8 @@ def _check_rows(rows: np.ndarray, shape: tuple[int, int, int], where: str) -> No
             )
     if lo[3] < 0:
         raise FormatError(f"{where}: negative label {int(lo[3])}")
+    if int(hi[3]) > np.iinfo(SURROUNDOCC_DTYPE).max:  # unsigned rows beyond int64 would wrap negative
+        raise FormatError(f"{where}: label {int(hi[3])} does not fit the format's int64")
 
 
 def dense_to_surroundocc(semantic: np.ndarray, free: int) -> np.ndarray:

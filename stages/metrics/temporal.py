@@ -7,9 +7,11 @@ the frame the grid is expressed in: the LiDAR frame for CarlaOcc) and the two **
 
 Convention (exact):
 
-1. **Pose order.** ``T = inv(P_{t+1}) @ P_t`` maps frame-t sensor coordinates into frame t+1
-   (the paper writes ``T_t T_{t+1}^{-1}``, which is the same map when its ``T`` are
-   world-to-sensor).
+1. **Pose order.** ``T = inv(P_{t+1}) @ P_t`` (``P`` sensor-to-world, column vectors,
+   ``p = T x``) maps frame-t sensor coordinates into frame t+1. The paper writes
+   ``T_t T_{t+1}^{-1}``: the same map under a row-vector convention (``p = x T_t T_{t+1}^{-1}``,
+   applied left to right) with sensor-to-world ``T``. (With world-to-sensor ``T`` and column
+   vectors it would be ``inv(P_t) @ P_{t+1}``, the inverse map.)
 2. **Warp.** Every voxel ``v = (i, j, k)`` of grid t has the centre
    ``x(v) = origin_t + (v + 0.5) * voxel_t``; its image is ``p = T x(v)``.
 3. **Nearest sampling** ``Pi``: the frame-(t+1) voxel containing ``p``,

@@ -219,6 +219,10 @@ def test_surroundocc_validation(tmp_path):
     np.save(tmp_path / "d.npy", np.zeros((3, 4), np.float32))
     with pytest.raises(FormatError, match="integers"):
         load_surroundocc(tmp_path / "d.npy")
+    # an unsigned label beyond int64 is refused, not wrapped to a negative one
+    np.save(tmp_path / "e.npy", np.array([[0, 0, 0, 2**64 - 4]], np.uint64))
+    with pytest.raises(FormatError, match=r"label 18446744073709551612 does not fit"):
+        load_surroundocc(tmp_path / "e.npy")
     with pytest.raises(ValueError, match="free label"):
         surroundocc_to_dense(np.array([[0, 0, 0, 0]]), free=0)
     with pytest.raises(ValueError, match="more than once"):

@@ -11,7 +11,8 @@ from typer.testing import CliRunner
 
 from catalog.formats import (Occ3DFrame, SemanticKittiVoxels, dense_to_surroundocc, load_occ3d, save_carlaocc_npz,
                              save_occ3d, save_semantickitti, save_surroundocc, to_raw)
-from pipeline.audit import AuditError, audit_command, load_poses
+from pipeline.audit import (FORMATS, AuditError, KeyedPoses, audit, audit_command, collect_inputs, load_poses,
+                            plan_sequences)
 from pipeline.cli import app
 from stages.metrics import isolated_mask_reference, spatial_continuity_counts
 
@@ -119,18 +120,23 @@ def test_carlaocc_npz_sequence_s_sc_and_s_tc(tmp_path):
     assert json.loads(out.read_text())["s_tc"] < 0.9
 
 
+def _keyed_json(path: Path, frames, poses) -> Path:
+    path.write_text(json.dumps([{"frame": f, "pose": p.tolist()} for f, p in zip(frames, poses)]))
+    return path
+
+
 def test_occ3d_sequence_uses_the_camera_mask(tmp_path):
-    shape = (24, 12, 8)
+    shape = (200, 200, 16)
     world = _world((shape[0] + 3, *shape[1:]), (11, 15, 16))
     frames = [np.where(world[s:s + shape[0]] == 0, 17, world[s:s + shape[0]]).astype(np.uint8) for s in (0, 3)]
     frames[1][5, 5, 1] = 13  # frame t+1 calls one ground voxel sidewalk ...
     masks = [np.ones(shape, np.uint8), np.ones(shape, np.uint8)]
     for t in range(2):
         save_occ3d(tmp_path / f"scene/{t}/labels.npz", Occ3DFrame(frames[t], masks[t], masks[t]))
-    poses = tmp_path / "poses.npy"
-    np.save(poses, _poses((0, 3), 0.4))
+    poses = _keyed_json(tmp_path / "poses.json", ["0", "1"], _poses((0, 3), 0.4))
     out = tmp_path / "r.json"
-    assert _run("occ3d", tmp_path / "scene", "--poses", poses, "--json", out).exit_code == 0
+    r = _run("occ3d", tmp_path / "scene", "--poses", poses, "--json", out)
+    assert r.exit_code == 0, r.output
     report = json.loads(out.read_text())
     ground = int((frames[0][3:, :, 1] == 11).sum())  # ground voxels of frame t that stay in view
     # driveable_surface: I = ground - 1, U = ground; sidewalk: I = 0, U = 1; everything else agrees
@@ -230,10 +236,146 @@ def test_clear_errors(tmp_path):
         r = _run(*args)
         assert r.exit_code == 2, (args, r.output)
         assert message in r.output and r.output.startswith("error: "), (args, r.output)
-    with pytest.raises(AuditError, match="2 poses for 3 frames"):
-        from pipeline.audit import FORMATS, audit
-
-        audit(FORMATS["carlaocc-npz"], [tmp_path / "d/a.npz"] * 3, np.stack([np.eye(4)] * 2))
+    npz = FORMATS["carlaocc-npz"]
+    inputs = collect_inputs(npz, [tmp_path / "d", tmp_path / "d/a.npz"])  # a file found twice is one frame
+    assert [i.path.name for i in inputs] == ["a.npz", "b.npz"]
+    with pytest.raises(AuditError, match="3 poses for fewer carlaocc-npz frames, and a.npz has no frame number"):
+        plan_sequences(npz, inputs, np.stack([np.eye(4)] * 3))
+    # a file of a SemanticKITTI scan named once, not twice ("x.label: x.invalid: ...")
+    save_semantickitti(tmp_path / "sk", "000000", SemanticKittiVoxels(*(np.zeros((256, 256, 32), bool),) * 3,
+                                                                       labels=np.zeros((256, 256, 32), np.uint16)))
+    (tmp_path / "sk/000000.invalid").write_bytes(b"\0" * 100)
+    r = _run("semantickitti", tmp_path / "sk")
+    assert r.exit_code == 2 and r.output.startswith(f"error: {tmp_path / 'sk/000000.invalid'}: truncated"), r.output
     # a single good frame with poses: no pair, no s_tc value
     result, table = audit_command("carlaocc-npz", [str(tmp_path / "d/a.npz")], str(tmp_path / "one.txt"))
     assert result.s_tc != result.s_tc and "CarlaOcc" in table
+
+
+# -- sequences: pairs stay inside one sequence, in time order ------------------------------------
+def _occ3d_frame(world, s, X=200):
+    return np.where(world[s:s + X] == 0, 17, world[s:s + X]).astype(np.uint8)
+
+
+def test_occ3d_scenes_and_keyed_poses_give_the_time_order(tmp_path):
+    """Two scenes of one static world, the sensor moving by whole voxels; sample tokens whose path
+    order is not the time order. Only the keyed poses' order, within each scene, gives s_tc = 1."""
+    ones = np.ones((200, 200, 16), np.uint8)
+    # scene-a: time order 0 -> 1 -> 2 is tokens f3 -> 0b -> 9c (path order 0b, 9c, f3)
+    scene_a = {"f3": 0, "0b": 2, "9c": 5}
+    # scene-b is another place (other classes) in its own world frame: paired with scene-a's last
+    # frame it would disagree everywhere
+    scene_b = {"77": 6, "1e": 4, "c5": 1}
+    for scene, frames, labels in (("scene-a", scene_a, (11, 15, 16)), ("scene-b", scene_b, (13, 1, 14))):
+        world = _world((206, 200, 16), labels, seed=3)
+        for token, s in frames.items():
+            save_occ3d(tmp_path / "gts" / scene / token / "labels.npz", Occ3DFrame(_occ3d_frame(world, s), ones, ones))
+    vs = 0.4
+    # scene-b's c5 has no pose: left out of s_tc; scene-a's last frame is named by its relative path
+    keys = ["f3", "0b", "scene-a/9c/labels.npz", "77", "1e", "not-audited"]
+    shifts = [0, 2, 5, 6, 4, 0]
+    poses = _keyed_json(tmp_path / "poses.json", keys, _poses(shifts, vs))
+    out = tmp_path / "r.json"
+    r = _run("occ3d", tmp_path / "gts", "--poses", poses, "--json", out, "--per-frame")
+    assert r.exit_code == 0, r.output
+    report = json.loads(out.read_text())
+    assert report["s_tc"] == 1.0 and report["union"] > 0
+    assert (report["frames"], report["sequences"], report["pairs"]) == (6, 2, 3)
+    assert (report["frames_without_pose"], report["poses_unmatched"]) == (1, 1)
+    paths = [Path(f["path"]).parent.name for f in report["per_frame"]]
+    assert paths == ["f3", "0b", "9c", "77", "1e", "c5"]  # time order, the frame without a pose last
+    assert [(p["t"], p["t1"]) for p in report["per_pair"]] == [(0, 1), (1, 2), (3, 4)]
+    assert "1 frame(s) without a pose left out" in r.output
+    # the time-ordered poses given to the frames in path order (as the per-listed-frame form would)
+    wrong = _keyed_json(tmp_path / "wrong.json", ["0b", "9c", "f3", "1e", "77"], _poses(shifts[:5], vs))
+    assert _run("occ3d", tmp_path / "gts", "--poses", wrong, "--json", out).exit_code == 0
+    assert json.loads(out.read_text())["s_tc"] < 1.0
+    # one pose per listed frame cannot order occ3d frames
+    np.save(tmp_path / "p.npy", _poses([0] * 6, vs))
+    r = _run("occ3d", tmp_path / "gts", "--poses", tmp_path / "p.npy")
+    assert r.exit_code == 2 and "occ3d paths carry no time order" in r.output and "\"frame\"" in r.output
+    # a keyed file naming nothing audited
+    r = _run("occ3d", tmp_path / "gts", "--poses", _keyed_json(tmp_path / "none.json", ["x"], _poses([0], vs)))
+    assert r.exit_code == 2 and "none of its 1 frames names an audited occ3d file" in r.output
+
+
+def test_numbered_files_sort_numerically_within_each_directory(tmp_path):
+    """carlaocc-npz files 0, 2, 10 (path order 0, 10, 2) in two directories: one pose per listed
+    frame, listed directory by directory in frame-number order; no pair crosses directories."""
+    X, vs, origin = 20, 0.4, (-4.0, -2.0, -1.2)
+    world = _world((X + 9, 10, 8), (1, 3, 9), seed=5)
+    shifts = {"a": {0: 0, 2: 2, 10: 3}, "b": {1: 9, 3: 7}}
+    listed = []
+    for d, frames in shifts.items():
+        for n, s in frames.items():
+            sem = world[s:s + X].astype(np.uint8)
+            save_carlaocc_npz(tmp_path / d / f"{n}.npz", sem, np.zeros_like(sem, np.uint32), vs, origin)
+            listed.append(s)
+    out = tmp_path / "r.json"
+    poses = _write_kitti_poses(tmp_path / "poses.txt", _poses(listed, vs))
+    r = _run("carlaocc-npz", tmp_path / "a", tmp_path / "b", "--poses", poses, "--json", out)
+    assert r.exit_code == 0, r.output
+    report = json.loads(out.read_text())
+    assert [Path(f["path"]).name for f in report["per_frame"]] == ["0.npz", "2.npz", "10.npz", "1.npz", "3.npz"]
+    assert report["s_tc"] == 1.0 and [(p["t"], p["t1"]) for p in report["per_pair"]] == [(0, 1), (1, 2), (3, 4)]
+
+
+def test_semantickitti_pose_per_scan_is_picked_by_frame_number(tmp_path):
+    """KITTI poses.txt has a pose per LiDAR scan; SemanticKITTI voxels exist for every 5th scan."""
+    shape = (256, 256, 32)
+    world = _world((shape[0] + 10, *shape[1:]), (9, 13, 15), seed=7)
+    voxels = tmp_path / "sequences" / "08" / "voxels"
+    for scan in (0, 5, 10):  # the sensor moves one voxel per scan
+        learning = world[scan:scan + shape[0]].astype(np.uint8)
+        save_semantickitti(voxels, f"{scan:06d}", SemanticKittiVoxels(
+            occupied=learning > 0, invalid=np.zeros(shape, bool), occluded=np.zeros(shape, bool),
+            labels=to_raw(learning)))
+    tr = np.array([[0, -1, 0, 0.1], [0, 0, -1, -0.05], [1, 0, 0, -0.3], [0, 0, 0, 1]], float)
+    velo = _poses(range(13), 0.2)  # scans 0..12
+    poses = _write_kitti_poses(tmp_path / "poses.txt", tr @ velo @ np.linalg.inv(tr))
+    calib = tmp_path / "calib.txt"
+    calib.write_text("Tr: " + " ".join(f"{v:.12g}" for v in tr[:3].ravel()) + "\n")
+    out = tmp_path / "r.json"
+    r = _run("semantickitti", voxels, "--poses", poses, "--calib", calib, "--json", out)
+    assert r.exit_code == 0, r.output
+    report = json.loads(out.read_text())
+    assert report["frames"] == 3 and report["pairs"] == 2 and report["s_tc"] == 1.0
+    # a poses.txt too short for the last voxel scan
+    short = _write_kitti_poses(tmp_path / "short.txt", velo[:8])
+    r = _run("semantickitti", voxels, "--poses", short, "--calib", calib)
+    assert r.exit_code == 2 and "none for frame 10" in r.output and "every 5th scan" in r.output
+    # two sequences: a per-scan list is ambiguous
+    other = tmp_path / "sequences" / "09" / "voxels"
+    for f in voxels.iterdir():
+        (other / f.name).parent.mkdir(parents=True, exist_ok=True)
+        (other / f.name).write_bytes(f.read_bytes())
+    r = _run("semantickitti", voxels, other, "--poses", poses)
+    assert r.exit_code == 2 and "13 poses for 6 semantickitti frames" in r.output and "keyed" in r.output
+
+
+def test_occ3d_other_grids_and_ids_are_refused(tmp_path):
+    small = np.full((10, 10, 16), 17, np.uint8)
+    save_occ3d(tmp_path / "s/t/labels.npz", Occ3DFrame(small, small * 0, small * 0))
+    r = _run("occ3d", tmp_path / "s")
+    assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith(f"error: {tmp_path / 's/t/labels.npz'}: Occ3D-nuScenes grids are (200, 200, 16)")
+    sem = np.full((200, 200, 16), 17, np.uint8)
+    sem[1, 2, 3] = 18
+    save_occ3d(tmp_path / "i/t/labels.npz", Occ3DFrame(sem, sem * 0, sem * 0))
+    r = _run("occ3d", tmp_path / "i")
+    assert r.exit_code == 2 and "labels.npz: Occ3D-nuScenes ids are 0..17 (17 = free), found 18" in r.output
+
+
+def test_keyed_poses_file(tmp_path):
+    poses = _poses((0, 1), 0.4)
+    p = _keyed_json(tmp_path / "k.json", ["a", "b/c.npz"], poses)
+    keyed = load_poses(p)
+    assert isinstance(keyed, KeyedPoses) and keyed.frames == ("a", "b/c.npz") and np.allclose(keyed.poses, poses)
+    (tmp_path / "flat.json").write_text(json.dumps({"poses": [{"frame": "a", "pose": poses[1][:3].ravel().tolist()}]}))
+    assert np.allclose(load_poses(tmp_path / "flat.json").poses, poses[1:])
+    for bad, message in (([{"frame": "a"}], "entry 0 must be"), ([{"frame": 3, "pose": poses[0].tolist()}], "a string"),
+                         ([{"frame": "a", "pose": [1, 2]}], "entry 0 (a): a pose is"),
+                         ([{"frame": "a", "pose": poses[0].tolist()}] * 2, "'a' is listed more than once")):
+        (tmp_path / "bad.json").write_text(json.dumps(bad))
+        with pytest.raises(AuditError, match=message.replace("(", r"\(").replace(")", r"\)")):
+            load_poses(tmp_path / "bad.json")
