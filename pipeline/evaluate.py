@@ -206,6 +206,17 @@ def _frame_error(key: str, exc: ValueError) -> InputError:
     return InputError(f"{key}: {exc}")
 
 
+def _occupancy_pairs(pred: Path, gt: Path, lm, mask: str, instances: bool, suffixes: tuple[str, ...]):
+    """Paired prediction / ground-truth grids, loaded and checked: yields (prediction file,
+    (pred semantics, pred instances), (gt semantics, gt instances), the --mask array or None)."""
+    for _, pf, gf in pair_files(pred, gt, suffixes):
+        p_sem, p_inst, _ = load_occupancy(pf, lm, instances)
+        g_sem, g_inst, masks = load_occupancy(gf, lm, instances)
+        if p_sem.shape != g_sem.shape:
+            raise InputError(f"{pf}: shape {p_sem.shape} differs from ground truth {gf} {g_sem.shape}")
+        yield pf, (p_sem, p_inst), (g_sem, g_inst), _pick_mask(mask, masks, g_sem.shape, gf)
+
+
 # --------------------------------------------------------------------------- commands
 
 
@@ -228,14 +239,9 @@ def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: Ign
         if mask not in ("none", "camera", "lidar"):
             raise InputError(f"--mask must be none, camera or lidar, got {mask!r}")
         acc = SSCAccumulator(lm, _ids(ignore, "--ignore"))
-        pairs = pair_files(pred, gt, (".npz", ".npy"))
-        for key, pf, gf in pairs:
-            p_sem, _, _ = load_occupancy(pf, lm, False)
-            g_sem, _, masks = load_occupancy(gf, lm, False)
-            if p_sem.shape != g_sem.shape:
-                raise InputError(f"{pf}: shape {p_sem.shape} differs from ground truth {gf} {g_sem.shape}")
+        for pf, (p_sem, _), (g_sem, _), m in _occupancy_pairs(pred, gt, lm, mask, False, (".npz", ".npy")):
             try:
-                acc.update(p_sem, g_sem, _pick_mask(mask, masks, g_sem.shape, gf))
+                acc.update(p_sem, g_sem, m)
             except ValueError as exc:
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()
@@ -277,13 +283,9 @@ def panoptic_cmd(
                                       None if things is None else _ids(things, "--things"))  # fmt: skip
         except ValueError as exc:
             raise InputError(f"--things: {exc}") from None
-        for key, pf, gf in pair_files(pred, gt, (".npz",)):
-            p_sem, p_inst, _ = load_occupancy(pf, lm, True)
-            g_sem, g_inst, masks = load_occupancy(gf, lm, True)
-            if p_sem.shape != g_sem.shape:
-                raise InputError(f"{pf}: shape {p_sem.shape} differs from ground truth {gf} {g_sem.shape}")
+        for pf, (p_sem, p_inst), (g_sem, g_inst), m in _occupancy_pairs(pred, gt, lm, mask, True, (".npz",)):
             try:
-                acc.update(p_sem, p_inst, g_sem, g_inst, _pick_mask(mask, masks, g_sem.shape, gf))
+                acc.update(p_sem, p_inst, g_sem, g_inst, m)
             except ValueError as exc:
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()

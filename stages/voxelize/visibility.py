@@ -140,9 +140,10 @@ def _unswizzle_or(sw, sw64, pages, nx, ny, nz, tx, ty, tz, out):
     Inside a brick the 4 voxels along z of each (x, y) row are 4 consecutive bytes in both
     layouts (brick offset (x & 3) * 16 + (y & 3) * 4 + (z & 3)), so a brick is 16 runs of 4
     bytes. Bricks of unflagged pages, and bricks no ray reached (their 64 bytes, read as 8
-    words, are all zero: most bricks of a LiDAR page), are skipped, and a run of zeros is
-    never written (``out``'s untouched pages stay unmapped). Parallel over x-blocks of 4
-    (disjoint rows)."""
+    words, are all zero: most bricks of a LiDAR page), are skipped; the others are OR-ed
+    without a branch per voxel (a per-voxel test measured 30 % slower on a camera mask, whose
+    reached bricks mix observed and unobserved voxels). Parallel over x-blocks of 4 (disjoint
+    rows)."""
     npy = (ny + _PAGE - 1) // _PAGE
     npz = (nz + _PAGE - 1) // _PAGE
     for i4 in prange((nx + 3) // 4):
@@ -168,9 +169,7 @@ def _unswizzle_or(sw, sw64, pages, nx, ny, nz, tx, ty, tz, out):
                         base = ((i0 + xi) * ny + j0 + yi) * nz + k0
                         s0 = src + xi * 16 + yi * 4
                         for zi in range(nk):
-                            v = sw[s0 + zi]
-                            if v:
-                                out[base + zi] |= v
+                            out[base + zi] |= sw[s0 + zi]
 
 
 # ----------------------------------------------------------------------------------------------
