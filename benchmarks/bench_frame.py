@@ -11,11 +11,9 @@ Usage: ``python -m benchmarks.bench_frame [frames] [out.json]``.
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
-import tempfile
-import time
+
+from benchmarks.common import default_scenes_root, run_case, save_json
 
 CASE = r"""
 import json, resource, sys, time
@@ -46,27 +44,18 @@ def main(argv: list[str] | None = None) -> dict:
     argv = [] if argv is None else argv
     frames = int(argv[0]) if argv else 3
     results = {"frames": frames, "cases": []}
-    with tempfile.TemporaryDirectory() as tmp:
-        root = f"{tmp}/data"
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "pipeline.cli", "run", "--stages", "ingest,scenes", "--root", root,
-                        "--scheduler", "synchronous"], check=True, capture_output=True)
-        print(f"ingest + scenes of the embedded default: {time.perf_counter() - t0:.1f} s")
+    with default_scenes_root() as root:
         print(f"{'res':>5} {'masks':>5} {'s/frame (mean)':>14} {'min':>6} {'max':>6} {'peak RSS':>9}")
         for res in (0.2, 0.1, 0.05):
             for masks in (False, True):
-                out = subprocess.run([sys.executable, "-c", CASE, root, str(res), "1" if masks else "0", str(frames)],
-                                     check=True, capture_output=True, text=True)
-                r = json.loads(out.stdout.strip().splitlines()[-1])
+                r = run_case(CASE, root, res, "1" if masks else "0", frames)
                 s = r["seconds"]
                 row = {"voxel_size": res, "masks": masks, "mean_s": sum(s) / len(s), "min_s": min(s), "max_s": max(s),
                        "peak_rss_gib": r["peak_rss_gib"]}
                 results["cases"].append(row)
                 print(f"{res:>5} {'yes' if masks else 'no':>5} {row['mean_s']:>13.2f}s {min(s):>5.2f}s {max(s):>5.2f}s "
                       f"{row['peak_rss_gib']:>7.2f} GiB")
-    if len(argv) > 1:
-        with open(argv[1], "w") as fh:
-            json.dump(results, fh, indent=2)
+    save_json(argv, 1, results)
     return results
 
 

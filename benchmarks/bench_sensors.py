@@ -19,11 +19,9 @@ Usage: ``python -m benchmarks.bench_sensors [frames] [out.json]``.
 
 from __future__ import annotations
 
-import json
-import subprocess
 import sys
-import tempfile
-import time
+
+from benchmarks.common import default_scenes_root, run_case, save_json
 
 CASE = r"""
 import json, resource, sys, time
@@ -94,15 +92,8 @@ print(json.dumps(out))
 def main(argv: list[str] | None = None) -> dict:
     argv = [] if argv is None else argv
     frames = int(argv[0]) if argv else 3
-    with tempfile.TemporaryDirectory() as tmp:
-        root = f"{tmp}/data"
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "pipeline.cli", "run", "--stages", "ingest,scenes", "--root", root,
-                        "--scheduler", "synchronous"], check=True, capture_output=True)
-        print(f"ingest + scenes of the embedded default: {time.perf_counter() - t0:.1f} s")
-        proc = subprocess.run([sys.executable, "-c", CASE, root, str(frames)], check=True, capture_output=True,
-                              text=True)
-        r = json.loads(proc.stdout.strip().splitlines()[-1])
+    with default_scenes_root() as root:
+        r = run_case(CASE, root, frames)
     n = r["rays"]
     print(f"scene: {r['triangles']:,} triangles; six cameras: {n:,} rays; one thread everywhere")
     print(f"  BVH build (open3d, 1 thread):               {r['bvh_build_s']:.3f} s")
@@ -114,9 +105,7 @@ def main(argv: list[str] | None = None) -> dict:
     ts = r["task_seconds"]
     print(f"sensors task (6 cameras clean+raw, rectification, normals, LiDAR, writes): mean {sum(ts) / len(ts):.2f} s "
           f"per frame (min {min(ts):.2f}, max {max(ts):.2f}) over {len(ts)} frames; peak RSS {r['peak_rss_gib']:.2f} GiB")
-    if len(argv) > 1:
-        with open(argv[1], "w") as fh:
-            json.dump(r, fh, indent=2)
+    save_json(argv, 1, r)
     return r
 
 

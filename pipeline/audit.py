@@ -81,8 +81,8 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import numpy as np
 import typer
 
-from catalog.formats import (FormatError, load_carlaocc_npz, load_occ3d, load_semantickitti, load_surroundocc,
-                             surroundocc_to_dense, to_learning)
+from catalog.formats import (FormatError, atomic_write, load_carlaocc_npz, load_occ3d, load_semantickitti,
+                             load_surroundocc, surroundocc_to_dense, to_learning)
 from catalog.formats.occ3d import OCC3D_FREE, OCC3D_RANGE, OCC3D_SHAPE, OCC3D_VOXEL_SIZE
 from catalog.formats.semantickitti import SEMANTICKITTI_RANGE, SEMANTICKITTI_VOXEL_SIZE
 from catalog.formats.surroundocc import SURROUNDOCC_RANGE, SURROUNDOCC_SHAPE, SURROUNDOCC_VOXEL_SIZE
@@ -560,7 +560,7 @@ def audit(fmt: DatasetFormat, sequences: Sequence[AuditSequence]) -> AuditResult
     """s_sc per frame and over all frames; where the sequences carry poses, s_tc per pair of
     consecutive frames with a pose **within** one sequence, and over all pairs (counts summed over
     the sequences). Frames are read and scored one at a time (two in memory)."""
-    from stages.metrics import (empty_temporal_counts, sequence_continuity, spatial_continuity_counts,
+    from stages.metrics import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
                                 static_table, temporal_consistency_counts)
 
     static = static_table(fmt.dynamic)
@@ -571,7 +571,7 @@ def audit(fmt: DatasetFormat, sequences: Sequence[AuditSequence]) -> AuditResult
         poses = seq.poses if seq.poses is not None else (None,) * len(seq.files)
         if len(poses) != len(seq.files):
             raise AuditError(f"{seq.name}: {len(poses)} poses for {len(seq.files)} frames")
-        prev: tuple[int, AuditFrame, np.ndarray] | None = None  # the last frame with a pose
+        prev: tuple[int, AuditFrame, np.ndarray, tuple] | None = None  # the last frame with a pose
         for path, pose in zip(seq.files, poses):
             frame = read_frame(fmt, path)
             t = len(result.frames)
@@ -583,20 +583,22 @@ def audit(fmt: DatasetFormat, sequences: Sequence[AuditSequence]) -> AuditResult
             if pose is None:
                 result.without_pose += has_poses
                 continue
+            ranges = column_ranges(frame.semantic)  # serves both pairs of the frame
             if prev is not None:
-                t0, f0, p0 = prev
+                t0, f0, p0, ranges0 = prev
                 use_mask = f0.mask is not None and frame.mask is not None
                 tc = temporal_consistency_counts(
                     f0.semantic, frame.semantic, p0, pose, f0.voxel_size, f0.origin,
                     mask_t=f0.mask if use_mask else None, mask_t1=frame.mask if use_mask else None,
-                    static=static, voxel_size_t1=frame.voxel_size, origin_t1=frame.origin)
+                    static=static, voxel_size_t1=frame.voxel_size, origin_t1=frame.origin,
+                    ranges_t=ranges0, ranges_t1=ranges)
                 pair_counts.append(tc)
                 result.pairs.append({"t": t0, "t1": t, "sequence": seq.name, "s_tc": _nan_to_none(tc.score),
                                      "intersection": tc.total_intersection, "union": tc.total_union})
-            prev = (t, frame, pose)
+            prev = (t, frame, pose, ranges)
     result.continuity = sequence_continuity(counts)
     if has_poses:
-        result.temporal = sum(pair_counts, empty_temporal_counts())
+        result.temporal = sequence_temporal(pair_counts)
     return result
 
 
@@ -655,10 +657,7 @@ def audit_command(
     if json_out is not None:
         out = Path(json_out)
         try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            tmp = out.with_name(out.name + ".tmp")
-            tmp.write_text(json.dumps(result.to_json(), indent=1))
-            tmp.replace(out)
+            atomic_write(out, lambda fh: fh.write(json.dumps(result.to_json(), indent=1).encode()))
         except OSError as exc:
             raise AuditError(f"cannot write {out}: {exc.strerror or exc}") from None
     return result, format_table(result, per_frame)

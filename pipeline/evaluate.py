@@ -185,9 +185,10 @@ def _pct(v: float | None) -> str:
 def _write_json(out: Path | None, data: dict[str, Any]) -> None:
     if out is None:
         return
+    from catalog.formats import atomic_write
+
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n")
+        atomic_write(out, lambda fh: fh.write((json.dumps(data, indent=1, allow_nan=False) + "\n").encode()))
     except OSError as exc:
         raise InputError(f"--json {out}: cannot write: {exc.strerror or exc}") from exc
 

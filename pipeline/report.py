@@ -202,10 +202,9 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     from stages.render_occupancy import occupancy_figure
 
     occ = OccupancyStore(store)
-    X = int(grid.shape[0])
-    sem = occ.read_tile(seq, grid, frame, "semantic", 0, X)
     small = int(np.prod(grid.shape)) <= RENDER_INSTANCE_VOXELS and occ.exists(seq, grid, "instance")
-    inst = occ.read_tile(seq, grid, frame, "instance", 0, X) if small else None
+    data = occ.read_frame(seq, grid, frame, ("semantic", "instance") if small else ("semantic",))
+    sem, inst = data["semantic"], data.get("instance")
     image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", height=FRAME_HEIGHT,
                              mode="instance" if small else "semantic")
     return png_bytes(image)

@@ -171,9 +171,10 @@ def _report_partitions(ctx: Context) -> list[Partition]:
         needs |= {("scenes", p.key), *p.needs}
     for p in _metrics_partitions(ctx):
         needs |= {("metrics", p.key), *p.needs}
+    lineage = LineageLog(ctx.store)
     # the ADMesh plot counts the whole library: every ingested item, whichever source
-    needs |= {("ingest", k) for k, r in LineageLog(ctx.store).latest("ingest").items() if r.status == "completed"}
-    if LineageLog(ctx.store).latest("sensors"):
+    needs |= {("ingest", k) for k, r in lineage.latest("ingest").items() if r.status == "completed"}
+    if lineage.latest("sensors"):
         needs |= {("sensors", p.key) for p in _sensors_partitions(ctx)}
     grids = [ctx.config.voxelize.grid(res) for res in ctx.resolutions]
     return [Partition("dataset", {"grids": [g.model_dump(mode="json") for g in grids],

@@ -8,7 +8,7 @@ from stages.metrics.continuity import (
 )
 from stages.metrics.temporal import (
     TemporalCounts,
-    empty_temporal_counts,
+    column_ranges,
     relative_pose,
     sequence_temporal,
     static_table,
@@ -18,7 +18,7 @@ from stages.metrics.temporal import (
 __all__ = [
     "ContinuityCounts",
     "TemporalCounts",
-    "empty_temporal_counts",
+    "column_ranges",
     "isolated_mask_reference",
     "relative_pose",
     "sequence_continuity",
