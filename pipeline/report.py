@@ -251,9 +251,7 @@ def report_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, 
     t_cls = ParquetTable(store, ClassStatisticsRecord)
     outputs[t_cls.path(TABLE_KEY)] = t_cls.save(TABLE_KEY, class_rows)
     # 2. the ADMesh library per class and source (duplicates once, as the catalog views list it)
-    counts = asset_distribution(dedupe_assets(ParquetTable(store, AssetRecord).load()))
-    asset_rows = [AssetStatisticsRecord(source=c.source, category_id=c.category_id, category=c.category,
-                                        assets=c.assets) for c in counts]
+    asset_rows = asset_distribution(dedupe_assets(ParquetTable(store, AssetRecord).load()))
     t_ast = ParquetTable(store, AssetStatisticsRecord)
     outputs[t_ast.path(TABLE_KEY)] = t_ast.save(TABLE_KEY, asset_rows)
     # 3. quality scores of these sequences and resolutions
@@ -273,7 +271,7 @@ def report_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, 
                                                                             f"(per sequence, summed)")
         png[f"motion_{k}"] = plots.motion_plot(motion_share(s.voxels, s.instances, s.moving),
                                                f"Static vs dynamic, {k} m")
-    png["assets"] = plots.asset_plot(counts)
+    png["assets"] = plots.asset_plot(asset_rows)
     png["quality"] = plots.quality_plot(quality)
     if sequences and grids:
         seq = sequences[0]

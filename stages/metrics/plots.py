@@ -21,7 +21,8 @@ from matplotlib.ticker import FuncFormatter
 
 from schemas import taxonomy
 from schemas.records import QualityRecord
-from stages.metrics.statistics import N_CLASSES, AssetCount, MotionShare
+from schemas.records import AssetStatisticsRecord
+from stages.metrics.statistics import N_CLASSES, MotionShare
 
 DPI = 100
 _SOURCE_COLOURS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#ff9da7",
@@ -128,7 +129,7 @@ def instances_plot(instances, moving=None, title: str = "Instances per class") -
     return to_png(fig)
 
 
-def asset_plot(rows: Sequence[AssetCount], title: str = "ADMesh assets per class and source") -> bytes:
+def asset_plot(rows: Sequence[AssetStatisticsRecord], title: str = "ADMesh assets per class and source") -> bytes:
     """Assets per category, stacked by source (one colour per source, legend), categories in
     taxonomy order; the bar's total above it."""
     fig = _figure(max(6.0, 0.5 * len({r.category_id for r in rows}) + 2.5), 4.0, (0.7, 0.2, 1.1, 0.45))

@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from schemas import taxonomy
-from schemas.records import AssetRecord
+from schemas.records import AssetRecord, AssetStatisticsRecord
 
 N_CLASSES = len(taxonomy.CLASSES)  # 30: ids 0..29
 
@@ -179,24 +179,15 @@ class SequenceStatistics:
         return instances_per_class(self.pairs, only_ids)
 
 
-@dataclass(frozen=True)
-class AssetCount:
-    """Assets of one (source, category) of the ADMesh library."""
-
-    source: str
-    category_id: int
-    category: str
-    assets: int
-
-
-def asset_distribution(assets: Sequence[AssetRecord]) -> list[AssetCount]:
+def asset_distribution(assets: Sequence[AssetRecord]) -> list[AssetStatisticsRecord]:
     """Assets per (source, category), sorted by category id then source. Each record counts once
     (deduplicate the library first: duplicates are aliases of one asset)."""
     counts: dict[tuple[str, int, str], int] = {}
     for a in assets:
         key = (a.source, a.category_id, a.category)
         counts[key] = counts.get(key, 0) + 1
-    return [AssetCount(s, cid, c, n) for (s, cid, c), n in sorted(counts.items(), key=lambda kv: (kv[0][1], kv[0][0]))]
+    return [AssetStatisticsRecord(source=s, category_id=cid, category=c, assets=n)
+            for (s, cid, c), n in sorted(counts.items(), key=lambda kv: (kv[0][1], kv[0][0]))]
 
 
 @dataclass(frozen=True)

@@ -47,14 +47,6 @@ def _frame(t: int, seq_index: int) -> tuple[np.ndarray, np.ndarray]:
     return sem, inst
 
 
-def _asset(aid: str, source: str, cat: str) -> AssetRecord:
-    c = taxonomy.by_name(cat)
-    return AssetRecord(asset_id=aid, source=source, source_path=f"{source}://{aid}", licence="CC0-1.0",
-                       category_id=c.id, category=c.name, subclass="x", extent=[1.0, 1.0, 1.0], vertex_count=8,
-                       face_count=12, part_count=1, transparent_part_count=0, surface_area=6.0, volume=1.0,
-                       watertight=True, geometry_hash=aid, mesh_path=f"admesh/meshes/{aid}.glb")
-
-
 def _run(stage: str, partition: str, outputs: dict, inputs: dict | None = None, run_id: str = "20250102T030405Z-abc",
          status: str = "completed") -> RunRecord:
     return RunRecord(run_id=run_id, stage=stage, partition=partition, code_version="c0de", config_hash="cf6",
@@ -64,7 +56,7 @@ def _run(stage: str, partition: str, outputs: dict, inputs: dict | None = None, 
 
 
 @pytest.fixture
-def small(store: Store) -> Store:
+def small(store: Store, make_asset) -> Store:
     occ = OccupancyStore(store)
     for i, s in enumerate(SEQS):
         ParquetTable(store, SequenceRecord).save(s, [SequenceRecord(
@@ -81,8 +73,9 @@ def small(store: Store) -> Store:
                                            box_size=[4.0, 2.0, 1.5], yaw=0.0, velocity=[1.0, 0.0, 0.0],
                                            angular_velocity=[0.0, 0.0, 0.0]) for t in range(FRAMES)])
     ParquetTable(store, AssetRecord).save("source=procedural/procedural", [
-        _asset("a", "procedural", "Car"), _asset("b", "procedural", "Car"), _asset("c", "procedural", "Building")])
-    ParquetTable(store, AssetRecord).save("source=folder/f", [_asset("d", "folder", "Car")])
+        make_asset("a", "procedural", "Car"), make_asset("b", "procedural", "Car"),
+        make_asset("c", "procedural", "Building")])
+    ParquetTable(store, AssetRecord).save("source=folder/f", [make_asset("d", "folder", "Car")])
     ParquetTable(store, QualityRecord).save("q", [
         QualityRecord(sequence_id=s, resolution=0.4, frame_index=f, metric=m, value=v, occupied=10, isolated=0)
         for s in SEQS for f in (None, 0, 1) for m, v in (("spatial_continuity", 0.99), ("temporal_consistency", 0.95))])

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from schemas import taxonomy
-from schemas.records import AssetRecord, QualityRecord
+from schemas.records import AssetRecord, AssetStatisticsRecord, QualityRecord
 from stages.metrics import plots
-from stages.metrics.statistics import (N_CLASSES, AssetCount, SequenceStatistics, asset_distribution,
+from stages.metrics.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
                                        class_voxel_counts, frame_statistics, instance_class_pairs,
                                        instances_per_class, motion_share, split_pairs)
 
@@ -131,21 +131,17 @@ def test_frame_statistics_refuses_mismatched_grids():
         frame_statistics(np.array([[[40]]], np.uint8), np.array([[[1]]], np.uint32))
 
 
-def _asset(aid: str, source: str, cat: str) -> AssetRecord:
-    c = taxonomy.by_name(cat)
-    return AssetRecord(asset_id=aid, source=source, source_path=f"{source}://{aid}", licence="CC0-1.0",
-                       category_id=c.id, category=c.name, subclass="x", extent=[1.0, 1.0, 1.0], vertex_count=8,
-                       face_count=12, part_count=1, transparent_part_count=0, surface_area=6.0, volume=1.0,
-                       watertight=True, geometry_hash=aid, mesh_path=f"admesh/meshes/{aid}.glb")
+def _count(source: str, category_id: int, category: str, assets: int) -> AssetStatisticsRecord:
+    return AssetStatisticsRecord(source=source, category_id=category_id, category=category, assets=assets)
 
 
-def test_asset_distribution():
-    assets = [_asset("a", "procedural", "Car"), _asset("b", "procedural", "Car"), _asset("c", "folder", "Car"),
-              _asset("d", "procedural", "Building"), _asset("e", "objaverse", "Pedestrian")]
+def test_asset_distribution(make_asset):
+    assets = [make_asset("a", "procedural", "Car"), make_asset("b", "procedural", "Car"), make_asset("c", "folder", "Car"),
+              make_asset("d", "procedural", "Building"), make_asset("e", "objaverse", "Pedestrian")]
     rows = asset_distribution(assets)
     # by class id, then source
-    assert rows == [AssetCount("procedural", BUILDING, "Building", 1), AssetCount("objaverse", PED, "Pedestrian", 1),
-                    AssetCount("folder", CAR, "Car", 1), AssetCount("procedural", CAR, "Car", 2)]
+    assert rows == [_count("procedural", BUILDING, "Building", 1), _count("objaverse", PED, "Pedestrian", 1),
+                    _count("folder", CAR, "Car", 1), _count("procedural", CAR, "Car", 2)]
     assert asset_distribution([]) == []
 
 
@@ -195,8 +191,8 @@ def test_plots_are_pngs_of_sensible_size():
     figures = {
         "voxels": plots.class_voxel_plot(voxels),
         "instances": plots.instances_plot(inst, moving),
-        "assets": plots.asset_plot([AssetCount("procedural", CAR, "Car", 30), AssetCount("folder", CAR, "Car", 3),
-                                    AssetCount("procedural", BUILDING, "Building", 12)]),
+        "assets": plots.asset_plot([_count("procedural", CAR, "Car", 30), _count("folder", CAR, "Car", 3),
+                                    _count("procedural", BUILDING, "Building", 12)]),
         "motion": plots.motion_plot(motion_share(voxels, inst, moving)),
         "quality": plots.quality_plot(quality),
     }
