@@ -291,7 +291,7 @@ def report_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, 
     # 5. the page
     usage = store_usage(store, exclude=(REPORT_HTML, PLOTS_DIR))
     page = render_html(
-        root=store.url, sequences=sequences, grids=grids, class_rows=class_rows, asset_rows=asset_rows,
+        root=store.url, sequences=sequences, grids=grids, totals=totals, asset_rows=asset_rows,
         quality=quality, usage=[(u.part, u.files, u.bytes) for u in usage],
         lineage=stage_lineage(LineageLog(store).load()), images=png,
     )
@@ -355,7 +355,7 @@ SECTIONS = ("size", "sequences", "statistics", "quality", "frame", "lineage")
 
 
 def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridSpec],
-                class_rows: list[ClassStatisticsRecord], asset_rows: list[AssetStatisticsRecord],
+                totals: dict[float, ResolutionStats], asset_rows: list[AssetStatisticsRecord],
                 quality: list[QualityRecord], usage: list[tuple[str, int, int]], lineage: list[StageLineage],
                 images: dict[str, bytes]) -> str:
     """The report page: one string of HTML with every picture inlined (``images``: name -> PNG)."""
@@ -384,19 +384,15 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
     out.append('<h2 id="statistics">Statistics</h2>')
     for grid in grids:
         k = grid.key
-        mine = [r for r in class_rows if r.resolution == float(grid.voxel_size)]
-        if not mine:
+        t = totals.get(float(grid.voxel_size))
+        if t is None:
             continue
-        by_class: dict[int, list[int]] = defaultdict(lambda: [0, 0, 0])
-        for r in mine:
-            acc = by_class[r.semantic_id]
-            acc[0] += r.voxels
-            acc[1] += r.instances
-            acc[2] += r.moving_instances
-        occupied = sum(v[0] for c, v in by_class.items() if c)
-        rows = [[_swatch(c), _e(taxonomy.by_id(c).kind), f"{v[0]:,}", f"{100 * v[0] / max(occupied, 1):.3f}",
-                 f"{v[1]:,}" if taxonomy.by_id(c).kind == "thing" else "", f"{v[2]:,}" if v[2] else ""]
-                for c, v in sorted(by_class.items()) if c]
+        occupied = int(t.voxels[1:].sum())
+        rows = [[_swatch(c), _e(taxonomy.by_id(c).kind), f"{t.voxels[c]:,}",
+                 f"{100 * t.voxels[c] / max(occupied, 1):.3f}",
+                 f"{t.instances[c]:,}" if taxonomy.by_id(c).kind == "thing" else "",
+                 f"{t.moving[c]:,}" if t.moving[c] else ""]
+                for c in range(1, len(t.voxels)) if t.voxels[c] or t.instances[c]]
         out += [f"<h3>{_e(k)} m</h3>", '<div class="grid2"><div>',
                 _img(images, f"class_voxels_{k}", f"voxels per class at {k} m"), "</div><div>",
                 _img(images, f"instances_{k}", f"instances per class at {k} m"), "</div></div>",
