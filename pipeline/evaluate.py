@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import zipfile
 import zlib
 from pathlib import Path
@@ -462,12 +461,3 @@ def det_cmd(
         typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}")
 
     _run(go)
-
-
-def main() -> None:  # pragma: no cover - ``python -m pipeline.evaluate``
-    os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
-    eval_app()
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()

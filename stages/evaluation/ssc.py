@@ -24,6 +24,7 @@ Label ids outside the map (and not ignored) are an error naming the value, not a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -68,19 +69,31 @@ class LabelMap:
         """The evaluated class ids: every id but the free one."""
         return tuple(i for i in range(self.n) if i != self.free)
 
+    @cached_property
+    def _carlaocc_table(self) -> tuple[np.ndarray, np.ndarray]:
+        # uint8 lookup CarlaOcc id -> this space's id (255 = ignore passes through), and which
+        # uint8 values are CarlaOcc ids at all; built once per map
+        lut = np.zeros(256, dtype=np.uint8)
+        valid = np.zeros(256, dtype=bool)
+        lut[: len(self.from_carlaocc)] = self.from_carlaocc
+        valid[: len(self.from_carlaocc)] = True
+        lut[taxonomy.IGNORE], valid[taxonomy.IGNORE] = taxonomy.IGNORE, True
+        return lut, valid
+
     def convert_carlaocc(self, semantic: np.ndarray) -> np.ndarray:
         """Map a CarlaOcc-id array (0-29; 255 = ignore passes through) into this space (uint8)."""
         sem = np.asarray(semantic)
-        lut = np.full(256, -1, dtype=np.int64)
-        lut[: len(self.from_carlaocc)] = self.from_carlaocc
-        lut[taxonomy.IGNORE] = taxonomy.IGNORE
-        if sem.size and (sem.min() < 0 or sem.max() > 255):
-            raise ValueError(f"CarlaOcc semantic ids must be 0..29 (or 255), found {int(sem.min())}..{int(sem.max())}")
-        out = lut[sem.astype(np.intp, copy=False)]
-        if sem.size and out.min() < 0:
-            bad = int(sem.reshape(-1)[np.argmin(out.reshape(-1))])
-            raise ValueError(f"CarlaOcc semantic id {bad} is not a class (0..29, or 255 = ignore)")
-        return out.astype(np.uint8)
+        if sem.dtype != np.uint8:
+            if sem.size and (sem.min() < 0 or sem.max() > 255):
+                raise ValueError(f"CarlaOcc semantic ids must be 0..29 (or 255), found {int(sem.min())}..{int(sem.max())}")
+            sem = sem.astype(np.uint8)
+        lut, valid = self._carlaocc_table
+        # the ids present (one counting pass, no per-voxel temporaries), then one uint8 lookup
+        present = np.flatnonzero(np.bincount(sem.reshape(-1), minlength=256))
+        bad = present[~valid[present]]
+        if bad.size:
+            raise ValueError(f"CarlaOcc semantic id {int(bad[0])} is not a class (0..29, or 255 = ignore)")
+        return lut[sem]
 
 
 def _things_of(target: str) -> tuple[int, ...]:
@@ -130,17 +143,17 @@ def label_map(name: str) -> LabelMap:
 
 
 @numba.njit(cache=True, nogil=True)
-def _confusion_kernel(gt, pred, mask, use_mask, gt_lut, pred_lut, n):  # pragma: no cover - jitted
+def _confusion_kernel(gt, pred, mask, use_mask, lut, n):  # pragma: no cover - jitted
     cm = np.zeros((n, n), dtype=np.int64)
     # bad[0] = bad gt count, bad[1] = first bad gt value, bad[2..3] the same for pred, bad[4] =
     # voxels skipped for an ignored prediction
     bad = np.zeros(5, dtype=np.int64)
-    size = gt_lut.size
+    size = lut.size
     for i in range(gt.size):
         if use_mask and not mask[i]:
             continue
         g = np.int64(gt[i])
-        r = gt_lut[g] if 0 <= g < size else -2
+        r = lut[g] if 0 <= g < size else -2
         if r == -1:  # ignored ground truth: the ignore column
             continue
         if r == -2:
@@ -149,7 +162,7 @@ def _confusion_kernel(gt, pred, mask, use_mask, gt_lut, pred_lut, n):  # pragma:
             bad[0] += 1
             continue
         p = np.int64(pred[i])
-        c = pred_lut[p] if 0 <= p < size else -2
+        c = lut[p] if 0 <= p < size else -2
         if c == -1:  # ignored prediction: the ignore row
             bad[4] += 1
             continue
@@ -201,7 +214,7 @@ def confusion_matrix(
     for v in ignore:
         if v >= 0:
             lut[v] = -1
-    cm, bad = _confusion_kernel(g, p, m, mask is not None, lut, lut, np.int64(n))
+    cm, bad = _confusion_kernel(g, p, m, mask is not None, lut, np.int64(n))
     if bad[0]:
         raise ValueError(f"ground truth has {int(bad[0])} voxels with label {int(bad[1])} (or others) "
                          f"outside 0..{n - 1} that is not ignored {list(ignore)}")
@@ -288,14 +301,10 @@ class SSCAccumulator:
         self.frames += 1
 
     def result(self) -> SSCResult:
-        """Per-class IoU, mIoU and geometry IoU of everything added so far."""
-        cm = self.confusion.copy()
+        """Per-class IoU, mIoU and geometry IoU of everything added so far. Ignored ids inside the
+        label range have empty rows and columns (semantic-kitti-api): the kernel never counts them."""
+        cm = self.confusion
         lm = self.label_map
-        # ignore ids inside the label range: drop their row and column (semantic-kitti-api)
-        for v in self.ignore:
-            if 0 <= v < lm.n:
-                cm[v, :] = 0
-                cm[:, v] = 0
         classes = np.array([c for c in lm.classes if c not in self.ignore], dtype=np.intp)
         tp_all = np.diag(cm)
         fp_all = cm.sum(axis=0) - tp_all
