@@ -74,27 +74,36 @@ def _any_run(b, b64, start, end):  # pragma: no cover - numba
 
 
 @njit(cache=True, nogil=True)
-def _chunk_flags(b, b64, nx, ny, m, cx, cy):  # pragma: no cover - numba
+def _chunk_flags(b, b64, nx, ny, m, cx, cy, candidates):  # pragma: no cover - numba
     """1 for each (cx, cy) column block of the flat byte volume ``b`` (nx, ny, m bytes per
-    column, C order) that holds a nonzero byte; for each x row a block's columns are one
-    contiguous byte run."""
+    column, C order) that holds a nonzero byte, looking only at the blocks flagged in
+    ``candidates``; for each x row a block's columns are one contiguous byte run."""
     fy = (ny + cy - 1) // cy
     flags = np.zeros(((nx + cx - 1) // cx, fy), dtype=np.uint8)
     for i in range(nx):
         for cj in range(fy):
-            if flags[i // cx, cj]:
+            if flags[i // cx, cj] or not candidates[i // cx, cj]:
                 continue
             if _any_run(b, b64, (i * ny + cj * cy) * m, (i * ny + min(ny, (cj + 1) * cy)) * m):
                 flags[i // cx, cj] = 1
     return flags
 
 
-def chunk_flags(data: np.ndarray, cx: int, cy: int) -> np.ndarray:
-    """Which (x, y) chunks of a tile (nx, ny, ...) hold a nonzero value (bitwise: -0.0 counts)."""
+def chunk_flags(data: np.ndarray, cx: int, cy: int, candidates: np.ndarray | None = None) -> np.ndarray:
+    """Which (x, y) chunks of a tile (nx, ny, ...) hold a nonzero value (bitwise: -0.0 counts).
+
+    ``candidates`` (bool, one per chunk), when given, are the only chunks that may: the others
+    are reported empty without reading them."""
     nx, ny = data.shape[:2]
+    shape = (-(-nx // cx), -(-ny // cy))
+    if candidates is None:
+        candidates = np.ones(shape, dtype=np.uint8)
+    elif np.shape(candidates) != shape:
+        raise ValueError(f"candidates must have one flag per chunk {shape}, got {np.shape(candidates)}")
     b = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
     b64 = b[: b.size // 8 * 8].view(np.uint64)  # the buffer start is 8-aligned (numpy allocations are)
-    return _chunk_flags(b, b64, nx, ny, b.size // max(nx * ny, 1), cx, cy)
+    return _chunk_flags(b, b64, nx, ny, b.size // max(nx * ny, 1), cx, cy,
+                        np.ascontiguousarray(candidates, dtype=np.uint8))
 
 
 class OccupancyStore:
@@ -224,12 +233,14 @@ class OccupancyStore:
         return (shape, chunks, dtype), keys
 
     def write_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, data: np.ndarray,
-                   x0: int) -> None:
+                   x0: int, candidates: np.ndarray | None = None) -> None:
         """Write voxels ``[x0, x0 + len(data))`` x all y x all z of one frame of one array.
 
         The tile must cover whole chunks: ``x0`` on a chunk boundary, and its end on one or at
         the end of the array. Each chunk is encoded here and stored as one object (see the module
-        docstring); all-zero chunks are removed instead.
+        docstring); all-zero chunks are removed instead. ``candidates`` (bool, x chunks by y
+        chunks of the tile) may say which chunks can hold data: the others are known
+        to be zero and are not read.
         """
         data = np.asarray(data)
         shape = self._layout(sequence_id, grid, name)[0]
@@ -240,7 +251,7 @@ class OccupancyStore:
         little = dtype.newbyteorder("<")
         padded = np.zeros(chunks[1:], dtype=little)
         # one pass over the tile finds the chunks that hold data (per-block .any() is ~10x slower)
-        flags = chunk_flags(data, cx, cy)
+        flags = chunk_flags(data, cx, cy, candidates)
         for ci, cj, key in keys:
             if not flags[ci - x0 // cx, cj]:
                 remove_object(self.store, key)
@@ -251,6 +262,11 @@ class OccupancyStore:
                 padded[:block.shape[0], :block.shape[1]] = block
                 block = padded
             put_object(self.store, key, encode_chunk(block, little))
+
+    def chunk_edges(self, sequence_id: str, grid: GridSpec, name: str) -> tuple[int, int]:
+        """(x, y) chunk edge of one array, voxels."""
+        chunks = self._layout(sequence_id, grid, name)[1]
+        return chunks[1], chunks[2]
 
     def clear_tile(self, sequence_id: str, grid: GridSpec, frame: int, name: str, x0: int, nx: int) -> None:
         """Make voxels ``[x0, x0 + nx)`` of one frame of one array all zero (their chunks are

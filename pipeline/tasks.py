@@ -353,10 +353,10 @@ def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
 
 
 def _frame_flow(inputs: FrameInputs):
-    """``tile -> flow`` of the frame's actors (the flow of a tile without them is all zero)."""
+    """``(tile, tile_origin, voxel_size) -> (flat indices, float16 (N, 3) flow) | None``: the flow
+    of the voxels of the frame's actors in a tile (None when it holds none: its flow is zero)."""
     from stages.geometry import pose_from_list
-    from stages.scratch import scratch
-    from stages.voxelize.flow import instance_flow
+    from stages.voxelize.flow import actor_voxels, voxel_flow
 
     actors = [a for a in inputs.actors if a.instance_id > 0]
     ids = np.asarray([a.instance_id for a in actors], dtype=np.uint32)
@@ -366,64 +366,94 @@ def _frame_flow(inputs: FrameInputs):
     ang = np.asarray([a.angular_velocity for a in actors], dtype=np.float64).reshape(-1, 3)
     lidar_to_world = pose_from_list(inputs.frame.lidar_pose)
 
-    first = int(ids.min()) if len(ids) else None
-
-    def flow(tile, tile_origin, voxel_size) -> np.ndarray | None:
-        # actors' instance ids come after every static one of the town (see traffic): a tile whose
-        # largest id is below the first actor's holds no dynamic voxel (None: all zero)
-        if first is None or int(tile.instance.max()) < first:
+    def flow(tile, tile_origin, voxel_size):
+        # an actor's voxels are looked for only inside the boxes of its meshes in the tile
+        flat, actor = actor_voxels(tile.instance, tile.things, ids)
+        if len(flat) == 0:
             return None
-        buf = scratch("tile_flow", tile.instance.size * 3, np.float16).reshape(*tile.instance.shape, 3)
-        return instance_flow(tile.instance, tile_origin, voxel_size, ids, centres, vel, ang, lidar_to_world, out=buf)
+        return flat, voxel_flow(flat, tile.instance.shape, tile_origin, voxel_size, actor, centres, vel, ang,
+                                lidar_to_world)
 
     return flow
 
 
+def _box_chunks(things: np.ndarray, flags_shape: tuple[int, int], cx: int, cy: int) -> np.ndarray:
+    """Chunk flags (x chunks, y chunks of a tile) of the chunks that the voxel boxes ``things``
+    (Tile.things rows: instance, i0, i1, j0, j1, k0, k1) reach: where the instance tile can be
+    nonzero."""
+    flags = np.zeros(flags_shape, dtype=bool)
+    for _, i0, i1, j0, j1, k0, k1 in things:
+        if i1 > i0 and j1 > j0 and k1 > k0:
+            flags[i0 // cx:(i1 - 1) // cx + 1, j0 // cy:(j1 - 1) // cy + 1] = True
+    return flags
+
+
+def _index_chunks(flat: np.ndarray, shape: tuple[int, ...], cx: int, cy: int) -> np.ndarray:
+    """Chunk flags (x chunks, y chunks) of the chunks holding the C-order voxel indices ``flat``
+    of a tile of ``shape`` (X, Y, Z)."""
+    flags = np.zeros((-(-shape[0] // cx), -(-shape[1] // cy)), dtype=bool)
+    flags[flat // (shape[1] * shape[2]) // cx, (flat // shape[2]) % shape[1] // cy] = True
+    return flags
+
+
 def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
-    """Voxelize one frame of one sequence at one resolution into occupancy.zarr: semantic and
-    instance tile by tile (x-slabs of whole chunks), the flow of each tile, then the camera and
-    LiDAR masks of the whole frame."""
+    """Voxelize one frame of one sequence at one resolution into occupancy.zarr: semantic,
+    instance and flow tile by tile (x-slabs of whole chunks), then the camera and LiDAR masks,
+    traced through the frame's occupancy packed tile by tile and written slab by slab (no array
+    of the whole frame is ever held)."""
     from schemas.rig import RigConfig
     from stages.scenes.assembly import region_of_grid
     from stages.scratch import scratch
     from stages.voxelize import voxelize_tiles
-    from stages.voxelize.visibility import (auto_camera_stride, camera_visibility, lidar_visibility,
+    from stages.voxelize.visibility import (auto_camera_stride, camera_visibility_bits, lidar_visibility_bits,
                                             pack_occupancy)
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
     inputs = frame_inputs(store, seq_id, frame_index, region_of_grid(grid))
     occ = OccupancyStore(store)
-    shape = tuple(int(n) for n in grid.shape)
     names = occupancy_arrays(cfg)
-    # 1. semantic + instance per tile: the instance tile is written at once (never a whole
-    #    uint32 frame in memory); the semantic frame is kept for the masks
-    semantic = scratch("frame_semantic", int(np.prod(shape)), np.uint8).reshape(shape)
+    tile_x = cfg.chunk_edge * cfg.tile_chunks
+    cx, cy = occ.chunk_edges(seq_id, grid, "instance")
     flow = _frame_flow(inputs) if cfg.flow else None
+    packed = pack_occupancy(None, grid) if cfg.masks else None
     vs = float(grid.voxel_size)
-    for tile in voxelize_tiles(inputs.scene, grid, cfg.chunk_edge * cfg.tile_chunks, cfg.fill):
-        x1 = tile.x0 + tile.semantic.shape[0]
-        semantic[tile.x0:x1] = tile.semantic
-        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0)
-        if flow is not None:
-            origin = (grid.origin[0] + tile.x0 * vs, grid.origin[1], grid.origin[2])
-            v = flow(tile, origin, vs)
-            if v is None:
-                occ.clear_tile(seq_id, grid, frame_index, "flow", tile.x0, x1 - tile.x0)
-            else:
-                occ.write_tile(seq_id, grid, frame_index, "flow", v, tile.x0)
-    occ.write_tile(seq_id, grid, frame_index, "semantic", semantic, 0)
-    # 2. visibility: rays of the rig's cameras and LiDAR through the frame's occupancy
-    if cfg.masks:
+    # 1. per tile: semantic, instance (only the chunks its things' boxes reach are read), flow,
+    #    and the tile's occupancy packed for the masks
+    for tile in voxelize_tiles(inputs.scene, grid, tile_x, cfg.fill):
+        nx = tile.semantic.shape[0]
+        occ.write_tile(seq_id, grid, frame_index, "semantic", tile.semantic, tile.x0)
+        shape = tile.instance.shape
+        candidates = _box_chunks(tile.things, (-(-nx // cx), -(-shape[1] // cy)), cx, cy)
+        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0, candidates)
+        if packed is not None:
+            packed.pack_slab(tile.x0, tile.semantic)
+        if flow is None:
+            continue
+        v = flow(tile, (grid.origin[0] + tile.x0 * vs, grid.origin[1], grid.origin[2]), vs)
+        if v is None:
+            occ.clear_tile(seq_id, grid, frame_index, "flow", tile.x0, nx)
+            continue
+        # a sparse scatter into a zero buffer kept zero between uses (a dense tile is 200 MB at
+        # 0.05 m: zeroing it per tile costs more than the flow)
+        flat, values = v
+        buf = scratch("tile_flow", tile.instance.size * 3, np.float16).reshape(-1, 3)
+        try:
+            buf[flat] = values
+            occ.write_tile(seq_id, grid, frame_index, "flow", buf.reshape(*shape, 3), tile.x0,
+                           _index_chunks(flat, shape, cx, cy))
+        finally:
+            buf[flat] = 0
+    # 2. visibility: rays of the rig's LiDAR and cameras through the frame's occupancy, each
+    #    mask written an x-slab at a time from its bits
+    if packed is not None:
         rig = cfg.rig or RigConfig()
         stride = cfg.camera_ray_stride or auto_camera_stride(rig, grid.voxel_size)
-        packed = pack_occupancy(semantic, grid)
-        n = int(np.prod(shape))
-        # one mask buffer, reused: LiDAR first, written, then the cameras
-        mask = lidar_visibility(packed, rig, out=scratch("mask", n, np.uint8, zero=True).reshape(shape))
-        occ.write_tile(seq_id, grid, frame_index, "mask_lidar", mask, 0)
-        mask = camera_visibility(packed, rig, stride, out=scratch("mask", n, np.uint8, zero=True).reshape(shape))
-        occ.write_tile(seq_id, grid, frame_index, "mask_camera", mask, 0)
+        for name, bits in (("mask_lidar", lidar_visibility_bits(packed, rig)),
+                           ("mask_camera", camera_visibility_bits(packed, rig, stride))):
+            for x0 in range(0, packed.shape[0], tile_x):
+                nx = min(tile_x, packed.shape[0] - x0)
+                occ.write_tile(seq_id, grid, frame_index, name, packed.slab(bits, x0, nx), x0)
     return occ.fingerprints(seq_id, grid, frame_index, names)
 
 

@@ -183,6 +183,10 @@ class Tile:
     x0: int
     semantic: np.ndarray  # uint8 (nx_tile, Y, Z)
     instance: np.ndarray  # uint32 (nx_tile, Y, Z)
+    # (K, 7) int64 rows (instance, i0, i1, j0, j1, k0, k1): for each thing mesh painted into the
+    # tile, a half-open voxel box of the tile holding every voxel it painted (a later mesh may
+    # have overwritten some): where the voxels of an instance can be, without a scan
+    things: np.ndarray
 
 
 class _TiledMesh:
@@ -198,6 +202,14 @@ class _TiledMesh:
         fin = np.isfinite(self.xmin) & np.isfinite(self.xmax)
         self.lo = float(self.xmin[fin].min()) if fin.any() else np.inf
         self.hi = float(self.xmax[fin].max()) if fin.any() else -np.inf
+        # voxel box (half-open, grid voxels) of everything the mesh can paint: its finite vertices'
+        # range widened by one voxel each side (closed voxel boxes touching a face on a lattice
+        # plane; a fill only reaches voxel centres inside the vertices' range)
+        V = self.P[np.isfinite(self.P).all(axis=1)] if p.instance_id > 0 and not p.is_stuff else self.P[:0]
+        if len(V):
+            self.box = np.concatenate([np.floor(V.min(axis=0)) - 1, np.floor(V.max(axis=0)) + 2])
+        else:
+            self.box = None
 
     def faces_for(self, x0: int, x1: int) -> np.ndarray | None:
         """Faces that can touch voxels [x0, x1) (closed boxes: [x0, x1] in voxel units); a filled
@@ -232,10 +244,13 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
         sem_flat = scratch("tile_semantic", n, np.uint8, zero=True)
         inst_flat = scratch("tile_instance", n, np.uint32, zero=True)
         offset[0] = x0
+        things = []
         for t in tiled:
             faces = t.faces_for(x0, x1)
             if faces is None:
                 continue
+            if t.box is not None:
+                things.append(_tile_box(t.plan.instance_id, t.box, x0, shape))
             # the tile's voxel units: an integer shift, exact in float64
             P = t.P - offset
             p = t.plan
@@ -243,7 +258,20 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
             if p.fill:
                 paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
             paint_surface(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
-        yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape))
+        yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape),
+                   np.array(things, dtype=np.int64).reshape(-1, 7))
+
+
+def _tile_box(instance_id: int, box: np.ndarray, x0: int, shape: tuple[int, int, int]) -> list[int]:
+    """A mesh's grid voxel box (lo xyz, hi xyz; half-open) as a tile's Tile.things row, clipped to
+    the tile (an empty box has i0 == i1 or the like)."""
+    row = [int(instance_id)]
+    for axis in range(3):
+        shift = x0 if axis == 0 else 0
+        lo = int(min(max(box[axis] - shift, 0), shape[axis]))
+        hi = int(min(max(box[3 + axis] - shift, lo), shape[axis]))
+        row += [lo, hi]
+    return row
 
 
 def voxelize_scene(meshes: Sequence[SceneMesh], grid: GridSpec, fill: FillMode = "auto",

@@ -18,8 +18,9 @@ instance 0 (free space, stuff) get 0.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-__all__ = ["instance_flow"]
+__all__ = ["instance_flow", "actor_voxels", "voxel_flow"]
 
 
 def instance_flow(
@@ -75,13 +76,68 @@ def instance_flow(
     actor = order[pos[hit]]
     if len(flat) == 0:
         return out
-    # 3. voxel centres: LiDAR frame -> world
-    ijk = np.stack(np.unravel_index(flat, inst.shape), axis=1).astype(np.float64)
+    out.reshape(-1, 3)[flat] = voxel_flow(flat, inst.shape, tile_origin, voxel_size, actor, C, Vl, W, T)
+    return out
+
+
+def voxel_flow(flat: np.ndarray, shape, tile_origin, voxel_size: float, actor: np.ndarray, centres: np.ndarray,
+               velocities: np.ndarray, angular_velocities: np.ndarray, lidar_to_world: np.ndarray) -> np.ndarray:
+    """(N, 3) float16 flow (m/s, LiDAR axes) of the voxels at C-order indices ``flat`` of a volume
+    of ``shape`` whose voxel (0, 0, 0) has its minimum corner at ``tile_origin``; ``actor`` (N,)
+    indexes the rows of ``centres``, ``velocities`` and ``angular_velocities`` (world frame)."""
+    T = np.asarray(lidar_to_world, dtype=np.float64)
+    C = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    Vl = np.asarray(velocities, dtype=np.float64).reshape(-1, 3)
+    W = np.asarray(angular_velocities, dtype=np.float64).reshape(-1, 3)
+    # 1. voxel centres: LiDAR frame -> world
+    ijk = np.stack(np.unravel_index(flat, tuple(shape)), axis=1).astype(np.float64)
     p_lidar = np.asarray(tile_origin, dtype=np.float64).reshape(3) + (ijk + 0.5) * float(voxel_size)
     R = T[:3, :3]
     p_world = p_lidar @ R.T + T[:3, 3]
-    # 4. rigid-body velocity in the world, v + w x (p - c), then in the LiDAR's axes (R^T v)
+    # 2. rigid-body velocity in the world, v + w x (p - c), then in the LiDAR's axes (R^T v)
     v_world = Vl[actor] + np.cross(W[actor], p_world - C[actor])
-    v_lidar = v_world @ R
-    out.reshape(-1, 3)[flat] = v_lidar.astype(np.float16)
-    return out
+    return (v_world @ R).astype(np.float16)
+
+
+@njit(cache=True, nogil=True)
+def _gather(inst, ny, nz, boxes, box_actor, out_flat, out_actor):  # pragma: no cover - numba
+    """Flat indices (and the actor row) of the voxels of ``inst`` (flat C order, (., ny, nz))
+    equal to each box's id inside that box; boxes are rows (id, i0, i1, j0, j1, k0, k1)."""
+    n = 0
+    for b in range(boxes.shape[0]):
+        ident = np.uint32(boxes[b, 0])
+        for i in range(boxes[b, 1], boxes[b, 2]):
+            for j in range(boxes[b, 3], boxes[b, 4]):
+                base = (i * ny + j) * nz
+                for k in range(boxes[b, 5], boxes[b, 6]):
+                    if inst[base + k] == ident:
+                        out_flat[n] = base + k
+                        out_actor[n] = box_actor[b]
+                        n += 1
+    return n
+
+
+def actor_voxels(instance: np.ndarray, things: np.ndarray, instance_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(flat C-order indices, actor rows) of the voxels of ``instance`` (X, Y, Z) that belong to
+    the actors ``instance_ids``, looked for only inside the boxes ``things`` (rows (instance, i0,
+    i1, j0, j1, k0, k1), half-open voxel boxes that hold every voxel of their instance, e.g.
+    :attr:`stages.voxelize.compose.Tile.things`). Ascending indices per actor, actors in the order
+    of ``instance_ids``."""
+    inst = np.ascontiguousarray(instance)
+    ids = np.asarray(instance_ids, dtype=np.int64).reshape(-1)
+    things = np.asarray(things, dtype=np.int64).reshape(-1, 7)
+    # one box per actor: the union of its meshes' boxes (a voxel is then found once)
+    rows, actors = [], []
+    for a, ident in enumerate(ids):
+        mine = things[things[:, 0] == ident]
+        mine = mine[(mine[:, 2] > mine[:, 1]) & (mine[:, 4] > mine[:, 3]) & (mine[:, 6] > mine[:, 5])]
+        if len(mine):
+            rows.append([ident, mine[:, 1].min(), mine[:, 2].max(), mine[:, 3].min(), mine[:, 4].max(),
+                         mine[:, 5].min(), mine[:, 6].max()])
+            actors.append(a)
+    boxes = np.array(rows, dtype=np.int64).reshape(-1, 7)
+    size = int(np.prod(boxes[:, 2::2] - boxes[:, 1::2], axis=1).sum()) if len(boxes) else 0
+    flat = np.empty(size, dtype=np.int64)
+    actor = np.empty(size, dtype=np.int64)
+    n = _gather(inst.reshape(-1), inst.shape[1], inst.shape[2], boxes, np.array(actors, dtype=np.int64), flat, actor)
+    return flat[:n], actor[:n]

@@ -112,6 +112,15 @@ def test_write_tile_round_trips_through_zarr_with_edge_chunks_and_empty_chunks(t
     assert not store.fs.exists(store.path(f"{root}/1/0/0"))
     np.testing.assert_array_equal(occ.read_frame("s", grid, 1, ("semantic",))["semantic"], sem2)
     assert occ.frame_fingerprint(occ.array_path("s", grid, "semantic"), 1) != fp
+    # candidate chunks: the ones holding data are written, a candidate that holds none is removed
+    inst2 = inst.copy()
+    inst2[32:, 16:] = 0
+    candidates = np.array([[True, True]])  # the last tile: 1 x 2 chunks of 16
+    occ.write_tile("s", grid, 1, "instance", inst2[32:], 32, candidates)
+    np.testing.assert_array_equal(occ.read_frame("s", grid, 1, ("instance",))["instance"], inst2)
+    iroot = f"occupancy.zarr/{occ.array_path('s', grid, 'instance')}/c/1"
+    assert not store.fs.exists(store.path(f"{iroot}/2/1/0")) and store.fs.exists(store.path(f"{iroot}/2/0/0"))
+    assert occ.chunk_edges("s", grid, "instance") == (16, 16)
     # tiles must cover whole chunks
     with pytest.raises(ValueError, match="whole chunks"):
         occ.write_tile("s", grid, 1, "semantic", sem[8:24], 8)
@@ -142,3 +151,8 @@ def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing
         for b in range(got.shape[1]):
             want[a, b] = data[a * cx:(a + 1) * cx, b * cy:(b + 1) * cy].any()
     np.testing.assert_array_equal(got, want)
+    # candidates: only those chunks are read (a chunk left out is reported empty)
+    candidates = rng.random(got.shape) < 0.5
+    np.testing.assert_array_equal(chunk_flags(data, cx, cy, candidates), want & candidates)
+    with pytest.raises(ValueError, match="one flag per chunk"):
+        chunk_flags(data, cx, cy, np.ones((got.shape[0] + 1, got.shape[1]), bool))

@@ -103,3 +103,29 @@ def test_tile_equals_slice_of_whole():
     np.testing.assert_array_equal(tile, whole[sl])
     # every voxel of actor 5 carries its own rigid-body velocity
     assert np.abs(whole[inst == 5]).max() > 0 and not whole[(inst == 0) | (inst == 99)].any()
+
+
+def test_actor_voxels_inside_boxes_give_the_dense_flow():
+    from stages.voxelize.flow import actor_voxels, voxel_flow
+
+    rng = np.random.default_rng(3)
+    inst = np.zeros((9, 8, 7), dtype=np.uint32)
+    inst[1:4, 2:5, 1:3] = 7
+    inst[5:9, 0:2, 4:7] = 9
+    inst[6, 6, 6] = 9  # a second mesh of actor 9, in another box
+    inst[0, 7, 0] = 3  # a static thing: never an actor voxel
+    things = np.array([[7, 0, 5, 1, 6, 0, 4], [9, 4, 9, 0, 3, 3, 7], [9, 6, 7, 6, 7, 6, 7], [3, 0, 1, 7, 8, 0, 1],
+                       [9, 0, 0, 0, 0, 0, 0]])  # an empty box is ignored
+    ids = np.array([9, 7, 11], np.uint32)  # 11: an actor outside this volume
+    C, Vl, W = rng.normal(size=(3, 3)), rng.normal(size=(3, 3)), rng.normal(size=(3, 3))
+    T = _yaw(0.4, (3.0, -2.0, 1.0))
+    flat, actor = actor_voxels(inst, things, ids)
+    assert sorted(flat) == sorted(np.flatnonzero((inst == 7) | (inst == 9)))
+    assert len(set(flat)) == len(flat)  # overlapping boxes of one actor find a voxel once
+    np.testing.assert_array_equal(ids[actor], inst.reshape(-1)[flat])
+    dense = instance_flow(inst, (0.5, -1.0, 2.0), 0.1, ids, C, Vl, W, T)
+    sparse = np.zeros_like(dense)
+    sparse.reshape(-1, 3)[flat] = voxel_flow(flat, inst.shape, (0.5, -1.0, 2.0), 0.1, actor, C, Vl, W, T)
+    np.testing.assert_array_equal(sparse, dense)
+    # a box too small to hold the actor's voxels misses them: the boxes are the contract
+    assert len(actor_voxels(inst, np.array([[7, 1, 2, 2, 3, 1, 2]]), np.array([7]))[0]) == 1

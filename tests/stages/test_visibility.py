@@ -18,8 +18,12 @@ from schemas.grid import GridSpec
 from schemas.rig import CameraSpec, RigConfig
 from stages.voxelize import visibility as vis
 from stages.voxelize.visibility import (
+    Fans,
+    camera_fans,
     camera_rays,
+    fan_mask,
     lidar_directions,
+    lidar_fans,
     ray_mask,
     sensor_to_lidar,
     visibility_masks,
@@ -262,3 +266,188 @@ def test_camera_rays_point_where_the_cameras_look():
     np.testing.assert_allclose(T[:3, 2], [0.0, -1.0, 0.0], atol=1e-12)  # CARLA yaw +90 = right = -y
     # top-left pixel looks up-left of the axis (optical x right, y down)
     assert d[0] @ T[:3, 0] < 0 and d[0] @ T[:3, 1] < 0
+
+
+# ------------------------------------------------------------------------------------------------
+# vertical fans (algorithm 2) against the reference and against the 3D DDA
+# ------------------------------------------------------------------------------------------------
+
+
+@st.composite
+def _fan_scene(draw):
+    shape = tuple(draw(st.integers(1, 9)) for _ in range(3))
+    density = draw(st.sampled_from([0.0, 0.05, 0.2]))
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    occ = rng.random(shape) < density
+    if draw(st.booleans()):  # a floor: most fans hit it
+        occ[:, :, 0] = True
+    n = draw(st.integers(1, 40))
+    if draw(st.booleans()):
+        # near: origins in or around the grid, rays from much less than a voxel apart (the
+        # "dense" path) to far apart
+        o = np.array([draw(st.floats(-3.0, k + 3.0, allow_nan=False)) for k in shape])
+        a = round(draw(st.floats(0.0, 2 * np.pi)), 6)
+        spread = draw(st.sampled_from([0.01, 0.2, 2.0]))
+        slopes = np.sort(draw(st.floats(-1.5, 1.5)) + spread * (rng.random(n) - 0.5))
+    else:
+        # far: fans arriving from 10-40 voxels away, their rays 0.3-3 voxels apart in the grid
+        # (where the dense and the per-ray paths meet)
+        dist = draw(st.floats(10.0, 40.0))
+        a = round(draw(st.floats(-0.6, 0.6)), 6)
+        o = np.array([-dist * np.cos(a), shape[1] / 2 - dist * np.sin(a), draw(st.floats(0.0, shape[2]))])
+        gap = draw(st.floats(0.3, 3.0)) / dist
+        slopes = np.sort(gap * (np.arange(n) - n / 2) + rng.normal(0, 1e-3 * gap, n))
+    t_end = draw(st.floats(0.0, 60.0))
+    # (angles on a 1e-6 rad lattice: a heading component of 1e-24, whose drift rounds away in the
+    # origin's coordinate, is a tie the reference's tolerance in t does not see)
+    return occ, o, np.array([np.cos(a), np.sin(a)]), slopes, t_end
+
+
+@SETTINGS
+@given(_fan_scene())
+def test_fans_agree_with_brute_force_reference(scene):
+    occ, o, h, slopes, t_end = scene
+    fans = Fans(origins=o[None], headings=h[None], slopes=slopes[None])
+    m = fan_mask(occ, _unit_grid(occ.shape), fans, t_end).astype(bool)
+    must = np.zeros(occ.shape, bool)
+    may = np.zeros(occ.shape, bool)
+    for d in fans.directions():
+        mu, ma, _ = _reference(occ, o, d, t_end)
+        must |= mu
+        may |= ma
+    assert not (must & ~m).any(), "a voxel a ray crosses before its first hit is not marked"
+    assert not (m & ~may).any(), "a marked voxel is off every ray or behind its first hit"
+
+
+def test_fans_equal_the_3d_dda_off_ties():
+    # random (non-lattice) origins and slopes: no ray passes exactly through a voxel edge, so the
+    # two algorithms must mark the very same voxels, near and far, on a floor, walls and clutter
+    rng = np.random.default_rng(7)
+    occ = rng.random((60, 50, 20)) < 0.01
+    occ[:, :, 0] = True
+    occ[45:47, :, :12] = True
+    grid = GridSpec(region_min=(-3.0, -2.5, -0.5), region_max=(3.0, 2.5, 1.5), voxel_size=0.1)
+    F = 40
+    O = np.column_stack([rng.uniform(-2.9, 2.9, F), rng.uniform(-2.4, 2.4, F), rng.uniform(-0.3, 1.2, F)])
+    a = rng.uniform(0, 2 * np.pi, F)
+    base = np.sort(rng.uniform(-0.8, 0.8, (F, 1)) + np.linspace(-0.3, 0.3, 90)[None] + rng.normal(0, 1e-4, (F, 90)),
+                   axis=1)
+    fans = Fans(origins=O, headings=np.column_stack([np.cos(a), np.sin(a)]), slopes=base)
+    got = fan_mask(occ, grid, fans, 5.0)
+    want = np.zeros(grid.shape, np.uint8)
+    D = fans.directions().reshape(F, -1, 3)
+    for f in range(F):
+        ray_mask(occ, grid, O[f], D[f], 5.0, out=want)
+    assert want.sum() > 3000
+    np.testing.assert_array_equal(got, want)
+
+
+def test_fans_serial_equals_parallel(monkeypatch):
+    rng = np.random.default_rng(1)
+    occ = rng.random((30, 20, 10)) < 0.05
+    grid = _unit_grid(occ.shape)
+    F = 100
+    a = rng.uniform(0, 2 * np.pi, F)
+    fans = Fans(origins=rng.uniform(-2, 25, (F, 3)), headings=np.column_stack([np.cos(a), np.sin(a)]),
+                slopes=np.sort(rng.normal(0, 0.3, (F, 12)), axis=1))
+    monkeypatch.setattr(vis, "PARALLEL_MIN_FANS", 10**9)
+    serial = fan_mask(occ, grid, fans, 40.0)
+    monkeypatch.setattr(vis, "PARALLEL_MIN_FANS", 1)
+    parallel = fan_mask(occ, grid, fans, 40.0)
+    assert serial.any()
+    np.testing.assert_array_equal(serial, parallel)
+
+
+def test_fans_are_checked():
+    with pytest.raises(ValueError, match="ascending"):
+        Fans(origins=np.zeros((1, 3)), headings=[[1.0, 0.0]], slopes=[[0.2, 0.1]])
+    with pytest.raises(ValueError, match="unit"):
+        Fans(origins=np.zeros((1, 3)), headings=[[2.0, 0.0]], slopes=[[0.1]])
+    with pytest.raises(ValueError, match="finite"):
+        Fans(origins=np.zeros((1, 3)), headings=[[1.0, 0.0]], slopes=[[np.nan]])
+    with pytest.raises(ValueError, match="fans need"):
+        Fans(origins=np.zeros((2, 3)), headings=[[1.0, 0.0]], slopes=[[0.1]])
+
+
+def _same_rays(a: np.ndarray, b: np.ndarray) -> None:
+    assert a.shape == b.shape
+    # the same set of unit vectors (sorted on rounded values: float noise must not reorder them)
+    ka, kb = np.round(a, 9), np.round(b, 9)
+    np.testing.assert_allclose(a[np.lexsort(ka.T)], b[np.lexsort(kb.T)], atol=1e-12)
+
+
+def test_camera_fans_are_the_camera_rays():
+    rig = RigConfig()
+    poses = sensor_to_lidar(rig)
+    for cam in rig.cameras:
+        fans = camera_fans(cam, poses[cam.name], stride=4)
+        o, d = camera_rays(cam, poses[cam.name], stride=4)
+        assert fans is not None and len(fans) == len(range(0, cam.width, 4))
+        np.testing.assert_allclose(fans.origins, np.broadcast_to(o, fans.origins.shape))
+        _same_rays(fans.directions(), d)
+    # a pitched camera's image columns are not vertical planes: no fans (traced ray by ray)
+    T = poses["camera_00"].copy()
+    c, s_ = np.cos(0.2), np.sin(0.2)
+    T[:3, :3] = np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]]) @ T[:3, :3]
+    assert camera_fans(rig.cameras[0], T) is None
+
+
+def test_lidar_fans_are_the_lidar_beams():
+    lidar = RigConfig().lidar
+    fans, vertical = lidar_fans(lidar)
+    assert len(vertical) == 0 and len(fans) == lidar.points_per_frame // lidar.channels
+    _same_rays(fans.directions(), lidar_directions(lidar))
+    # beams straight up/down belong to no fan: traced on their own
+    steep = lidar.model_copy(update={"upper_fov_deg": 90.0, "lower_fov_deg": -90.0, "channels": 5})
+    fans, vertical = lidar_fans(steep)
+    np.testing.assert_allclose(vertical, [[0, 0, 1.0], [0, 0, -1.0]])
+    assert fans.slopes.shape[1] == 3
+
+
+def test_rig_masks_by_fans_equal_the_rays_almost_everywhere():
+    # the default rig on a street (floor, walls, a car): fans against the pixel and beam rays
+    # one by one; they differ only where a ray passes exactly through a voxel edge (the camera
+    # centres sit on lattice planes of a 0.2 m grid, so such ties exist)
+    grid = GridSpec(voxel_size=0.2)
+    occ = np.zeros(grid.shape, bool)
+    k0 = int((-1.73 - grid.origin[2]) // 0.2)
+    occ[:, :, k0] = True
+    occ[:, :20, :] = True
+    occ[:, -20:, :] = True
+    occ[150:170, 110:140, k0:k0 + 8] = True
+    rig = RigConfig()
+    cam, lid = visibility_masks(occ, grid, rig, camera_stride=4)
+    packed = vis.pack_occupancy(occ, grid)
+    mask = packed.new_mask()
+    poses = sensor_to_lidar(rig)
+    maxr = float(np.linalg.norm(np.asarray(grid.shape) * 0.2))
+    for c in rig.cameras:
+        packed.trace(mask, *camera_rays(c, poses[c.name], 4), maxr)
+    cam_rays = packed.or_into(mask, np.zeros(grid.shape, np.uint8))
+    mask = packed.new_mask()
+    packed.trace(mask, np.zeros(3), lidar_directions(rig.lidar), rig.lidar.range_m)
+    lid_rays = packed.or_into(mask, np.zeros(grid.shape, np.uint8))
+    for a, b in ((cam, cam_rays), (lid, lid_rays)):
+        assert b.sum() > 10000
+        assert (a != b).sum() <= 1e-3 * b.sum()
+
+
+def test_slabs_and_packing_by_slabs_equal_the_whole():
+    rng = np.random.default_rng(4)
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(3.0, 2.0, 7.0), voxel_size=0.1)  # 30x20x70
+    occ = rng.random(grid.shape) < 0.02
+    whole = vis.pack_occupancy(occ, grid)
+    words = whole.words.copy()
+    parts = vis.pack_occupancy(None, grid)
+    for x0 in range(0, 30, 8):
+        parts.pack_slab(x0, occ[x0:x0 + 8])
+    np.testing.assert_array_equal(parts.words, words)
+    with pytest.raises(ValueError, match="does not fit"):
+        parts.pack_slab(25, occ[:8])
+    mask = parts.new_mask()
+    parts.trace(mask, np.array([0.05, 1.0, 3.5]), rng.normal(size=(500, 3)), 10.0)
+    full = parts.or_into(mask, np.zeros(grid.shape, np.uint8))
+    assert full.any() and (full <= 1).all()
+    for x0 in range(0, 30, 7):
+        np.testing.assert_array_equal(parts.slab(mask, x0, min(7, 30 - x0)), full[x0:x0 + 7])
