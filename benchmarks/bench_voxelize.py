@@ -16,6 +16,9 @@ default region (x [-25.6, 51.2], y [-25.6, 25.6], z [-3, 10] m):
   speed ratio and the IoU of the two voxel sets (open3d's out-of-bounds voxels dropped).
 * solid fill of one building at 0.1 m: ``stages.voxelize.fill_interior`` against
   ``open3d.t.geometry.RaycastingScene.compute_occupancy`` on the voxel centres.
+* the whole frame composed tile by tile, and its visibility masks for the default rig (every
+  camera pixel, every LiDAR beam): fans (``stages.voxelize.visibility``, algorithm 2) against the
+  same rays traced one by one by the 3D DDA (algorithm 1), with the voxels on which they differ.
 * the whole frame composed (``voxelize_scene``: fusion, elevation order, fills) for reference.
 
 The numba JIT is warmed up (compiled or loaded from its cache) before anything is timed.
@@ -297,12 +300,15 @@ def main(argv: list[str] | None = None) -> dict:
 
     print()
     print("whole frame composed tile by tile (voxelize_tiles, 128-voxel x-slabs, buffers reused: the pipeline's")
-    print("  path) and the camera/LiDAR visibility masks (3D DDA, camera rays every 2nd pixel), 1 and 2 threads")
-    from stages.voxelize import visibility_masks, voxelize_tiles
-    from stages.voxelize.visibility import warmup as warmup_visibility
+    print("  path) and the camera/LiDAR visibility masks of the default rig (every pixel of the six cameras, the")
+    print("  LiDAR's beams) traced as fans, against the same rays traced one by one by the 3D DDA; 1 and 2 threads")
     from schemas.rig import RigConfig
+    from stages.voxelize import voxelize_tiles
+    from stages.voxelize import visibility as vis
 
-    warmup_visibility()
+    vis.warmup()
+    rig = RigConfig()
+    poses = vis.sensor_to_lidar(rig)
     results["tiles"] = []
     for vs in (0.2, 0.05):
         grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=vs)
@@ -315,15 +321,38 @@ def main(argv: list[str] | None = None) -> dict:
                 for tile in voxelize_tiles(meshes, grid, 128):
                     sem[tile.x0:tile.x0 + tile.semantic.shape[0]] = tile.semantic
                 t_tiles = time.perf_counter() - t0
+            packed = vis.pack_occupancy(sem, grid)
+            t_fans, t_rays = [], []
+            for _ in range(2):
+                t0 = time.perf_counter()
+                fans = [vis.lidar_visibility_bits(packed, rig).copy(), vis.camera_visibility_bits(packed, rig).copy()]
+                t_fans.append(time.perf_counter() - t0)
+            # the same rays one by one (3D DDA): the LiDAR's beams and every camera pixel
+            maxr = float(np.linalg.norm(np.asarray(grid.shape) * vs))
             t0 = time.perf_counter()
-            visibility_masks(sem, grid, RigConfig(), camera_stride=2)
-            t_masks = time.perf_counter() - t0
-            row[f"tiles_{threads}thread_s"] = t_tiles
-            row[f"masks_{threads}thread_s"] = t_masks
-            print(f"  {vs:>5} m, {threads} thread(s): composed {t_tiles:.2f} s, masks {t_masks:.2f} s")
+            lid = packed.new_mask("bench_lidar")
+            packed.trace(lid, np.zeros(3), vis.lidar_directions(rig.lidar), rig.lidar.range_m)
+            cam = packed.new_mask("bench_camera")
+            for c in rig.cameras:
+                packed.trace(cam, *vis.camera_rays(c, poses[c.name]), maxr)
+            t_rays.append(time.perf_counter() - t0)
+            n_rays = sum(c.width * c.height for c in rig.cameras) + len(vis.lidar_directions(rig.lidar))
+            agree = []
+            for a, b in zip(fans, (lid, cam)):
+                ma = packed.or_into(a, np.zeros(grid.shape, np.uint8))
+                mb = packed.or_into(b, np.zeros(grid.shape, np.uint8))
+                agree.append((int(mb.sum()), int((ma != mb).sum())))
+                del ma, mb
+            row.update({f"tiles_{threads}thread_s": t_tiles, f"masks_fans_{threads}thread_s": min(t_fans),
+                        f"masks_dda_{threads}thread_s": min(t_rays), "rays": n_rays,
+                        "lidar_observed": agree[0][0], "lidar_differ": agree[0][1],
+                        "camera_observed": agree[1][0], "camera_differ": agree[1][1]})
+            print(f"  {vs:>5} m, {threads} thread(s): composed {t_tiles:.2f} s; masks ({n_rays / 1e6:.2f} M rays) as fans "
+                  f"{min(t_fans):.2f} s, ray by ray {min(t_rays):.2f} s ({min(t_rays) / min(t_fans):.1f}x); voxels that "
+                  f"differ: LiDAR {agree[0][1]:,} of {agree[0][0]:,}, camera {agree[1][1]:,} of {agree[1][0]:,}")
         numba.set_num_threads(nthreads)
         results["tiles"].append(row)
-        del sem
+        del sem, packed
 
     print()
     print("whole frame composed (voxelize_scene: stuff fusion, cull, elevation order, surfaces + fills;")

@@ -405,8 +405,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     from stages.scenes.assembly import region_of_grid
     from stages.scratch import scratch
     from stages.voxelize import voxelize_tiles
-    from stages.voxelize.visibility import (auto_camera_stride, camera_visibility_bits, lidar_visibility_bits,
-                                            pack_occupancy)
+    from stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
@@ -448,9 +447,8 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     #    mask written an x-slab at a time from its bits
     if packed is not None:
         rig = cfg.rig or RigConfig()
-        stride = cfg.camera_ray_stride or auto_camera_stride(rig, grid.voxel_size)
         for name, bits in (("mask_lidar", lidar_visibility_bits(packed, rig)),
-                           ("mask_camera", camera_visibility_bits(packed, rig, stride))):
+                           ("mask_camera", camera_visibility_bits(packed, rig, cfg.camera_ray_stride))):
             for x0 in range(0, packed.shape[0], tile_x):
                 nx = min(tile_x, packed.shape[0] - x0)
                 occ.write_tile(seq_id, grid, frame_index, name, packed.slab(bits, x0, nx), x0)

@@ -103,10 +103,10 @@ class VoxelizeConfig(StageConfig):
         "so the standalone voxelizer's 'solid' has no meaning here)")
     chunk_edge: int = Field(128, ge=16, le=1024, description="x/y chunk edge of the Zarr arrays, voxels")
     tile_chunks: int = Field(1, ge=1, le=64, description="x chunks per voxelization tile (memory per worker)")
-    masks: bool = Field(True, description="compute mask_camera and mask_lidar (3D DDA from the rig's sensors)")
-    camera_ray_stride: int | None = Field(
-        None, ge=1, le=64, description="camera mask rays through every n-th pixel row and column (1 = every pixel); "
-        "default: neighbouring rays one voxel apart at 25 m (1 at 0.05 m, 4 at 0.2 m)")
+    masks: bool = Field(True, description="compute mask_camera and mask_lidar (ray traversal from the rig's sensors)")
+    camera_ray_stride: int = Field(
+        1, ge=1, le=64, description="camera mask rays through every n-th pixel row and column (1 = every pixel of "
+        "the cameras; larger strides leave gaps between the rays, from 27 m at 0.05 m with stride 1)")
     flow: bool = Field(True, description="compute the occupancy flow of dynamic instances")
     rig: RigConfig | None = Field(
         None, description="the ego rig for the masks; the pipeline sets it from scenes.rig")

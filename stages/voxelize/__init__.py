@@ -3,8 +3,9 @@
 ``surface_voxels``/``fill_interior`` are the numba kernels (linear indices over a grid);
 ``voxelize_scene``/``voxelize_tiles`` compose a frame's meshes in elevation order into
 semantic/instance volumes (whole, or one x-slab at a time); ``visibility_masks`` casts the rig's
-camera and LiDAR rays through them (3D DDA); ``instance_flow`` gives dynamic voxels their velocity;
-``resample`` pools and resamples onto coarser grids and other datasets' grids.
+camera and LiDAR rays through them (DDA ray traversal; the rig's rays as vertical fans);
+``instance_flow`` gives dynamic voxels their velocity; ``resample`` pools and resamples onto
+coarser grids and other datasets' grids.
 """
 
 from stages.voxelize.compose import FILL_MODES, elevation_order, voxelize_scene, voxelize_tiles

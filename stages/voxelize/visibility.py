@@ -71,8 +71,10 @@ then costs a few word operations instead of a step per ray and voxel:
 
 The result equals the union of the rays' 3D DDA traversals except where a ray passes exactly
 through a voxel edge, where the two resolve the tie differently (5e-5 of the camera mask's voxels
-on a default 0.05 m frame; both are in the tests' tolerance band). The camera mask's 0.79 M rays
-take 518 M DDA steps one by one; as fans they take 3.8 M column visits.
+on a default 0.05 m frame; both are in the tests' tolerance band). Work grows with the columns
+the fans cross and the rays far from the sensor, not with the voxels every ray visits: every
+pixel of the six cameras at 0.05 m (3.2 M rays) costs about what every second pixel does
+(``benchmarks/bench_voxelize.py`` measures both algorithms on the same rays).
 
 Parallelism
 -----------
@@ -1013,15 +1015,6 @@ def sensor_to_lidar(rig: RigConfig) -> dict[str, np.ndarray]:
     out = {cam.name: ego_to_lidar @ np.asarray(cam.camera_to_ego(), dtype=np.float64) for cam in rig.cameras}
     out[rig.lidar.name] = ego_to_lidar @ np.asarray(rig.lidar.sensor_to_ego(), dtype=np.float64)
     return out
-
-
-def auto_camera_stride(rig: RigConfig, voxel_size: float, distance: float = 25.0) -> int:
-    """The camera ray stride (pixels) whose neighbouring rays are at most one voxel apart at
-    ``distance`` metres, ``floor(voxel_size * focal_px / distance)``, but at least 2 (reference
-    rig: 2 at 0.05 and 0.1 m, 4 at 0.2 m, 8 at 0.4 m). Beyond that distance rays may pass between
-    voxels (at 0.05 m from about 14 m)."""
-    focal = min((c.focal_px for c in rig.cameras), default=1.0)
-    return max(2, int(voxel_size * focal / distance))
 
 
 def pack_occupancy(occupied: np.ndarray | None, grid: GridSpec) -> _Volume:
