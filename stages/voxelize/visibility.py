@@ -698,9 +698,9 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
 
 
 @njit(cache=True, nogil=True)
-def _fans_serial(occ, mask, nx, ny, nz, W, O, H, M, t_range):
-    """Every fan in the calling thread: O (F, 3) origins, H (F, 2) horizontal directions, M (F, n)
-    ascending slopes, voxel units."""
+def _fan_stripe(occ, mask, nx, ny, nz, W, O, H, M, t_range, first, step):
+    """Fans first, first + step, ... of O (F, 3) origins, H (F, 2) horizontal directions and
+    M (F, n) ascending slopes (voxel units), with one set of scratch buffers."""
     n = M.shape[1]
     acc = np.zeros(W, np.uint64)
     R = np.empty(n, np.float64)
@@ -710,29 +710,23 @@ def _fans_serial(occ, mask, nx, ny, nz, W, O, H, M, t_range):
     rb = np.empty(n, np.int64)
     sa = np.empty(n, np.int64)
     sb = np.empty(n, np.int64)
-    for f in range(H.shape[0]):
+    for f in range(first, H.shape[0], step):
         _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, O[f, 0], O[f, 1], O[f, 2], H[f, 0], H[f, 1],
              M[f], t_range)
+
+
+@njit(cache=True, nogil=True)
+def _fans_serial(occ, mask, nx, ny, nz, W, O, H, M, t_range):
+    """Every fan in the calling thread."""
+    _fan_stripe(occ, mask, nx, ny, nz, W, O, H, M, t_range, 0, 1)
 
 
 @njit(parallel=True, cache=True, nogil=True)
 def _fans_parallel(occ, mask, nx, ny, nz, W, O, H, M, t_range):
     """:func:`_fans_serial` over numba's threads, fans dealt out in interleaved stripes."""
-    n = M.shape[1]
-    nf = H.shape[0]
-    stripes = min(_STRIPES, nf)
+    stripes = min(_STRIPES, H.shape[0])
     for s in prange(stripes):
-        acc = np.zeros(W, np.uint64)
-        R = np.empty(n, np.float64)
-        los = np.empty(n, np.int64)
-        his = np.empty(n, np.int64)
-        ra = np.empty(n, np.int64)
-        rb = np.empty(n, np.int64)
-        sa = np.empty(n, np.int64)
-        sb = np.empty(n, np.int64)
-        for f in range(s, nf, stripes):
-            _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, O[f, 0], O[f, 1], O[f, 2], H[f, 0], H[f, 1],
-                 M[f], t_range)
+        _fan_stripe(occ, mask, nx, ny, nz, W, O, H, M, t_range, s, stripes)
 
 
 # ----------------------------------------------------------------------------------------------
