@@ -415,7 +415,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     tile_x = cfg.chunk_edge * cfg.tile_chunks
     cx, cy = occ.chunk_edges(seq_id, grid, "instance")
     flow = _frame_flow(inputs) if cfg.flow else None
-    packed = pack_occupancy(None, grid) if cfg.masks else None
+    packed = pack_occupancy(None, grid, reuse=True) if cfg.masks else None
     vs = float(grid.voxel_size)
     # 1. per tile: semantic, instance (only the chunks its things' boxes reach are read), flow,
     #    and the tile's occupancy packed for the masks

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
 from schemas.rig import RigConfig
@@ -106,10 +106,17 @@ class VoxelizeConfig(StageConfig):
     masks: bool = Field(True, description="compute mask_camera and mask_lidar (ray traversal from the rig's sensors)")
     camera_ray_stride: int = Field(
         1, ge=1, le=64, description="camera mask rays through every n-th pixel row and column (1 = every pixel of "
-        "the cameras; larger strides leave gaps between the rays, from 27 m at 0.05 m with stride 1)")
+        "the cameras, whose neighbouring rays are one 0.05 m voxel apart at about 27 m; n divides that distance by "
+        "n). null, the former automatic choice, means 1")
     flow: bool = Field(True, description="compute the occupancy flow of dynamic instances")
     rig: RigConfig | None = Field(
         None, description="the ego rig for the masks; the pipeline sets it from scenes.rig")
+
+    @field_validator("camera_ray_stride", mode="before")
+    @classmethod
+    def _stride_null_is_every_pixel(cls, v):
+        # configs written by `carlaocc config` before every pixel became the default say null
+        return 1 if v is None else v
 
     def grid(self, voxel_size: float) -> GridSpec:
         """The grid spec of this region at one resolution (validates the resolution)."""

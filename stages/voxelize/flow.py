@@ -125,6 +125,8 @@ def actor_voxels(instance: np.ndarray, things: np.ndarray, instance_ids: np.ndar
     of ``instance_ids``."""
     inst = np.ascontiguousarray(instance)
     ids = np.asarray(instance_ids, dtype=np.int64).reshape(-1)
+    if len(np.unique(ids)) != len(ids):
+        raise ValueError("instance_ids must be unique")
     things = np.asarray(things, dtype=np.int64).reshape(-1, 7)
     # one box per actor: the union of its meshes' boxes (a voxel is then found once)
     rows, actors = [], []

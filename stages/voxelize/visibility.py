@@ -69,9 +69,10 @@ then costs a few word operations instead of a step per ray and voxel:
    run's ranges is one interval, marked with a few word operations; farther out each free ray
    sets its own bits (no occupancy test: the run is known to be free).
 
-The result equals the union of the rays' 3D DDA traversals except where a ray passes exactly
-through a voxel edge, where the two resolve the tie differently (5e-5 of the camera mask's voxels
-on a default 0.05 m frame; both are in the tests' tolerance band). Work grows with the columns
+The result equals the union of the rays' 3D DDA traversals except at ties, which the two resolve
+differently: a ray through a voxel edge, or a fan whose origin lies exactly on a horizontal voxel
+face (the DDA starts in the voxel above, a falling fan ray in the voxel below). Both stay in the
+tests' tolerance band; on a default 0.05 m frame 5e-5 of the camera mask's voxels differ. Work grows with the columns
 the fans cross and the rays far from the sensor, not with the voxels every ray visits: every
 pixel of the six cameras at 0.05 m (3.2 M rays) costs about what every second pixel does
 (``benchmarks/bench_voxelize.py`` measures both algorithms on the same rays).
@@ -288,7 +289,7 @@ def _slab(o, d, n, t0, t1):
 @njit(cache=True, nogil=True, inline="always")
 def _clamp_floor(x, n):
     """Voxel of coordinate x (floor), clamped to [0, n - 1]."""
-    i = int(math.floor(x))  # noqa: RUF046 (an int for numba whatever floor returns)
+    i = int(math.floor(min(max(x, -1.0), n + 1.0)))  # noqa: RUF046 (an int for numba whatever floor returns)
     if i < 0:
         return 0
     if i > n - 1:
@@ -392,10 +393,26 @@ def _rays_parallel(occ, mask, nx, ny, nz, W, O, D, t_range):
 # visits the cells lo..hi: lo = floor(lower end), hi = ceil(upper end) - 1 (at least lo).
 
 
+# Heights (voxel units) are clamped to [-2, 2^40] before they become integer cells: far outside
+# the grid either way, and no float -> int overflow for steep rays far away.
+_Z_LOW = -2.0
+_Z_HIGH = 1099511627776.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _floor_cell(z):
+    return int(math.floor(min(max(z, _Z_LOW), _Z_HIGH)))  # noqa: RUF046
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ceil_cell(z):
+    return int(math.ceil(min(max(z, _Z_LOW), _Z_HIGH)))  # noqa: RUF046
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _cell_lo(oz, m, r_in, r_out):
     """Lowest cell of a ray's voxel range in the column [r_in, r_out] (not clipped to the grid)."""
-    return int(math.floor(min(oz + m * r_in, oz + m * r_out)))
+    return _floor_cell(min(oz + m * r_in, oz + m * r_out))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -403,7 +420,7 @@ def _cell_hi(oz, m, r_in, r_out):
     """Highest cell of a ray's voxel range in the column [r_in, r_out] (not clipped to the grid)."""
     za = oz + m * r_in
     zb = oz + m * r_out
-    return max(int(math.ceil(max(za, zb))) - 1, int(math.floor(min(za, zb))))
+    return max(_ceil_cell(max(za, zb)) - 1, _floor_cell(min(za, zb)))
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -470,8 +487,8 @@ def _rays_column(occ, acc, cb, nz, M, R, a, b, oz, r_in, r_out, sa, sb, ns):
             dead = True
         za = oz + m * r_in
         zb = oz + m * r_end
-        lo = int(math.floor(min(za, zb)))
-        hi = max(int(math.ceil(max(za, zb))) - 1, lo)
+        lo = _floor_cell(min(za, zb))
+        hi = max(_ceil_cell(max(za, zb)) - 1, lo)
         if hi < 0:
             dead = dead or m <= 0.0  # below the grid and not rising
         elif lo >= nz:
@@ -543,9 +560,9 @@ def _free_cells(acc, M, a, b, oz, r_in, r_out, nz, los, his):
     for v in range(a, b + 1):
         za = oz + M[v] * r_in
         zb = oz + M[v] * r_out
-        lo = int(math.floor(min(za, zb)))
+        lo = _floor_cell(min(za, zb))
         los[v] = max(lo, 0)
-        his[v] = min(max(int(math.ceil(max(za, zb))) - 1, lo), top)
+        his[v] = min(max(_ceil_cell(max(za, zb)) - 1, lo), top)
     # 2. the ranges into words: lo ascends with the ray, so the rays starting in one word are
     #    consecutive and gathered in a register (a rare range running past the word is marked
     #    on its own); rays below/above the grid (empty ranges) are a prefix and a suffix
@@ -597,10 +614,10 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
     gmax = 0.0
     ns = 0
     for v in range(n):
-        R[v] = t_range / math.sqrt(1.0 + M[v] * M[v])
+        R[v] = t_range / math.hypot(1.0, M[v])
         if v > 0:
             gmax = max(gmax, M[v] - M[v - 1])
-        if R[v] > r0:
+        if R[v] >= r0:  # (a ray ending where it enters marks its entry voxel, as the 3D DDA)
             ns = _append_run(ra, rb, ns, v, v)
     nr = ns
     r_in = r0
@@ -767,7 +784,7 @@ class Fans:
     def directions(self) -> np.ndarray:
         """(F * n, 3) unit directions, fan by fan, slopes ascending within a fan."""
         M = self.slopes
-        c = 1.0 / np.sqrt(1.0 + M * M)
+        c = 1.0 / np.hypot(1.0, M)
         d = np.stack(np.broadcast_arrays(self.headings[:, 0:1] * c, self.headings[:, 1:2] * c, M * c), axis=-1)
         return np.ascontiguousarray(d.reshape(-1, 3))
 
@@ -784,17 +801,22 @@ def _as_flat_u8(a: np.ndarray) -> np.ndarray:
 
 class _Volume:
     """An occupancy volume packed once into column bits (see "Working layout"), tracing ray sets
-    and fans into column-bit masks."""
+    and fans into column-bit masks.
 
-    def __init__(self, grid: GridSpec, occupied: np.ndarray | None = None):
+    With ``reuse`` its bits and masks live in per-thread scratch buffers that stay mapped
+    between frames (:mod:`stages.scratch`): the next reusing volume of the thread overwrites
+    them, as does the next mask of the same name. Without it, they are arrays of its own."""
+
+    def __init__(self, grid: GridSpec, occupied: np.ndarray | None = None, reuse: bool = False):
         self.grid = grid
+        self.reuse = reuse
         self.shape = tuple(int(s) for s in grid.shape)
         nx, ny, nz = self.shape
         self.W = (nz + 63) // 64
         self.ncol = nx * ny
-        # occupancy bits (a per-thread buffer reused between frames), packed whole here or slab
-        # by slab by the caller (pack_slab)
-        self.words = scratch("occupancy_columns", self.ncol * self.W, np.uint64)
+        # occupancy bits, packed whole here or slab by slab by the caller (pack_slab)
+        size = self.ncol * self.W
+        self.words = scratch("occupancy_columns", size, np.uint64) if reuse else np.empty(size, np.uint64)
         if occupied is not None:
             if np.shape(occupied) != self.shape:
                 raise ValueError(f"occupied has shape {np.shape(occupied)}, the grid {self.shape}")
@@ -819,9 +841,11 @@ class _Volume:
         return (origins - np.asarray(self.grid.origin, dtype=np.float64)) / self.grid.voxel_size, t_range
 
     def new_mask(self, name: str = "mask_columns") -> np.ndarray:
-        """An empty column-bit mask: the per-thread scratch buffer ``name``, zeroed (the next
-        mask of that name reuses it)."""
-        return scratch(name, self.ncol * self.W, np.uint64, zero=True)
+        """An empty column-bit mask: with ``reuse``, the per-thread scratch buffer ``name``,
+        zeroed (the next mask of that name reuses it); else a new array."""
+        if self.reuse:
+            return scratch(name, self.ncol * self.W, np.uint64, zero=True)
+        return np.zeros(self.ncol * self.W, np.uint64)
 
     def trace(self, mask: np.ndarray, origins, directions, max_range: float) -> None:
         """Mark the voxels the rays visit (metres, grid frame) in ``mask`` (3D DDA)."""
@@ -1011,16 +1035,18 @@ def sensor_to_lidar(rig: RigConfig) -> dict[str, np.ndarray]:
     return out
 
 
-def pack_occupancy(occupied: np.ndarray | None, grid: GridSpec) -> _Volume:
+def pack_occupancy(occupied: np.ndarray | None, grid: GridSpec, reuse: bool = False) -> _Volume:
     """The occupancy packed once (column bits) for any number of ray sets and fans; with
-    ``occupied`` None, an unpacked volume to fill with :meth:`_Volume.pack_slab`."""
-    return _Volume(grid, occupied)
+    ``occupied`` None, an unpacked volume to fill with :meth:`_Volume.pack_slab`. ``reuse``:
+    keep the bits and masks in per-thread scratch buffers (see :class:`_Volume`; the pipeline's
+    tasks, one frame after another)."""
+    return _Volume(grid, occupied, reuse)
 
 
 def lidar_visibility_bits(packed: _Volume, rig: RigConfig) -> np.ndarray:
     """mask_lidar as column bits: the rig's beams (:func:`lidar_directions`, traced as
-    :func:`lidar_fans`) from the LiDAR origin up to ``rig.lidar.range_m``. A per-thread buffer
-    that the next call overwrites."""
+    :func:`lidar_fans`) from the LiDAR origin up to ``rig.lidar.range_m``; of a reusing volume,
+    a per-thread buffer that the next call overwrites."""
     mask = packed.new_mask("mask_lidar_columns")
     fans, vertical = lidar_fans(rig.lidar)
     packed.trace_fans(mask, fans, rig.lidar.range_m)
@@ -1032,8 +1058,8 @@ def camera_visibility_bits(packed: _Volume, rig: RigConfig, camera_stride: int =
                            max_range: float | None = None) -> np.ndarray:
     """mask_camera as column bits: every camera's pixel rays (every ``camera_stride``-th
     row/column, from the camera centre, up to ``max_range`` m; default the grid's diagonal);
-    level cameras are traced as fans (:func:`camera_fans`), others ray by ray. A per-thread
-    buffer that the next call overwrites."""
+    level cameras are traced as fans (:func:`camera_fans`), others ray by ray; of a reusing
+    volume, a per-thread buffer that the next call overwrites."""
     if max_range is None:
         max_range = float(np.linalg.norm(np.asarray(packed.shape, dtype=np.float64) * packed.grid.voxel_size))
     poses = sensor_to_lidar(rig)

@@ -61,3 +61,12 @@ def test_town_spec_checks():
         DatasetConfig.model_validate({"scenes": {"towns": [{"style": "suburb", "blockz": 3}]}})
     cfg = DatasetConfig.model_validate({"scenes": {"towns": [{"style": "arterial", "traffic_levels": ["high"]}]}})
     assert cfg.scenes.towns[0].style == "arterial" and cfg.scenes.rig.lidar.channels == 32
+
+
+def test_camera_ray_stride_defaults_to_every_pixel_and_null_means_it_too():
+    from schemas.configs import VoxelizeConfig
+
+    assert VoxelizeConfig().camera_ray_stride == 1
+    assert VoxelizeConfig(camera_ray_stride=None).camera_ray_stride == 1
+    with pytest.raises(ValueError):
+        VoxelizeConfig(camera_ray_stride=0)

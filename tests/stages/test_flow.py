@@ -129,3 +129,10 @@ def test_actor_voxels_inside_boxes_give_the_dense_flow():
     np.testing.assert_array_equal(sparse, dense)
     # a box too small to hold the actor's voxels misses them: the boxes are the contract
     assert len(actor_voxels(inst, np.array([[7, 1, 2, 2, 3, 1, 2]]), np.array([7]))[0]) == 1
+
+
+def test_actor_voxels_refuses_repeated_ids():
+    from stages.voxelize.flow import actor_voxels
+
+    with pytest.raises(ValueError, match="unique"):
+        actor_voxels(np.zeros((2, 2, 2), np.uint32), np.zeros((0, 7), np.int64), np.array([4, 4]))

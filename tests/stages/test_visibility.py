@@ -451,3 +451,38 @@ def test_slabs_and_packing_by_slabs_equal_the_whole():
     assert full.any() and (full <= 1).all()
     for x0 in range(0, 30, 7):
         np.testing.assert_array_equal(parts.slab(mask, x0, min(7, 30 - x0)), full[x0:x0 + 7])
+
+
+def test_a_packed_volume_keeps_its_bits_unless_it_reuses_the_thread_buffers():
+    g = GridSpec(region_min=(0, 0, 0), region_max=(8, 8, 8), voxel_size=1.0)
+    wall = np.zeros(g.shape, bool)
+    wall[3] = True
+    p = vis.pack_occupancy(wall, g)
+    m = p.new_mask()
+    # other volumes and masks of the same thread come and go in between
+    ray_mask(np.zeros(g.shape, bool), g, np.array([0.5, 0.5, 0.5]), np.array([[1.0, 0, 0]]), 1.0)
+    vis.warmup()
+    p.trace(m, np.array([0.5, 4.5, 4.5]), np.array([[1.0, 0, 0]]), 100.0)
+    p.trace(p.new_mask(), np.array([0.5, 1.5, 1.5]), np.array([[1.0, 0, 0]]), 100.0)
+    np.testing.assert_array_equal(p.or_into(m, np.zeros(g.shape, np.uint8))[:, 4, 4], [1, 1, 1, 1, 0, 0, 0, 0])
+    # a reusing volume shares the thread's buffers (what the pipeline wants, frame after frame)
+    a = vis.pack_occupancy(wall, g, reuse=True)
+    b = vis.pack_occupancy(np.zeros(g.shape, bool), g, reuse=True)
+    assert np.shares_memory(a.words, b.words) and np.shares_memory(a.new_mask("x"), b.new_mask("x"))
+
+
+def test_steep_fans_far_away_do_not_overflow():
+    g = GridSpec(region_min=(0, 0, 0), region_max=(4, 4, 70), voxel_size=1.0)
+    occ = np.zeros(g.shape, bool)
+    for z, m in ((2.2, -1e20), (69.5, 1e20), (2.2, 1e30), (2.2, -1e300)):
+        f = Fans(origins=[[1.3, 1.6, z]], headings=[[1.0, 0.0]], slopes=[[m]])
+        np.testing.assert_array_equal(fan_mask(occ, g, f, np.inf), ray_mask(occ, g, f.origins[0], f.directions(), np.inf))
+
+
+def test_zero_range_marks_the_origin_voxel_like_the_dda():
+    g = _unit_grid((4, 4, 4))
+    occ = np.zeros(g.shape, bool)
+    f = Fans(origins=[[1.3, 1.6, 2.2]], headings=[[1.0, 0.0]], slopes=[[-0.4, 0.1]])
+    got = fan_mask(occ, g, f, 0.0)
+    np.testing.assert_array_equal(got, ray_mask(occ, g, f.origins[0], f.directions(), 0.0))
+    assert np.argwhere(got).tolist() == [[1, 1, 2]]
