@@ -19,6 +19,8 @@ way; the tests read every written array back through zarr-python too.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import zarr
 from numba import njit
@@ -246,22 +248,38 @@ class OccupancyStore:
         shape = self._layout(sequence_id, grid, name)[0]
         if data.shape[1:] != shape[2:]:
             raise ValueError(f"{name}: tile shape {data.shape} does not match the array's {shape[1:]} beyond x")
-        (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, grid, frame, name, x0, data.shape[0])
-        cx, cy = chunks[1], chunks[2]
-        little = dtype.newbyteorder("<")
-        padded = np.zeros(chunks[1:], dtype=little)
+        cx, cy = self.chunk_edges(sequence_id, grid, name)
         # one pass over the tile finds the chunks that hold data (per-block .any() is ~10x slower)
         flags = chunk_flags(data, cx, cy, candidates)
-        for ci, cj, key in keys:
+
+        def block(ci: int, cj: int) -> np.ndarray | None:
             if not flags[ci - x0 // cx, cj]:
+                return None
+            return data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
+
+        self.write_chunks(sequence_id, grid, frame, name, x0, data.shape[0], block)
+
+    def write_chunks(self, sequence_id: str, grid: GridSpec, frame: int, name: str, x0: int, nx: int,
+                     block: Callable[[int, int], np.ndarray | None]) -> None:
+        """Write the chunks of voxels ``[x0, x0 + nx)`` of one frame of one array (whole chunks,
+        as :meth:`write_tile`), each from ``block(ci, cj)``: the chunk's voxels (the chunk's
+        shape, or what the array holds of it at its edges; encoded without a copy when
+        C-contiguous), or None for a chunk that is all zero (then removed)."""
+        (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, grid, frame, name, x0, nx)
+        little = dtype.newbyteorder("<")
+        padded = None
+        for ci, cj, key in keys:
+            data = block(ci, cj)
+            if data is None:
                 remove_object(self.store, key)
                 continue
-            block = data[ci * cx - x0:(ci + 1) * cx - x0, cj * cy:(cj + 1) * cy]
-            if block.shape != padded.shape:  # an edge chunk: pad with the fill value
+            if data.shape != chunks[1:]:  # an edge chunk: pad with the fill value
+                if padded is None:
+                    padded = np.zeros(chunks[1:], dtype=little)
                 padded[...] = 0
-                padded[:block.shape[0], :block.shape[1]] = block
-                block = padded
-            put_object(self.store, key, encode_chunk(block, little))
+                padded[:data.shape[0], :data.shape[1]] = data
+                data = padded
+            put_object(self.store, key, encode_chunk(data, little))
 
     def chunk_edges(self, sequence_id: str, grid: GridSpec, name: str) -> tuple[int, int]:
         """(x, y) chunk edge of one array, voxels."""

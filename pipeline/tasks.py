@@ -444,14 +444,14 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
         finally:
             buf[flat] = 0
     # 2. visibility: rays of the rig's LiDAR and cameras through the frame's occupancy, each
-    #    mask written an x-slab at a time from its bits
+    #    mask's chunks unpacked from its bits one at a time (an empty one is known from its words)
     if packed is not None:
         rig = cfg.rig or RigConfig()
+        X, Y = packed.shape[:2]
         for name, bits in (("mask_lidar", lidar_visibility_bits(packed, rig)),
                            ("mask_camera", camera_visibility_bits(packed, rig, cfg.camera_ray_stride))):
-            for x0 in range(0, packed.shape[0], tile_x):
-                nx = min(tile_x, packed.shape[0] - x0)
-                occ.write_tile(seq_id, grid, frame_index, name, packed.slab(bits, x0, nx), x0)
+            occ.write_chunks(seq_id, grid, frame_index, name, 0, X, lambda ci, cj, bits=bits: packed.block(
+                bits, ci * cx, cj * cy, min(cx, X - ci * cx), min(cy, Y - cj * cy)))
     return occ.fingerprints(seq_id, grid, frame_index, names)
 
 

@@ -26,7 +26,8 @@ word ``(i * ny + j) * W + k // 64``, bit ``k % 64``, ``W = ceil(nz / 64)`` words
 at 0.05 m, against 409 MB for a byte a voxel). A ray's voxels in one column are a run of bits of
 one or two words, so marking them is a few word operations whatever their number, and the
 occupancy of a column is read once for every ray of a fan that crosses it. Masks are converted
-back to C-order bytes (:func:`_unpack`) once, after every ray set, whole or an x-slab at a time.
+back to C-order bytes once, after every ray set: whole (:func:`_unpack_or`) or a block of columns
+at a time (:func:`_unpack_block`, a chunk of the store).
 
 Algorithm 1: 3D DDA (any rays; Amanatides & Woo 1987)
 -----------------------------------------------------
@@ -225,30 +226,53 @@ def _pack_columns(occ, ncol, nz, W, words):
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _unpack(mask, c0, ncol, nz, W, out, assign):
-    """Columns ``c0 .. c0 + ncol`` of the column bits ``mask`` as flat C-order bytes ``out``
-    (ncol * nz, 1 = set): written when ``assign``, else OR-ed in (zero words then skipped, full
-    ones written without a per-voxel shift). Parallel over columns."""
+def _unpack_or(mask, ncol, nz, W, out):
+    """OR the column bits ``mask`` into flat C-order bytes ``out`` (ncol * nz, 1 = set): zero words
+    are skipped, full ones written without a per-voxel shift. Parallel over columns."""
     for c in prange(ncol):
         base = c * nz
-        src = (c0 + c) * W
         for q in range(W):
-            w = mask[src + q]
+            w = mask[c * W + q]
+            if w == 0:
+                continue
             k0 = 64 * q
             k1 = min(k0 + 64, nz)
-            if w == 0:
-                if assign:
-                    for k in range(k0, k1):
-                        out[base + k] = 0
-            elif w == _ONES:
+            if w == _ONES:
                 for k in range(k0, k1):
                     out[base + k] = 1
-            elif assign:
-                for k in range(k0, k1):
-                    out[base + k] = np.uint8((w >> np.uint64(k - k0)) & np.uint64(1))
             else:
                 for k in range(k0, k1):
                     out[base + k] |= np.uint8((w >> np.uint64(k - k0)) & np.uint64(1))
+
+
+# byte n of entry b is bit n of b: four voxels' bytes from four bits, as one uint32 store
+_NIBBLE_BYTES = np.array([sum(((b >> n) & 1) << (8 * n) for n in range(4)) for b in range(16)], dtype=np.uint32)
+
+
+@njit(cache=True, nogil=True)
+def _unpack_block(mask, ny, i0, j0, bx, by, nz, W, out, out32, use32):
+    """The columns (i0 .. i0 + bx) x (j0 .. j0 + by) of the column bits ``mask`` as C-order bytes
+    ``out`` (bx * by * nz, 1 = set), written whole; with ``use32`` (nz a multiple of 4, ``out32``
+    the same buffer as uint32) four voxels per store from a nibble table. Returns the number
+    of nonzero words read (0: the block is empty)."""
+    nonzero = 0
+    for xi in range(bx):
+        for yj in range(by):
+            src = ((i0 + xi) * ny + j0 + yj) * W
+            base = (xi * by + yj) * nz
+            for q in range(W):
+                w = mask[src + q]
+                nonzero += w != 0
+                k0 = 64 * q
+                nb = min(64, nz - k0)
+                if use32:
+                    b32 = (base + k0) >> 2
+                    for n in range(nb >> 2):
+                        out32[b32 + n] = _NIBBLE_BYTES[(w >> np.uint64(4 * n)) & np.uint64(15)]
+                else:
+                    for k in range(nb):
+                        out[base + k0 + k] = np.uint8((w >> np.uint64(k)) & np.uint64(1))
+    return nonzero
 
 
 # ----------------------------------------------------------------------------------------------
@@ -614,7 +638,8 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
     gmax = 0.0
     ns = 0
     for v in range(n):
-        R[v] = t_range / math.hypot(1.0, M[v])
+        m = abs(M[v])  # (1 + m^2 overflows beyond 1e154; libm's hypot is slower)
+        R[v] = t_range / (math.sqrt(1.0 + m * m) if m < 1e150 else m)
         if v > 0:
             gmax = max(gmax, M[v] - M[v - 1])
         if R[v] >= r0:  # (a ray ending where it enters marks its entry voxel, as the 3D DDA)
@@ -871,18 +896,29 @@ class _Volume:
 
     def or_into(self, mask: np.ndarray, out: np.ndarray) -> np.ndarray:
         """OR ``mask`` into the C-order uint8 volume ``out`` (returned)."""
-        _unpack(mask, 0, self.ncol, self.shape[2], self.W, out.reshape(-1), False)
+        _unpack_or(mask, self.ncol, self.shape[2], self.W, out.reshape(-1))
         return out
+
+    def block(self, mask: np.ndarray, i0: int, j0: int, bx: int, by: int, name: str = "mask_block") -> np.ndarray | None:
+        """Voxels ``[i0, i0 + bx) x [j0, j0 + by)`` x all z of ``mask`` as uint8 (bx, by, Z) (1 =
+        set) in the per-thread buffer ``name`` (the next call overwrites it); None when no voxel
+        of the block is set."""
+        nx, ny, nz = self.shape
+        if not (0 <= i0 and 0 <= j0 and bx >= 0 and by >= 0 and i0 + bx <= nx and j0 + by <= ny):
+            raise ValueError(f"block [{i0}, {i0 + bx}) x [{j0}, {j0 + by}) outside the grid's {nx} x {ny} columns")
+        flat = scratch(name, -(-bx * by * nz // 4) * 4, np.uint8)
+        out = flat[:bx * by * nz]
+        use32 = nz % 4 == 0
+        nonzero = _unpack_block(mask, ny, i0, j0, bx, by, nz, self.W, out, flat.view(np.uint32), use32)
+        return out.reshape(bx, by, nz) if nonzero else None
 
     def slab(self, mask: np.ndarray, x0: int, nx: int) -> np.ndarray:
         """Voxels ``[x0, x0 + nx)`` of ``mask`` as a uint8 (nx, Y, Z) x-slab (1 = set), in a
         per-thread buffer that the next call overwrites."""
-        ny, nz = self.shape[1:]
         if not (0 <= x0 and nx >= 0 and x0 + nx <= self.shape[0]):
             raise ValueError(f"x-slab [{x0}, {x0 + nx}) outside the grid's {self.shape[0]} voxels")
-        out = scratch("mask_slab", nx * ny * nz, np.uint8).reshape(nx, ny, nz)
-        _unpack(mask, x0 * ny, nx * ny, nz, self.W, out.reshape(-1), True)
-        return out
+        out = self.block(mask, x0, 0, nx, self.shape[1], "mask_slab")
+        return np.zeros((nx, *self.shape[1:]), np.uint8) if out is None else out
 
 
 def _checked_out(out: np.ndarray | None, shape) -> np.ndarray:
@@ -1126,3 +1162,4 @@ def warmup() -> None:
     _fans_parallel(vol.words, mask, *vol.shape, vol.W, O, H, M, 10.0)
     vol.or_into(mask, np.zeros(grid.shape, dtype=np.uint8))
     vol.slab(mask, 0, 1)
+    vol.block(mask, 0, 0, 1, 1)

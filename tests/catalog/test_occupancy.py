@@ -156,3 +156,27 @@ def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing
     np.testing.assert_array_equal(chunk_flags(data, cx, cy, candidates), want & candidates)
     with pytest.raises(ValueError, match="one flag per chunk"):
         chunk_flags(data, cx, cy, np.ones((got.shape[0] + 1, got.shape[1]), bool))
+
+
+def test_write_chunks_from_a_block_function(tmp_path):
+    from catalog.store import Store
+
+    store = Store(str(tmp_path / "root"))
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(4.0, 2.5, 1.0), voxel_size=0.1)  # 40x25x10
+    occ = OccupancyStore(store)
+    occ.create("s", grid, frame_count=1, chunk_edge=16)
+    rng = np.random.default_rng(2)
+    want = (rng.random(grid.shape) < 0.3).astype(np.uint8)
+    want[16:32, 16:] = 0  # an empty (edge) chunk: the block function says None
+    asked = []
+
+    def block(ci, cj):
+        asked.append((ci, cj))
+        b = want[ci * 16:(ci + 1) * 16, cj * 16:(cj + 1) * 16]  # edge chunks smaller: padded on write
+        return np.ascontiguousarray(b) if b.any() else None
+
+    occ.write_chunks("s", grid, 0, "mask_camera", 0, 40, block)
+    assert sorted(asked) == [(i, j) for i in range(3) for j in range(2)]
+    np.testing.assert_array_equal(occ.read_frame("s", grid, 0, ("mask_camera",))["mask_camera"], want)
+    root = f"occupancy.zarr/{occ.array_path('s', grid, 'mask_camera')}/c/0"
+    assert not store.fs.exists(store.path(f"{root}/1/1/0")) and store.fs.exists(store.path(f"{root}/2/1/0"))

@@ -486,3 +486,24 @@ def test_zero_range_marks_the_origin_voxel_like_the_dda():
     got = fan_mask(occ, g, f, 0.0)
     np.testing.assert_array_equal(got, ray_mask(occ, g, f.origins[0], f.directions(), 0.0))
     assert np.argwhere(got).tolist() == [[1, 1, 2]]
+
+
+def test_blocks_of_a_mask_equal_the_whole_and_say_when_empty():
+    rng = np.random.default_rng(9)
+    for nz in (70, 72):  # bytes one by one, and four at a time
+        grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(2.0, 1.7, nz / 10), voxel_size=0.1)
+        occ = rng.random(grid.shape) < 0.02
+        packed = vis.pack_occupancy(occ, grid)
+        mask = packed.new_mask()
+        packed.trace(mask, np.array([0.05, 0.05, 3.0]), rng.normal(size=(300, 3)) * (1, 1, 0.2) + (1, 1, 0), 2.0)
+        full = packed.or_into(mask, np.zeros(grid.shape, np.uint8))
+        assert full.any()
+        for i0, j0, bx, by in ((0, 0, 20, 17), (3, 5, 7, 4), (19, 16, 1, 1), (0, 0, 0, 0)):
+            b = packed.block(mask, i0, j0, bx, by)
+            want = full[i0:i0 + bx, j0:j0 + by]
+            if want.any():
+                np.testing.assert_array_equal(b, want)
+            else:
+                assert b is None
+        with pytest.raises(ValueError, match="outside"):
+            packed.block(mask, 15, 0, 6, 1)
