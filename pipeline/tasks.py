@@ -377,11 +377,16 @@ def _frame_flow(inputs: FrameInputs):
     return flow
 
 
-def _box_chunks(things: np.ndarray, flags_shape: tuple[int, int], cx: int, cy: int) -> np.ndarray:
-    """Chunk flags (x chunks, y chunks of a tile) of the chunks that the voxel boxes ``things``
-    (Tile.things rows: instance, i0, i1, j0, j1, k0, k1) reach: where the instance tile can be
-    nonzero."""
-    flags = np.zeros(flags_shape, dtype=bool)
+def _tile_chunk_flags(shape: tuple[int, ...], cx: int, cy: int) -> np.ndarray:
+    """All-false chunk flags (x chunks, y chunks) of a tile of ``shape`` (X, Y, ...)."""
+    return np.zeros((-(-shape[0] // cx), -(-shape[1] // cy)), dtype=bool)
+
+
+def _box_chunks(things: np.ndarray, shape: tuple[int, ...], cx: int, cy: int) -> np.ndarray:
+    """Chunk flags (x chunks, y chunks) of the chunks of a tile of ``shape`` that the voxel boxes
+    ``things`` (Tile.things rows: instance, i0, i1, j0, j1, k0, k1) reach: where the instance
+    tile can be nonzero."""
+    flags = _tile_chunk_flags(shape, cx, cy)
     for _, i0, i1, j0, j1, k0, k1 in things:
         if i1 > i0 and j1 > j0 and k1 > k0:
             flags[i0 // cx:(i1 - 1) // cx + 1, j0 // cy:(j1 - 1) // cy + 1] = True
@@ -391,7 +396,7 @@ def _box_chunks(things: np.ndarray, flags_shape: tuple[int, int], cx: int, cy: i
 def _index_chunks(flat: np.ndarray, shape: tuple[int, ...], cx: int, cy: int) -> np.ndarray:
     """Chunk flags (x chunks, y chunks) of the chunks holding the C-order voxel indices ``flat``
     of a tile of ``shape`` (X, Y, Z)."""
-    flags = np.zeros((-(-shape[0] // cx), -(-shape[1] // cy)), dtype=bool)
+    flags = _tile_chunk_flags(shape, cx, cy)
     flags[flat // (shape[1] * shape[2]) // cx, (flat // shape[2]) % shape[1] // cy] = True
     return flags
 
@@ -399,8 +404,8 @@ def _index_chunks(flat: np.ndarray, shape: tuple[int, ...], cx: int, cy: int) ->
 def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
     """Voxelize one frame of one sequence at one resolution into occupancy.zarr: semantic,
     instance and flow tile by tile (x-slabs of whole chunks), then the camera and LiDAR masks,
-    traced through the frame's occupancy packed tile by tile and written slab by slab (no array
-    of the whole frame is ever held)."""
+    traced through the frame's occupancy packed tile by tile and written chunk by chunk from
+    their bits (no array of the whole frame is ever held)."""
     from schemas.rig import RigConfig
     from stages.scenes.assembly import region_of_grid
     from stages.scratch import scratch
@@ -423,8 +428,8 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
         nx = tile.semantic.shape[0]
         occ.write_tile(seq_id, grid, frame_index, "semantic", tile.semantic, tile.x0)
         shape = tile.instance.shape
-        candidates = _box_chunks(tile.things, (-(-nx // cx), -(-shape[1] // cy)), cx, cy)
-        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0, candidates)
+        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0,
+                       _box_chunks(tile.things, shape, cx, cy))
         if packed is not None:
             packed.pack_slab(tile.x0, tile.semantic)
         if flow is None:
