@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from stages.evaluation import PanopticAccumulator, SSCAccumulator, label_map
-from stages.evaluation.ssc import confusion_matrix
+from carlaocc.stages.evaluation import PanopticAccumulator, SSCAccumulator, label_map
+from carlaocc.stages.evaluation.ssc import confusion_matrix
 
 
 def _bincount_cm(pred: np.ndarray, gt: np.ndarray, n: int, chunk: int = 1 << 23) -> np.ndarray:

@@ -19,12 +19,12 @@ CASE = r"""
 import json, resource, sys, time
 import numba
 numba.set_num_threads(1)
-from catalog.occupancy import OccupancyStore
-from catalog.store import Store
-from pipeline.registry import Partition
-from pipeline.stages import voxelize_config
-from pipeline.tasks import occupancy_arrays, voxelize_task
-from schemas.configs import DatasetConfig
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.registry import Partition
+from carlaocc.pipeline.stages import voxelize_config
+from carlaocc.pipeline.tasks import occupancy_arrays, voxelize_task
+from carlaocc.schemas.configs import DatasetConfig
 root, res, masks, frames = sys.argv[1], float(sys.argv[2]), sys.argv[3] == "1", int(sys.argv[4])
 store = Store(root)
 cfg = voxelize_config(DatasetConfig()).model_copy(update={"masks": masks})

@@ -18,8 +18,8 @@ from pathlib import Path
 def _folder_source(n: int, where: Path) -> Path:
     import trimesh
 
-    from schemas.configs import IngestConfig
-    from stages.ingest.procedural import ingest_procedural
+    from carlaocc.schemas.configs import IngestConfig
+    from carlaocc.stages.ingest.procedural import ingest_procedural
 
     lib = ingest_procedural(IngestConfig())
     src = where / "src"
@@ -42,7 +42,7 @@ def _folder_source(n: int, where: Path) -> Path:
 def main(argv: list[str] | None = None) -> None:
     from typer.testing import CliRunner
 
-    from pipeline.cli import app
+    from carlaocc.pipeline.cli import app
 
     n = int((argv or ["200"])[0])
     tmp = Path(tempfile.mkdtemp(prefix="carlaocc-bench-ingest-"))
@@ -56,8 +56,8 @@ def main(argv: list[str] | None = None) -> None:
             r = cli.invoke(app, ["run", "--stages", "ingest", "--root", str(root), "--workers", str(workers)])
             dt = time.perf_counter() - t0
             assert r.exit_code == 0, r.output
-            from catalog.sql import query
-            from catalog.store import Store
+            from carlaocc.catalog.sql import query
+            from carlaocc.catalog.store import Store
 
             count = query(Store(str(root)), "SELECT count(*) FROM assets")[1][0][0]
             print(f"{'procedural':<11}{workers:>8}{count:>8}{dt:>9.2f}{count / dt:>10.1f}")

@@ -21,8 +21,8 @@ import time
 import numba
 import numpy as np
 
-from schemas.grid import GridSpec
-from stages.metrics.statistics import frame_statistics
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.stages.metrics.statistics import frame_statistics
 
 REPEAT = 3
 
@@ -58,11 +58,11 @@ def bench_kernel() -> None:
 
 
 def bench_task(root: str, res: float) -> None:
-    from catalog.store import Store
-    from pipeline.registry import Context
-    from pipeline.report import REPORT_HTML, report_task
-    from pipeline.stages import STAGES
-    from schemas.configs import DatasetConfig
+    from carlaocc.catalog.store import Store
+    from carlaocc.pipeline.registry import Context
+    from carlaocc.pipeline.report import REPORT_HTML, report_task
+    from carlaocc.pipeline.stages import STAGES
+    from carlaocc.schemas.configs import DatasetConfig
 
     store, spec, cfg = Store(root), STAGES["report"], DatasetConfig()
     (part,) = spec.partitions(Context(store, cfg, (res,)))

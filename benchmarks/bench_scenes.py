@@ -29,15 +29,15 @@ def _best(fn, repeat: int = 3) -> tuple[float, object]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from catalog.opendrive import read_opendrive
-    from catalog.towns import resolve_opendrive
-    from schemas.configs import IngestConfig, ScenesConfig, TownSpec
-    from schemas.grid import GridSpec
-    from stages.ingest import ingest_procedural
-    from stages.scenes import build_town, simulate_sequence
-    from stages.scenes.assembly import PlacementIndex, assemble_frame, region_of_grid
-    from stages.scenes.pedestrians import match_walker_phases, rig_pedestrian
-    from stages.scenes.traffic import ego_starts
+    from carlaocc.catalog.opendrive import read_opendrive
+    from carlaocc.catalog.towns import resolve_opendrive
+    from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
+    from carlaocc.schemas.grid import GridSpec
+    from carlaocc.stages.ingest import ingest_procedural
+    from carlaocc.stages.scenes import build_town, simulate_sequence
+    from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, region_of_grid
+    from carlaocc.stages.scenes.pedestrians import match_walker_phases, rig_pedestrian
+    from carlaocc.stages.scenes.traffic import ego_starts
 
     argv = sys.argv[1:] if argv is None else argv
     frames = int(argv[0]) if argv else 200

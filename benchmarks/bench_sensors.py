@@ -27,16 +27,16 @@ CASE = r"""
 import json, resource, sys, time
 import numpy as np
 import open3d as o3d
-from catalog.store import Store
-from catalog.sensors import SensorStore
-from pipeline.registry import Partition
-from pipeline.stages import sensors_config
-from pipeline.tasks import frame_inputs, sensor_arrays, sensor_region, sensors_task
-from schemas.configs import DatasetConfig
-from stages.scenes.assembly import flatten
-from stages.sensors import camera_poses
-from stages.sensors.raycast import RayScene, _camera_rays, render_camera
-from stages.threads import set_kernel_threads
+from carlaocc.catalog.store import Store
+from carlaocc.catalog.sensors import SensorStore
+from carlaocc.pipeline.registry import Partition
+from carlaocc.pipeline.stages import sensors_config
+from carlaocc.pipeline.tasks import frame_inputs, sensor_arrays, sensor_region, sensors_task
+from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.stages.scenes.assembly import flatten
+from carlaocc.stages.sensors import camera_poses
+from carlaocc.stages.sensors.raycast import RayScene, _camera_rays, render_camera
+from carlaocc.stages.threads import set_kernel_threads
 
 set_kernel_threads(1)
 root, frames = sys.argv[1], int(sys.argv[2])

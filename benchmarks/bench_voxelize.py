@@ -35,10 +35,10 @@ import time
 import numpy as np
 import trimesh
 
-from schemas.grid import GridSpec
-from stages.geometry import SceneMesh
-from stages.voxelize import fill_interior, surface_voxels, voxelize_scene
-from stages.voxelize.kernels import warmup
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.voxelize import fill_interior, surface_voxels, voxelize_scene
+from carlaocc.stages.voxelize.kernels import warmup
 
 GROUND_Z = -1.73  # ground height in the LiDAR frame (LiDAR 1.73 m above the ground), metres
 REGION_MIN = (-25.6, -25.6, -3.0)
@@ -302,9 +302,9 @@ def main(argv: list[str] | None = None) -> dict:
     print("whole frame composed tile by tile (voxelize_tiles, 128-voxel x-slabs, buffers reused: the pipeline's")
     print("  path) and the camera/LiDAR visibility masks of the default rig (every pixel of the six cameras, the")
     print("  LiDAR's beams) traced as fans, against the same rays traced one by one by the 3D DDA; 1 and 2 threads")
-    from schemas.rig import RigConfig
-    from stages.voxelize import voxelize_tiles
-    from stages.voxelize import visibility as vis
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.voxelize import voxelize_tiles
+    from carlaocc.stages.voxelize import visibility as vis
 
     vis.warmup()
     rig = RigConfig()

@@ -1,5 +1,5 @@
 """Where data lives: the store layout, Parquet/Zarr/GLB readers and writers, lineage, SQL views."""
 
-from catalog.store import Store, StoreError
+from carlaocc.catalog.store import Store, StoreError
 
 __all__ = ["Store", "StoreError"]

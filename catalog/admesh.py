@@ -3,7 +3,7 @@ geometry and labels, ingested from several files) are one asset listing the othe
 
 from __future__ import annotations
 
-from schemas.records import AssetRecord, PartRecord
+from carlaocc.schemas.records import AssetRecord, PartRecord
 
 
 def dedupe_assets(assets: list[AssetRecord]) -> list[AssetRecord]:

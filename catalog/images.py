@@ -7,7 +7,7 @@ import zlib
 
 import numpy as np
 
-from catalog.store import Store
+from carlaocc.catalog.store import Store
 
 
 def png_bytes(image: np.ndarray) -> bytes:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import typing
 
-from catalog.parquet import ParquetTable
-from catalog.store import Store
-from schemas.records import RunRecord
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store
+from carlaocc.schemas.records import RunRecord
 
 
 class LineageLog:

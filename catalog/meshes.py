@@ -13,7 +13,7 @@ import typing
 import numpy as np
 import trimesh
 
-from catalog.store import Store, StoreError
+from carlaocc.catalog.store import Store, StoreError
 
 
 class MeshPartLike(typing.Protocol):

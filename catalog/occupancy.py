@@ -26,11 +26,11 @@ import zarr
 from numba import njit
 from zarr.codecs import ZstdCodec
 
-from catalog.store import OCCUPANCY_ZARR, Store
-from catalog.zarrio import (ZSTD_LEVEL, decode_chunk, encode_chunk, frame_fingerprint, get_object, parse_frame_key,
+from carlaocc.catalog.store import OCCUPANCY_ZARR, Store
+from carlaocc.catalog.zarrio import (ZSTD_LEVEL, decode_chunk, encode_chunk, frame_fingerprint, get_object, parse_frame_key,
                             put_object, remove_object, zarr_store)
-from schemas.grid import GridSpec, resolution_key
-from schemas.taxonomy import TAXONOMY_VERSION
+from carlaocc.schemas.grid import GridSpec, resolution_key
+from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 # array name -> dtype, description, trailing axes (beyond frame, x, y, z)
 OCCUPANCY_ARRAYS: dict[str, tuple[str, str, tuple[int, ...]]] = {

@@ -34,8 +34,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from catalog.meshes import from_gltf_axes, to_gltf_axes
-from schemas import taxonomy
+from carlaocc.catalog.meshes import from_gltf_axes, to_gltf_axes
+from carlaocc.schemas import taxonomy
 
 __all__ = ["FORMAT", "TRANSPARENT_ALPHA", "load_panoptic_glb", "panoptic_glb_bytes"]
 

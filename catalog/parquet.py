@@ -15,8 +15,8 @@ from typing import Generic, Literal, TypeVar, get_args, get_origin
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from catalog.store import Store
-from schemas.records import Record
+from carlaocc.catalog.store import Store
+from carlaocc.schemas.records import Record
 
 R = TypeVar("R", bound=Record)
 

@@ -24,10 +24,10 @@ import pyarrow.parquet as pq
 import zarr
 from zarr.codecs import ZstdCodec
 
-from catalog.parquet import table_bytes
-from catalog.store import LIDAR_DIR, SENSORS_ZARR, Store, StoreError
-from catalog.zarrio import ZSTD_LEVEL, encode_chunk, frame_fingerprint, put_object, remove_object, zarr_store
-from schemas.taxonomy import TAXONOMY_VERSION
+from carlaocc.catalog.parquet import table_bytes
+from carlaocc.catalog.store import LIDAR_DIR, SENSORS_ZARR, Store, StoreError
+from carlaocc.catalog.zarrio import ZSTD_LEVEL, encode_chunk, frame_fingerprint, put_object, remove_object, zarr_store
+from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 _RAW = "as the simulator delivers it (before rectification): "
 _DEPTH = ("planar depth along the camera's optical axis (z of the OpenCV camera frame), metres; "

@@ -14,10 +14,10 @@ from __future__ import annotations
 import duckdb
 import pyarrow as pa
 
-from catalog.admesh import dedupe_assets, dedupe_parts
-from catalog.parquet import ParquetTable, from_table, to_table
-from catalog.store import Store
-from schemas import records, taxonomy
+from carlaocc.catalog.admesh import dedupe_assets, dedupe_parts
+from carlaocc.catalog.parquet import ParquetTable, from_table, to_table
+from carlaocc.catalog.store import Store
+from carlaocc.schemas import records, taxonomy
 
 # statement types that only read
 _READ_TYPES = {duckdb.StatementType.SELECT, duckdb.StatementType.EXPLAIN}

@@ -18,7 +18,7 @@ import numpy as np
 from numcodecs import Zstd
 from zarr.storage import FsspecStore, LocalStore
 
-from catalog.store import Store
+from carlaocc.catalog.store import Store
 
 ZSTD_LEVEL = 1
 

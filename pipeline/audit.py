@@ -81,15 +81,15 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import numpy as np
 import typer
 
-from catalog.formats import (FormatError, atomic_write, load_carlaocc_npz, load_occ3d, load_semantickitti,
+from carlaocc.catalog.formats import (FormatError, atomic_write, load_carlaocc_npz, load_occ3d, load_semantickitti,
                              load_surroundocc, surroundocc_to_dense, to_learning)
-from catalog.formats.occ3d import OCC3D_FREE, OCC3D_RANGE, OCC3D_SHAPE, OCC3D_VOXEL_SIZE
-from catalog.formats.semantickitti import SEMANTICKITTI_RANGE, SEMANTICKITTI_VOXEL_SIZE
-from catalog.formats.surroundocc import SURROUNDOCC_RANGE, SURROUNDOCC_SHAPE, SURROUNDOCC_VOXEL_SIZE
-from schemas import taxonomy
+from carlaocc.catalog.formats.occ3d import OCC3D_FREE, OCC3D_RANGE, OCC3D_SHAPE, OCC3D_VOXEL_SIZE
+from carlaocc.catalog.formats.semantickitti import SEMANTICKITTI_RANGE, SEMANTICKITTI_VOXEL_SIZE
+from carlaocc.catalog.formats.surroundocc import SURROUNDOCC_RANGE, SURROUNDOCC_SHAPE, SURROUNDOCC_VOXEL_SIZE
+from carlaocc.schemas import taxonomy
 
 if TYPE_CHECKING:
-    from stages.metrics import ContinuityCounts, TemporalCounts
+    from carlaocc.stages.metrics import ContinuityCounts, TemporalCounts
 
 
 class AuditError(ValueError):
@@ -560,7 +560,7 @@ def audit(fmt: DatasetFormat, sequences: Sequence[AuditSequence]) -> AuditResult
     """s_sc per frame and over all frames; where the sequences carry poses, s_tc per pair of
     consecutive frames with a pose **within** one sequence, and over all pairs (counts summed over
     the sequences). Frames are read and scored one at a time (two in memory)."""
-    from stages.metrics import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
+    from carlaocc.stages.metrics import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
                                 static_table, temporal_consistency_counts)
 
     static = static_table(fmt.dynamic)

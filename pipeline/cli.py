@@ -18,9 +18,9 @@ from typing import Annotated, Optional
 import typer
 from pydantic import ValidationError
 
-from catalog.store import Store, StoreError
-from schemas import taxonomy
-from schemas.configs import DatasetConfig, parse_resolutions
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import DatasetConfig, parse_resolutions
 
 app = typer.Typer(
     name="carlaocc",
@@ -44,7 +44,7 @@ app.add_typer(scenes_app, name="scenes")
 show_app = typer.Typer(help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
                        rich_markup_mode=None)
 app.add_typer(show_app, name="show")
-from pipeline.evaluate import eval_app  # noqa: E402  (carlaocc eval ssc|panoptic|depth|det)
+from carlaocc.pipeline.evaluate import eval_app  # noqa: E402  (carlaocc eval ssc|panoptic|depth|det)
 
 app.add_typer(eval_app, name="eval")
 
@@ -99,8 +99,8 @@ MAX_FRAME_VOXELS = 1_000_000_000
 
 def check_towns(cfg: DatasetConfig) -> None:
     """Every OpenDRIVE town's file exists and parses; else a one-line error naming it."""
-    from catalog.opendrive import read_opendrive
-    from catalog.towns import resolve_opendrive
+    from carlaocc.catalog.opendrive import read_opendrive
+    from carlaocc.catalog.towns import resolve_opendrive
 
     for i, spec in enumerate(cfg.scenes.towns):
         if spec.opendrive is None:
@@ -179,7 +179,7 @@ def run(
     force: Annotated[bool, typer.Option("--force", help="re-run the selected stages even when up to date")] = False,
 ) -> None:
     """Build the dataset (or the selected stages) on the embedded default or a --config file."""
-    from pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
+    from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
     cfg = load_config(config)
     check_towns(cfg)
@@ -230,9 +230,9 @@ def ingest(
 ) -> None:
     """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
     are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
-    from pipeline.ingest import IngestError, ingest_source
-    from pipeline.runner import PlanError, resolve_scheduler
-    from schemas.configs import SourceIngestConfig
+    from carlaocc.pipeline.ingest import IngestError, ingest_source
+    from carlaocc.pipeline.runner import PlanError, resolve_scheduler
+    from carlaocc.schemas.configs import SourceIngestConfig
 
     try:
         cfg = SourceIngestConfig(kind=kind, root=str(path.resolve()),
@@ -269,7 +269,7 @@ def status(
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="list every stale partition")] = False,
 ) -> None:
     """List what is stale and why (runs nothing, writes nothing)."""
-    from pipeline.runner import status as plan_status
+    from carlaocc.pipeline.runner import status as plan_status
 
     cfg = load_config(config)
     resolutions = _resolutions(res, cfg)
@@ -297,7 +297,7 @@ def status(
 @app.command("stages")
 def list_stages() -> None:
     """List the registered stages, what they read and write."""
-    from pipeline.stages import STAGES
+    from carlaocc.pipeline.stages import STAGES
 
     for s in STAGES.values():
         typer.echo(f"{s.name}: {s.description}")
@@ -327,7 +327,7 @@ def catalog_query(
 ) -> None:
     """Run read-only SQL. Views: assets, parts, quarantine, placements, sequences, frames, actors,
     runs, quality, quality_classes, statistics_classes, statistics_assets, classes."""
-    from catalog.sql import QueryError, QueryRefused, query
+    from carlaocc.catalog.sql import QueryError, QueryRefused, query
 
     if fmt not in ("table", "csv", "json"):
         fail(f"--format {fmt!r}: choose table, csv or json")
@@ -362,13 +362,13 @@ def catalog_query(
 def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int, size: int = 512):
     """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view,
     each part in its semantic class's palette colour, glass translucent."""
-    from catalog.admesh import dedupe_parts
-    from catalog.meshes import MeshStore
-    from catalog.parquet import ParquetTable
-    from catalog.sql import QueryError, query
-    from schemas.records import PartRecord
-    from stages.geometry import MeshPart
-    from stages.render import render_asset
+    from carlaocc.catalog.admesh import dedupe_parts
+    from carlaocc.catalog.meshes import MeshStore
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.catalog.sql import QueryError, query
+    from carlaocc.schemas.records import PartRecord
+    from carlaocc.stages.geometry import MeshPart
+    from carlaocc.stages.render import render_asset
 
     if asset_id is not None:
         sql = f"SELECT asset_id, category, subclass, mesh_path FROM assets WHERE asset_id = '{asset_id.replace(chr(39), '')}'"
@@ -402,7 +402,7 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
 
 
 def _write_png(out: Path, image) -> None:
-    from catalog.images import save_png
+    from carlaocc.catalog.images import save_png
 
     if out.is_dir():
         fail(f"--out {out} is a directory; give a file name such as {out / 'asset.png'}")
@@ -434,7 +434,7 @@ def admesh_sheet(
     root: RootOpt = "data",
 ) -> None:
     """A contact sheet of the assets a query selects (semantic colours), headless."""
-    from stages.render import contact_sheet
+    from carlaocc.stages.render import contact_sheet
 
     labels, images = _render_assets(Store(root), where, None, limit, size)
     _write_png(out, contact_sheet(images, labels, columns=columns))
@@ -450,7 +450,7 @@ def scenes_town_mesh(
     """Write the town's unified static mesh (world frame, Z up converted to glTF's Y up) as GLB:
     one primitive per (class, instance), per-vertex attributes _SEMANTIC and _INSTANCE, and
     extras naming the class and instance (the city-level reconstruction of the paper)."""
-    from pipeline.scenes import town_mesh_glb
+    from carlaocc.pipeline.scenes import town_mesh_glb
 
     store = _store(root, writable=False)
     try:
@@ -474,8 +474,8 @@ def scenes_frame_mesh(
     instance ids, for inspection."""
     import numpy as np
 
-    from pipeline.scenes import frame_mesh_glb
-    from stages.scenes.assembly import region_of_grid
+    from carlaocc.pipeline.scenes import frame_mesh_glb
+    from carlaocc.stages.scenes.assembly import region_of_grid
 
     cfg = load_config(config)
     if range_m is None:
@@ -503,7 +503,7 @@ def scenes_swap(
     class uses another asset with a compatible footprint; trajectories, rig and timing are
     unchanged; parent_sequence_id and the runs table record where they came from. Then
     `carlaocc run --stages voxelize,metrics` voxelizes them."""
-    from pipeline.scenes import swap_class
+    from carlaocc.pipeline.scenes import swap_class
 
     cfg = load_config(config)
     store = _store(root, writable=True)
@@ -542,8 +542,8 @@ def voxelize_files(
     """Voxelize mesh files or ADMesh assets exactly (triangle-box overlap, closed meshes filled),
     without a dataset. Things get instance ids 1, 2, ... in argument order. The grid defaults to
     the meshes' bounding box snapped to multiples of the voxel size."""
-    from pipeline.standalone import InputError, grid_for, load_inputs, save_result, voxelize_inputs
-    from stages.voxelize.compose import FILL_MODES
+    from carlaocc.pipeline.standalone import InputError, grid_for, load_inputs, save_result, voxelize_inputs
+    from carlaocc.stages.voxelize.compose import FILL_MODES
 
     if fill not in FILL_MODES:
         fail(f"--fill must be one of {', '.join(FILL_MODES)}, got {fill!r}")
@@ -584,8 +584,8 @@ def export_cmd(
     grid, sem << 11 | inst; refuses ids beyond 5/11 bits instead of wrapping)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from catalog.formats import FormatError
-    from pipeline.export import FORMATS, export, frame_count
+    from carlaocc.catalog.formats import FormatError
+    from carlaocc.pipeline.export import FORMATS, export, frame_count
 
     if fmt not in FORMATS:
         fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
@@ -606,9 +606,9 @@ def export_cmd(
 
 
 def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, res: float):
-    from catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.occupancy import OccupancyStore
 
-    from schemas.grid import resolution_key
+    from carlaocc.schemas.grid import resolution_key
 
     occ = OccupancyStore(store)
     grid = occ.stored_grid(sequence, res)  # the grid it was built on, whatever the config says now
@@ -634,7 +634,7 @@ def show_occupancy(
 ) -> None:
     """Render one frame's occupancy: a bird's-eye height map and a 3D view (one resolution), or
     the multi-resolution figure (3D views and a zoomed bird's-eye crop per resolution)."""
-    from stages.render_occupancy import multi_resolution_figure, occupancy_figure
+    from carlaocc.stages.render_occupancy import multi_resolution_figure, occupancy_figure
 
     if mode not in ("instance", "semantic", "height"):
         fail(f"--mode must be instance, semantic or height, got {mode!r}")
@@ -667,8 +667,8 @@ def show_sensors(
     """Contact sheet of one frame's camera maps (no RGB: depth, normals, semantics, instances per
     camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
     transparency region tinted red and of the omission region blue (epsilon from the config)."""
-    from catalog.sensors import SensorStore
-    from stages.render_sensors import CameraView, sensor_sheet
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.render_sensors import CameraView, sensor_sheet
 
     cfg = load_config(config)
     store = _store(root, writable=False)
@@ -709,11 +709,11 @@ def compare_resolutions(
 ) -> None:
     """Pool the fine grid onto the coarse one by class priority and count where the pooled grid
     and the coarse grid voxelized directly from the meshes disagree (occupancy and label)."""
-    from catalog.occupancy import OccupancyStore
-    from pipeline.export import voxelized_sequences
-    from stages.voxelize.resample import pool_to_grid, pooling_disagreement
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.pipeline.export import voxelized_sequences
+    from carlaocc.stages.voxelize.resample import pool_to_grid, pooling_disagreement
 
-    from schemas.grid import resolution_key
+    from carlaocc.schemas.grid import resolution_key
 
     load_config(config)  # a bad --config is refused like everywhere else
     store = _store(root, writable=False)
@@ -758,7 +758,7 @@ def _write_bytes(out: Path, data: bytes) -> None:
         fail(f"cannot write {out}: {exc.strerror or exc}")
 
 
-from pipeline.audit import audit_cli  # noqa: E402  (after app: the audit command lives in its module)
+from carlaocc.pipeline.audit import audit_cli  # noqa: E402  (after app: the audit command lives in its module)
 
 app.command("audit")(audit_cli)
 

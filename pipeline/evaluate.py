@@ -119,7 +119,7 @@ def load_occupancy(path: Path, lm, instances: bool) -> tuple[np.ndarray, np.ndar
     """``(semantics, instances or None, masks)`` of one occupancy file in ``lm``'s label space."""
     arrays = _load_arrays(path, occupancy_ok=True)
     if "occupancy" in arrays:  # a published CarlaOcc npz: CarlaOcc ids, mapped into lm
-        from catalog.formats import FormatError, load_carlaocc_npz
+        from carlaocc.catalog.formats import FormatError, load_carlaocc_npz
 
         try:
             frame = load_carlaocc_npz(path)
@@ -166,7 +166,7 @@ def _ids(text: str, opt: str) -> tuple[int, ...]:
 
 
 def _label_map(name: str):
-    from stages.evaluation import label_map
+    from carlaocc.stages.evaluation import label_map
 
     try:
         return label_map(name)
@@ -184,7 +184,7 @@ def _pct(v: float | None) -> str:
 def _write_json(out: Path | None, data: dict[str, Any]) -> None:
     if out is None:
         return
-    from catalog.formats import atomic_write
+    from carlaocc.catalog.formats import atomic_write
 
     try:
         atomic_write(out, lambda fh: fh.write((json.dumps(data, indent=1, allow_nan=False) + "\n").encode()))
@@ -233,7 +233,7 @@ def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: Ign
     read on either side, its CarlaOcc ids mapped into --map. Missing counterpart: exit code 2."""
 
     def go() -> None:
-        from stages.evaluation import SSCAccumulator
+        from carlaocc.stages.evaluation import SSCAccumulator
 
         lm = _label_map(map_name)
         if mask not in ("none", "camera", "lidar"):
@@ -273,7 +273,7 @@ def panoptic_cmd(
     on both sides; a CarlaOcc npz carries both."""
 
     def go() -> None:
-        from stages.evaluation import PanopticAccumulator
+        from carlaocc.stages.evaluation import PanopticAccumulator
 
         lm = _label_map(map_name)
         if mask not in ("none", "camera", "lidar"):
@@ -331,7 +331,7 @@ def depth_cmd(
     no depth."""
 
     def go() -> None:
-        from stages.evaluation import DepthAccumulator
+        from carlaocc.stages.evaluation import DepthAccumulator
 
         try:
             acc = DepthAccumulator(min_depth, max_depth, scale)  # type: ignore[arg-type]
@@ -360,7 +360,7 @@ def depth_cmd(
 
 
 def _box(obj: Any, where: str, need_score: bool):
-    from stages.evaluation import Box3D
+    from carlaocc.stages.evaluation import Box3D
 
     if not isinstance(obj, dict):
         raise InputError(f"{where}: a box must be a JSON object, got {type(obj).__name__}")
@@ -430,7 +430,7 @@ def det_cmd(
     "detection_name", "detection_score"}; ground-truth boxes need no score."""
 
     def go() -> None:
-        from stages.evaluation import DetectionAccumulator
+        from carlaocc.stages.evaluation import DetectionAccumulator
 
         if pred.is_file() and gt.is_file():
             p_all, g_all = load_boxes(pred, True), load_boxes(gt, False)

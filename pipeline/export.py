@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from catalog.formats import atomic_write
-from catalog.occupancy import OccupancyStore
-from catalog.parquet import ParquetTable
-from catalog.store import Store, StoreError
-from schemas.configs import DatasetConfig
-from schemas.grid import GridSpec
-from schemas.records import SequenceRecord
-from stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
+from carlaocc.catalog.formats import atomic_write
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import SequenceRecord
+from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
 
 FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz")
 
@@ -71,7 +71,7 @@ def _coverage(target: TargetGrid, grid: GridSpec, grid_to_target: np.ndarray) ->
 
 def _actor_ids(store: Store, seq: str) -> np.ndarray:
     """Instance ids of the sequence's simulated actors (the actors table)."""
-    from schemas.records import ActorStateRecord
+    from carlaocc.schemas.records import ActorStateRecord
 
     t = ParquetTable(store, ActorStateRecord)
     if not t.exists(seq):
@@ -82,7 +82,7 @@ def _actor_ids(store: Store, seq: str) -> np.ndarray:
 def voxelized_sequences(store: Store, voxel_size: float, sequences: list[str] | None) -> Iterator[tuple[str, GridSpec, int]]:
     """(sequence, the grid it was voxelized on at ``voxel_size``, frames) of every voxelized
     sequence (or of ``sequences``, refusing those not voxelized)."""
-    from schemas.grid import resolution_key
+    from carlaocc.schemas.grid import resolution_key
 
     seqs = sorted(ParquetTable(store, SequenceRecord).load(), key=lambda s: s.sequence_id)
     known = {s.sequence_id for s in seqs}
@@ -107,7 +107,7 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
            sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> ExportSummary:
     """Write every frame of every voxelized sequence (or ``sequences``) at ``resolution`` in
     ``fmt`` under ``out``. Files are written atomically, one frame at a time."""
-    from catalog.formats import (
+    from carlaocc.catalog.formats import (
         Occ3DFrame,
         SemanticKittiVoxels,
         dense_to_surroundocc,
@@ -122,7 +122,7 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
 
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
-    from schemas.grid import resolution_key
+    from carlaocc.schemas.grid import resolution_key
 
     occ = OccupancyStore(store)
     n_seq = n_frames = n_files = 0

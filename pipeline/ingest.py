@@ -11,16 +11,16 @@ import os
 from collections import Counter
 from dataclasses import dataclass, field
 
-from catalog.parquet import ParquetTable
-from catalog.sources.base import SourceError
-from catalog.sources.registry import adapter
-from catalog.store import ADMESH_MESHES, Store
-from pipeline import tasks
-from pipeline.registry import Partition, StageSpec
-from pipeline.runner import Progress, StageOutcome, run
-from pipeline.stages import SHARED_CODE
-from schemas.configs import DatasetConfig, SourceIngestConfig
-from schemas.records import AssetRecord, PartRecord, QuarantineRecord
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.registry import adapter
+from carlaocc.catalog.store import ADMESH_MESHES, Store
+from carlaocc.pipeline import tasks
+from carlaocc.pipeline.registry import Partition, StageSpec
+from carlaocc.pipeline.runner import Progress, StageOutcome, run
+from carlaocc.pipeline.stages import SHARED_CODE
+from carlaocc.schemas.configs import DatasetConfig, SourceIngestConfig
+from carlaocc.schemas.records import AssetRecord, PartRecord, QuarantineRecord
 
 STAGE = "ingest"
 
@@ -68,7 +68,7 @@ def source_spec(cfg: SourceIngestConfig) -> StageSpec:
         name=STAGE,
         description=f"ingest the {cfg.kind} source {cfg.root}",
         upstream=(),
-        code_modules=("stages.ingest", "catalog.sources", *SHARED_CODE),
+        code_modules=("carlaocc.stages.ingest", "carlaocc.catalog.sources", *SHARED_CODE),
         reads=(cfg.root,),
         writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/", "admesh/quarantine/"),
         partitions=lambda ctx: parts,

@@ -16,8 +16,8 @@ import pkgutil
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from catalog.store import Store
-from schemas.configs import DatasetConfig, StageConfig
+from carlaocc.catalog.store import Store
+from carlaocc.schemas.configs import DatasetConfig, StageConfig
 
 
 @dataclass(frozen=True)

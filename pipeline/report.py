@@ -28,17 +28,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from catalog.admesh import dedupe_assets
-from catalog.lineage import LineageLog
-from catalog.occupancy import OccupancyStore
-from catalog.parquet import ParquetTable
-from catalog.store import LIDAR_DIR, Store, StoreError
-from catalog.usage import store_usage
-from pipeline.registry import Partition
-from schemas import taxonomy
-from schemas.configs import MetricsConfig
-from schemas.grid import GridSpec
-from schemas.records import (ActorStateRecord, AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord,
+from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import LIDAR_DIR, Store, StoreError
+from carlaocc.catalog.usage import store_usage
+from carlaocc.pipeline.registry import Partition
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import MetricsConfig
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord,
                              QualityRecord, RunRecord, SequenceRecord)
 
 REPORT_HTML = "metrics/report.html"
@@ -89,7 +89,7 @@ def _tiles(occ: OccupancyStore, seq: str, grid: GridSpec, instance: bool, voxels
 
 def sequence_statistics(store: Store, seq: SequenceRecord, grid: GridSpec) -> list[ClassStatisticsRecord]:
     """Class statistics of one sequence at one resolution: every frame streamed once, in tiles."""
-    from stages.metrics.statistics import SequenceStatistics
+    from carlaocc.stages.metrics.statistics import SequenceStatistics
 
     occ = OccupancyStore(store)
     if not occ.exists(seq.sequence_id, grid, "semantic"):
@@ -112,7 +112,7 @@ def sequence_statistics(store: Store, seq: SequenceRecord, grid: GridSpec) -> li
 def resolution_totals(rows: list[ClassStatisticsRecord]) -> dict[float, ResolutionStats]:
     """Per-resolution sums over sequences (instances of different sequences are different
     tracks, so they add up)."""
-    from stages.metrics.statistics import N_CLASSES
+    from carlaocc.stages.metrics.statistics import N_CLASSES
 
     out: dict[float, ResolutionStats] = {}
     frames: dict[float, dict[str, int]] = defaultdict(dict)
@@ -198,8 +198,8 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     """The occupancy figure of one frame (BEV, 3D view, legend); instances coloured per object
     unless the grid is larger than :data:`RENDER_INSTANCE_VOXELS` (a 0.05 m instance frame is
     1.6 GB: such frames are drawn by class from the semantic grid alone)."""
-    from catalog.images import png_bytes
-    from stages.render_occupancy import occupancy_figure
+    from carlaocc.catalog.images import png_bytes
+    from carlaocc.stages.render_occupancy import occupancy_figure
 
     occ = OccupancyStore(store)
     small = int(np.prod(grid.shape)) <= RENDER_INSTANCE_VOXELS and occ.exists(seq, grid, "instance")
@@ -212,9 +212,9 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
 
 def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
     """The camera contact sheet of one frame (rectified maps only), or None without cameras."""
-    from catalog.images import png_bytes
-    from catalog.sensors import SensorStore
-    from stages.render_sensors import CameraView, sensor_sheet
+    from carlaocc.catalog.images import png_bytes
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.render_sensors import CameraView, sensor_sheet
 
     sensors = SensorStore(store)
     views = []
@@ -235,8 +235,8 @@ def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
 # -- the task ---------------------------------------------------------------------------------------
 def report_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str, str]:
     """Statistics tables, plots and ``metrics/report.html`` of the requested resolutions."""
-    from stages.metrics import plots
-    from stages.metrics.statistics import asset_distribution, motion_share
+    from carlaocc.stages.metrics import plots
+    from carlaocc.stages.metrics.statistics import asset_distribution, motion_share
 
     grids = [GridSpec.model_validate(g) for g in part.params["grids"]]
     seq_ids = list(part.params["sequences"])
@@ -359,7 +359,7 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
                 quality: list[QualityRecord], usage: list[tuple[str, int, int]], lineage: list[StageLineage],
                 images: dict[str, bytes]) -> str:
     """The report page: one string of HTML with every picture inlined (``images``: name -> PNG)."""
-    from stages.metrics.plots import metric_label
+    from carlaocc.stages.metrics.plots import metric_label
 
     res_keys = ", ".join(f"{g.key} m" for g in grids)
     frames = sum(s.frame_count for s in sequences)

@@ -20,13 +20,13 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
 
-from catalog.lineage import LineageLog
-from catalog.store import Store
-from catalog.zarrio import frame_fingerprint, parse_frame_key
-from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
-from pipeline.stages import STAGES
-from schemas.configs import DatasetConfig, StageConfig
-from schemas.records import RunRecord
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.store import Store
+from carlaocc.catalog.zarrio import frame_fingerprint, parse_frame_key
+from carlaocc.pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
+from carlaocc.pipeline.stages import STAGES
+from carlaocc.schemas.configs import DatasetConfig, StageConfig
+from carlaocc.schemas.records import RunRecord
 
 SYNCHRONOUS = "synchronous"
 _LINEAGE_FLUSH_SECONDS = 20.0
@@ -58,7 +58,7 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
     kernels run single-threaded instead of oversubscribing.
     """
     if kernel_threads:
-        from stages.threads import set_kernel_threads
+        from carlaocc.stages.threads import set_kernel_threads
 
         set_kernel_threads(kernel_threads)
     started = datetime.now(timezone.utc)
@@ -220,7 +220,7 @@ def file_fingerprint(path: str) -> str:
     """Fingerprint of an external input file (a local path or fsspec URL); "missing" if absent."""
     import fsspec
 
-    from catalog.store import fingerprint_bytes
+    from carlaocc.catalog.store import fingerprint_bytes
 
     try:
         fs, p = fsspec.core.url_to_fs(path)

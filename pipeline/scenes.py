@@ -14,14 +14,14 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from catalog.admesh import dedupe_assets
-from catalog.lineage import LineageLog
-from catalog.panoptic import panoptic_glb_bytes
-from catalog.parquet import ParquetTable
-from catalog.store import Store, StoreError
-from pipeline.tasks import frame_scene, is_edited, load_geometry
-from schemas import taxonomy
-from schemas.records import (
+from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.panoptic import panoptic_glb_bytes
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.tasks import frame_scene, is_edited, load_geometry
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import (
     ActorStateRecord,
     AssetRecord,
     FrameRecord,
@@ -38,7 +38,7 @@ LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relati
 def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
     """The whole town's static mesh (world frame) as GLB with per-face semantic and instance ids;
     returns (bytes, triangles, placements)."""
-    from stages.scenes.assembly import town_mesh
+    from carlaocc.stages.scenes.assembly import town_mesh
 
     t_place = ParquetTable(store, PlacementRecord)
     if not t_place.exists(f"town={town}"):
@@ -52,7 +52,7 @@ def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
 
 def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> tuple[bytes, int]:
     """One frame's panoptic scene (LiDAR frame) cut to ``region`` as GLB; returns (bytes, triangles)."""
-    from stages.scenes.assembly import flatten
+    from carlaocc.stages.scenes.assembly import flatten
 
     mesh = flatten(frame_scene(store, sequence_id, frame_index, region))
     return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces)

@@ -2,20 +2,20 @@
 
 from __future__ import annotations
 
-from catalog.occupancy import OccupancyStore
-from catalog.parquet import ParquetTable
-from catalog.store import StoreError
-from pipeline import tasks
-from pipeline.report import report_task
-from pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
-from schemas.records import SequenceRecord
-from schemas.configs import DatasetConfig, MetricsConfig, SensorsConfig, VoxelizeConfig
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import StoreError
+from carlaocc.pipeline import tasks
+from carlaocc.pipeline.report import report_task
+from carlaocc.pipeline.registry import Context, Partition, StageSpec, UpstreamMissing
+from carlaocc.schemas.records import SequenceRecord
+from carlaocc.schemas.configs import DatasetConfig, MetricsConfig, SensorsConfig, VoxelizeConfig
 
 INGEST_PARTITION = tasks.PROCEDURAL_SOURCE
 # code every task runs through besides its stage's compute: the contracts, the readers/writers and
 # the task wiring; editing any of it changes every stage's code version
-SHARED_CODE = ("schemas", "catalog.store", "catalog.parquet", "catalog.meshes", "catalog.occupancy", "catalog.zarrio",
-               "pipeline.tasks", "stages.geometry")
+SHARED_CODE = ("carlaocc.schemas", "carlaocc.catalog.store", "carlaocc.catalog.parquet", "carlaocc.catalog.meshes", "carlaocc.catalog.occupancy", "carlaocc.catalog.zarrio",
+               "carlaocc.pipeline.tasks", "carlaocc.stages.geometry")
 
 
 def _ingest_partitions(ctx: Context) -> list[Partition]:
@@ -30,7 +30,7 @@ def _town_files(spec) -> tuple[str, ...]:
     """Input files of a town (its OpenDRIVE file), fingerprinted with the partition."""
     if spec.opendrive is None:
         return ()
-    from catalog.towns import resolve_opendrive
+    from carlaocc.catalog.towns import resolve_opendrive
 
     try:
         return (str(resolve_opendrive(spec.opendrive)),)
@@ -45,7 +45,7 @@ def _scenes_partitions(ctx: Context) -> list[Partition]:
     needs = [("ingest", INGEST_PARTITION)] if "procedural" in sources else []
     others = tuple(s for s in sources if s != "procedural")
     if others:
-        from catalog.lineage import LineageLog
+        from carlaocc.catalog.lineage import LineageLog
 
         latest = LineageLog(ctx.store).latest("ingest")
         needs += [("ingest", k) for k, r in sorted(latest.items())
@@ -115,8 +115,8 @@ def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
     """Create the camera arrays of every sequence about to be written (intrinsics and extrinsics
     in their attributes); a replaced array invalidates every frame of its sequence. The recorded
     path creates only the arrays it writes and leaves the recorder's ``*_raw`` arrays alone."""
-    from catalog.sensors import SensorStore
-    from stages.sensors import camera_poses
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.sensors import camera_poses
 
     cfg = sensors_config(ctx.config)
     rig = cfg.rig
@@ -164,7 +164,7 @@ def _report_partitions(ctx: Context) -> list[Partition]:
     """One partition over the whole dataset at the requested resolutions: it reads every metrics
     partition and what they read (every occupancy frame), the scenes and ingest partitions, and
     every sensors partition once the sensors stage has run (the report shows cameras then)."""
-    from catalog.lineage import LineageLog
+    from carlaocc.catalog.lineage import LineageLog
 
     needs: set[tuple[str, str]] = set()
     for p in _scenes_partitions(ctx):
@@ -189,7 +189,7 @@ STAGES: dict[str, StageSpec] = {
             name="ingest",
             description="procedural ADMesh library: closed metric meshes of every thing class",
             upstream=(),
-            code_modules=("stages.ingest", *SHARED_CODE),
+            code_modules=("carlaocc.stages.ingest", *SHARED_CODE),
             reads=(),
             writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/"),
             partitions=_ingest_partitions,
@@ -199,7 +199,7 @@ STAGES: dict[str, StageSpec] = {
             name="scenes",
             description="towns (procedural styles, OpenDRIVE), traffic, ego sequences, rig poses, actors",
             upstream=("ingest",),
-            code_modules=("stages.scenes", *SHARED_CODE),
+            code_modules=("carlaocc.stages.scenes", *SHARED_CODE),
             reads=("admesh/assets/",),
             writes=("scenes/meshes/", "scenes/placements/", "scenes/towns/", "scenes/sequences/", "scenes/frames/",
                     "scenes/sensor_poses/", "scenes/actors/"),
@@ -210,7 +210,7 @@ STAGES: dict[str, StageSpec] = {
             name="voxelize",
             description="panoptic voxelization of every frame's scene mesh (exact triangle-box overlap)",
             upstream=("ingest", "scenes"),
-            code_modules=("stages.voxelize", "stages.scenes", *SHARED_CODE),
+            code_modules=("carlaocc.stages.voxelize", "carlaocc.stages.scenes", *SHARED_CODE),
             reads=("admesh/", "scenes/"),
             writes=("occupancy.zarr/<seq>/<res>/{semantic,instance,mask_camera,mask_lidar,flow}",),
             partitions=_voxelize_partitions,
@@ -222,7 +222,7 @@ STAGES: dict[str, StageSpec] = {
             name="sensors",
             description="ray-cast camera maps and LiDAR, simulator artifacts, instance-guided rectification, normals",
             upstream=("ingest", "scenes"),
-            code_modules=("stages.sensors", "stages.scenes", "catalog.sensors", *SHARED_CODE),
+            code_modules=("carlaocc.stages.sensors", "carlaocc.stages.scenes", "carlaocc.catalog.sensors", *SHARED_CODE),
             reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)"),
             writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "lidar/<seq>/",
                     "metrics/rectification/"),
@@ -237,7 +237,7 @@ STAGES: dict[str, StageSpec] = {
                         "and sequence",
             upstream=("voxelize", "scenes"),
             # the scores' modules only: the report's statistics and plots live in the same package
-            code_modules=("stages.metrics.continuity", "stages.metrics.temporal", *SHARED_CODE),
+            code_modules=("carlaocc.stages.metrics.continuity", "carlaocc.stages.metrics.temporal", *SHARED_CODE),
             reads=("occupancy.zarr/", "scenes/frames/"),
             writes=("metrics/quality/", "metrics/quality_classes/"),
             partitions=_metrics_partitions,
@@ -247,9 +247,9 @@ STAGES: dict[str, StageSpec] = {
             name="report",
             description="statistics (voxels, instances, assets per class), plots and metrics/report.html",
             upstream=("ingest", "scenes", "voxelize", "sensors", "metrics"),
-            code_modules=("stages.metrics", "stages.render_occupancy", "stages.render_sensors", "stages.render",
-                          "catalog.admesh", "catalog.lineage", "catalog.images", "catalog.sensors", "catalog.usage",
-                          "pipeline.report", *SHARED_CODE),
+            code_modules=("carlaocc.stages.metrics", "carlaocc.stages.render_occupancy", "carlaocc.stages.render_sensors", "carlaocc.stages.render",
+                          "carlaocc.catalog.admesh", "carlaocc.catalog.lineage", "carlaocc.catalog.images", "carlaocc.catalog.sensors", "carlaocc.catalog.usage",
+                          "carlaocc.pipeline.report", *SHARED_CODE),
             reads=("admesh/assets/", "scenes/", "occupancy.zarr/", "sensors.zarr/", "metrics/quality/",
                    "catalog/runs/"),
             writes=("metrics/statistics_classes/", "metrics/statistics_assets/", "metrics/plots/",

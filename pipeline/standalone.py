@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from catalog.store import Store, StoreError
-from schemas import taxonomy
-from schemas.grid import GridSpec
-from stages.geometry import SceneMesh, is_watertight
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.stages.geometry import SceneMesh, is_watertight
 
 MAX_VOXELS = 2**31  # a grid beyond this is almost always a unit mistake (millimetres as metres)
 
@@ -81,7 +81,7 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     labels = iter(_classes(classes, len(files)))
     assets = {}
     if missing:
-        from pipeline.tasks import load_geometry
+        from carlaocc.pipeline.tasks import load_geometry
 
         try:
             assets = load_geometry(store, set(missing), [])
@@ -135,7 +135,7 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
 
 
 def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:
-    from stages.voxelize import voxelize_scene
+    from carlaocc.stages.voxelize import voxelize_scene
 
     semantic, instance = voxelize_scene(meshes, grid, fill=fill)
     return VoxelizeResult(grid, semantic, instance, meshes)

@@ -13,16 +13,16 @@ from collections import OrderedDict
 
 import numpy as np
 
-from catalog.admesh import dedupe_assets
-from catalog.meshes import MeshStore, load_glb_arrays
-from catalog.occupancy import OccupancyStore
-from catalog.parquet import ParquetTable
-from catalog.store import Store, StoreError
-from pipeline.registry import Partition
-from schemas.configs import (IngestConfig, MetricsConfig, ScenesConfig, SensorsConfig, SourceIngestConfig, TownSpec,
+from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.meshes import MeshStore, load_glb_arrays
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.registry import Partition
+from carlaocc.schemas.configs import (IngestConfig, MetricsConfig, ScenesConfig, SensorsConfig, SourceIngestConfig, TownSpec,
                              VoxelizeConfig)
-from schemas.grid import GridSpec
-from schemas.records import (
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import (
     ActorStateRecord,
     AssetRecord,
     ClassQualityRecord,
@@ -35,7 +35,7 @@ from schemas.records import (
     SequenceRecord,
     TownRecord,
 )
-from stages.geometry import AssetGeometry, MeshPart, is_watertight
+from carlaocc.stages.geometry import AssetGeometry, MeshPart, is_watertight
 
 PROCEDURAL_SOURCE = "procedural"
 
@@ -43,7 +43,7 @@ PROCEDURAL_SOURCE = "procedural"
 # -- ingest ---------------------------------------------------------------------------------------
 def ingest_task(store: Store, cfg: IngestConfig, part: Partition) -> dict[str, str]:
     """Generate the procedural ADMesh library; write meshes, assets and parts."""
-    from stages.ingest import ingest_procedural
+    from carlaocc.stages.ingest import ingest_procedural
 
     result = ingest_procedural(cfg)
     meshes = MeshStore(store)
@@ -74,7 +74,7 @@ def root_digest(root: str) -> str:
 
 def _raw_asset(src):
     """catalog SourceAsset -> stages RawAsset (same fields; the layers share no types)."""
-    from stages.ingest.raw import RawAsset, RawPart
+    from carlaocc.stages.ingest.raw import RawAsset, RawPart
 
     parts = tuple(RawPart(**{f.name: getattr(p, f.name) for f in dataclasses.fields(RawPart)}) for p in src.parts)
     fields = {f.name: getattr(src, f.name) for f in dataclasses.fields(RawAsset) if f.name != "parts"}
@@ -85,10 +85,10 @@ def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -
     """Read one source item, standardize it, and write its mesh and records — or its quarantine
     row. The other outcome's files of the same item are removed, so an item that turned bad (or
     good) is never listed twice."""
-    from catalog.sources.base import SourceError, SourceItem
-    from catalog.sources.registry import adapter
-    from stages.ingest.raw import Rejection
-    from stages.ingest.standardize import standardize
+    from carlaocc.catalog.sources.base import SourceError, SourceItem
+    from carlaocc.catalog.sources.registry import adapter
+    from carlaocc.stages.ingest.raw import Rejection
+    from carlaocc.stages.ingest.standardize import standardize
 
     item = SourceItem(key=part.params["item_key"], files=tuple(part.files), meta=part.params.get("meta", {}))
     key = source_table_key(cfg, item.key)
@@ -132,8 +132,8 @@ def read_town_network(spec: TownSpec):
     """The parsed OpenDRIVE network of an opendrive town spec (None for procedural ones)."""
     if spec.style != "opendrive":
         return None
-    from catalog.opendrive import read_opendrive
-    from catalog.towns import resolve_opendrive
+    from carlaocc.catalog.opendrive import read_opendrive
+    from carlaocc.catalog.towns import resolve_opendrive
 
     return read_opendrive(resolve_opendrive(spec.opendrive))
 
@@ -147,8 +147,8 @@ def is_edited(sequence_id: str) -> bool:
 def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
     """Build one town and simulate its sequences; write stuff meshes, placements, the town row,
     sequences, frames, sensor poses and actors."""
-    from stages.scenes import build_town, simulate_town
-    from stages.scenes.pedestrians import match_walker_phases
+    from carlaocc.stages.scenes import build_town, simulate_town
+    from carlaocc.stages.scenes.pedestrians import match_walker_phases
 
     index = part.params["town_index"]
     spec = cfg.towns[index]
@@ -277,8 +277,8 @@ _INDEX_CACHE: OrderedDict[tuple[str, str, str | None], object] = OrderedDict()
 def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
     """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
     (rigs cached per worker by asset id and geometry content)."""
-    from stages.geometry import geometry_hash
-    from stages.scenes.pedestrians import rig_pedestrian
+    from carlaocc.stages.geometry import geometry_hash
+    from carlaocc.stages.scenes.pedestrians import rig_pedestrian
 
     keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key, hashed once per frame
 
@@ -296,7 +296,7 @@ def _frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
     """The rows of one frame of a per-sequence table (filtered in Arrow before validation)."""
     import pyarrow.compute as pc
 
-    from catalog.parquet import from_table
+    from carlaocc.catalog.parquet import from_table
 
     table = ParquetTable(store, model).load_arrow([seq_id])
     return from_table(model, table.filter(pc.equal(table["frame_index"], frame_index)))
@@ -314,7 +314,7 @@ class FrameInputs:
 
 def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameInputs:
     """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame."""
-    from stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
+    from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
 
     t_seq = ParquetTable(store, SequenceRecord)
     sequences = t_seq.load([seq_id]) if t_seq.exists(seq_id) else []
@@ -355,8 +355,8 @@ def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
 def _frame_flow(inputs: FrameInputs):
     """``(tile, tile_origin, voxel_size) -> (flat indices, float16 (N, 3) flow) | None``: the flow
     of the voxels of the frame's actors in a tile (None when it holds none: its flow is zero)."""
-    from stages.geometry import pose_from_list
-    from stages.voxelize.flow import actor_voxels, voxel_flow
+    from carlaocc.stages.geometry import pose_from_list
+    from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
 
     actors = [a for a in inputs.actors if a.instance_id > 0]
     ids = np.asarray([a.instance_id for a in actors], dtype=np.uint32)
@@ -406,11 +406,11 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     instance and flow tile by tile (x-slabs of whole chunks), then the camera and LiDAR masks,
     traced through the frame's occupancy packed tile by tile and written chunk by chunk from
     their bits (no array of the whole frame is ever held)."""
-    from schemas.rig import RigConfig
-    from stages.scenes.assembly import region_of_grid
-    from stages.scratch import scratch
-    from stages.voxelize import voxelize_tiles
-    from stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.scenes.assembly import region_of_grid
+    from carlaocc.stages.scratch import scratch
+    from carlaocc.stages.voxelize import voxelize_tiles
+    from carlaocc.stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["resolution"])
@@ -471,7 +471,7 @@ def sensor_region(cfg: SensorsConfig) -> tuple[np.ndarray, np.ndarray]:
 def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
     """The camera arrays the sensors stage writes under ``cfg`` (the recorded path reads the raw
     ones, written by the recorder, and never writes them)."""
-    from catalog.sensors import CAMERA_MAPS
+    from carlaocc.catalog.sensors import CAMERA_MAPS
 
     raw = ("depth_raw", "semantic_raw", "instance_raw") if cfg.source == "raycast" else ()
     return CAMERA_MAPS + raw
@@ -480,7 +480,7 @@ def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
 def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
     """The raw maps a recorder wrote for one camera and frame (depth_raw and semantic_raw are
     required, instance_raw optional), with a clear error naming what is missing."""
-    from stages.sensors import CameraMaps
+    from carlaocc.stages.sensors import CameraMaps
 
     def read(name: str, required: bool):
         # a stored chunk is the recorder's image (an all-zero image has no chunk: for depth and
@@ -502,11 +502,11 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     clean maps, simulates the raw ones and rectifies them; the recorded path rectifies the raw
     maps already in sensors.zarr. Both write the rectified depth/semantic/instance, the D2NT
     normals and a rectification record per camera."""
-    from catalog.sensors import LidarStore, SensorStore
-    from schemas.records import RectificationRecord
-    from schemas.rig import RigConfig
-    from stages.sensors import recorded_stats, rectify_cameras, simulate_frame
-    from stages.threads import kernel_threads
+    from carlaocc.catalog.sensors import LidarStore, SensorStore
+    from carlaocc.schemas.records import RectificationRecord
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.sensors import recorded_stats, rectify_cameras, simulate_frame
+    from carlaocc.stages.threads import kernel_threads
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     rig = cfg.rig or RigConfig()
@@ -555,7 +555,7 @@ def metrics_task(store: Store, cfg: MetricsConfig, part: Partition) -> dict[str,
     are in the LiDAR frame; ``scenes/frames``). Its visibility mask is ``mask_camera | mask_lidar``
     (observed by any sensor of the rig): whichever of the two arrays the sequence has; no mask
     when it has neither."""
-    from stages.metrics import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
+    from carlaocc.stages.metrics import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
                                 temporal_consistency_counts)
 
     seq_id, res = part.params["sequence_id"], part.params["resolution"]

@@ -13,8 +13,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
-from schemas.rig import RigConfig
+from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
+from carlaocc.schemas.rig import RigConfig
 
 
 class StageConfig(BaseModel):
@@ -144,7 +144,7 @@ class SimulatorArtifacts(StageConfig):
 
     @model_validator(mode="after")
     def _known_classes(self) -> SimulatorArtifacts:
-        from schemas import taxonomy
+        from carlaocc.schemas import taxonomy
 
         for name in self.unlabelled_classes:
             try:

@@ -32,7 +32,7 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
-from stages.geometry import MeshPart
+from carlaocc.stages.geometry import MeshPart
 
 __all__ = [
     "FONT_HEIGHT",

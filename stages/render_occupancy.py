@@ -51,9 +51,9 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
-from schemas.grid import GridSpec
-from schemas.taxonomy import CLASSES, palette, thing_ids
-from stages.render import (AMBIENT, DIFFUSE, FONT_HEIGHT, FONT_WIDTH, _camera, barycentric, draw_text,
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.taxonomy import CLASSES, palette, thing_ids
+from carlaocc.stages.render import (AMBIENT, DIFFUSE, FONT_HEIGHT, FONT_WIDTH, _camera, barycentric, draw_text,
                            text_width, tri_pixel_box)
 
 __all__ = [

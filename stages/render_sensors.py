@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas import taxonomy
-from stages.render import contact_sheet
-from stages.render_occupancy import instance_colors
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.render import contact_sheet
+from carlaocc.stages.render_occupancy import instance_colors
 
 _DEPTH_T = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
 _DEPTH_RGB = np.array([[20, 12, 50], [95, 30, 120], [200, 60, 90], [250, 150, 50], [252, 250, 190]], dtype=np.float64)

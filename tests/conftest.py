@@ -6,7 +6,7 @@ import uuid
 
 import pytest
 
-from catalog.store import Store
+from carlaocc.catalog.store import Store
 
 
 @pytest.fixture(params=["local", "memory"])
@@ -28,8 +28,8 @@ def store(request, tmp_path) -> Store:
 @pytest.fixture
 def make_asset():
     """``make_asset(asset_id, source, category)``: a minimal valid :class:`AssetRecord` (a 1 m cube)."""
-    from schemas import taxonomy
-    from schemas.records import AssetRecord
+    from carlaocc.schemas import taxonomy
+    from carlaocc.schemas.records import AssetRecord
 
     def make(aid: str, source: str, category: str) -> AssetRecord:
         c = taxonomy.by_name(category)

@@ -10,13 +10,13 @@ import pytest
 import zarr
 from typer.testing import CliRunner
 
-from catalog.occupancy import OccupancyStore
-from catalog.sql import query
-from catalog.store import Store
-from pipeline.cli import app
-from schemas import taxonomy
-from schemas.configs import DatasetConfig
-from schemas.grid import GridSpec
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.sql import query
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli import app
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.schemas.grid import GridSpec
 
 RES = 0.4
 cli = CliRunner()
@@ -155,7 +155,7 @@ def test_scene_tables(built):
 
 
 def test_town_and_frame_mesh_exports(built, tmp_path):
-    from catalog.panoptic import load_panoptic_glb
+    from carlaocc.catalog.panoptic import load_panoptic_glb
 
     out = tmp_path / "town00.glb"
     r = cli.invoke(app, ["scenes", "town-mesh", "town00", "--out", str(out), "--root", built.url])
@@ -290,7 +290,7 @@ def test_flow_of_dynamic_instances(built):
 
 @pytest.mark.parametrize("fmt", ["occ3d", "semantickitti", "surroundocc", "carlaocc-npz"])
 def test_export_formats_read_back(built, tmp_path, fmt):
-    from catalog import formats
+    from carlaocc.catalog import formats
 
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / fmt
@@ -373,7 +373,7 @@ def test_second_resolution_pooling_report_and_multi_resolution_figure(config_fil
 
 # -- sensors ----------------------------------------------------------------------------------------
 def test_sensor_maps_lidar_and_rectification_records(built):
-    from catalog.sensors import SensorStore, LidarStore
+    from carlaocc.catalog.sensors import SensorStore, LidarStore
 
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     frames = E2E.scenes.frame_count
@@ -430,11 +430,11 @@ def test_recorded_path_rectifies_stored_raw_maps_like_the_raycast_path(built, tm
     error naming it."""
     import shutil
 
-    from catalog.sensors import SensorStore
-    from catalog.store import StoreError
-    from pipeline.registry import Partition
-    from pipeline.stages import sensors_config
-    from pipeline.tasks import sensors_task
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.catalog.store import StoreError
+    from carlaocc.pipeline.registry import Partition
+    from carlaocc.pipeline.stages import sensors_config
+    from carlaocc.pipeline.tasks import sensors_task
 
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)

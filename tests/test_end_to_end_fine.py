@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from catalog.occupancy import OccupancyStore
-from catalog.sql import query
-from catalog.store import Store
-from pipeline.cli import app
-from schemas import taxonomy
-from schemas.grid import GridSpec
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.sql import query
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli import app
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.grid import GridSpec
 
 pytestmark = pytest.mark.slow
 

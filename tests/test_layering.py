@@ -1,5 +1,10 @@
 """DESIGN.md: layers import downward only (pipeline -> stages, catalog -> schemas); stages never
-import catalog, pipeline, distributed or the CLI library; schemas imports nothing of ours."""
+import catalog, pipeline, distributed or the CLI library; schemas imports nothing of ours.
+
+Everything of ours is imported through the one ``carlaocc`` namespace: a bare ``import stages``
+(or schemas, catalog, pipeline) would load a second copy of each module beside ``carlaocc.stages``,
+so it is refused everywhere, tests and benchmarks included.
+"""
 
 import ast
 from pathlib import Path
@@ -7,27 +12,41 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-OURS = {"schemas", "stages", "catalog", "pipeline"}
+LAYERS = ("schemas", "stages", "catalog", "pipeline")
+OURS = set(LAYERS)
 FORBIDDEN = {
-    "schemas": OURS - {"schemas"} | {"numpy", "pyarrow", "zarr", "duckdb", "dask", "distributed", "typer", "trimesh"},
+    "schemas": OURS - {"schemas"} | {"pyarrow", "zarr", "duckdb", "dask", "distributed", "typer", "trimesh"},
     "stages": {"catalog", "pipeline", "distributed", "dask", "typer", "zarr", "duckdb", "fsspec", "pyarrow"},
     "catalog": {"stages", "pipeline", "distributed", "dask", "typer"},
     "pipeline": set(),
 }
+# every folder of Python code in the repository, whatever imports it
+CODE_DIRS = (*LAYERS, "carlaocc", "tests", "benchmarks", "tools")
 
 
-def _imports(path: Path) -> set[str]:
+def _modules(path: Path) -> list[str]:
+    """Absolute module names imported by ``path`` (relative imports are not ours to check)."""
     tree = ast.parse(path.read_text(), filename=str(path))
-    out = set()
+    out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            out |= {a.name.split(".")[0] for a in node.names}
+            out += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.add(node.module.split(".")[0])
+            out.append(node.module)
     return out
 
 
-FILES = [(pkg, p) for pkg in OURS for p in sorted((ROOT / pkg).rglob("*.py"))]
+def _imports(path: Path) -> set[str]:
+    """Top-level names imported by ``path``; ``carlaocc.<layer>...`` counts as ``<layer>``."""
+    out = set()
+    for name in _modules(path):
+        parts = name.split(".")
+        out.add(parts[1] if parts[0] == "carlaocc" and len(parts) > 1 else parts[0])
+    return out
+
+
+FILES = [(pkg, p) for pkg in LAYERS for p in sorted((ROOT / pkg).rglob("*.py"))]
+ALL_FILES = [p for d in CODE_DIRS for p in sorted((ROOT / d).rglob("*.py"))]
 
 
 @pytest.mark.parametrize("pkg, path", FILES, ids=[str(p.relative_to(ROOT)) for _, p in FILES])
@@ -36,8 +55,22 @@ def test_layering(pkg, path):
     assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}"
 
 
+@pytest.mark.parametrize("path", ALL_FILES, ids=[str(p.relative_to(ROOT)) for p in ALL_FILES])
+def test_one_namespace(path):
+    bare = sorted({m for m in _modules(path) if m.split(".")[0] in OURS})
+    assert not bare, f"{path.relative_to(ROOT)} imports {bare} by the bare name: use carlaocc.{bare[0]}"
+
+
 def test_every_layer_has_modules():
     assert {pkg for pkg, _ in FILES} == OURS
+
+
+def test_the_rule_catches_what_it_forbids(tmp_path):
+    # the checker itself: a stage importing the catalog through the namespace, and a bare import
+    f = tmp_path / "m.py"
+    f.write_text("from carlaocc.catalog.store import Store\nimport stages.geometry as g\n")
+    assert _imports(f) == {"catalog", "stages"}
+    assert {m for m in _modules(f) if m.split(".")[0] in OURS} == {"stages.geometry"}
 
 
 def test_stages_never_open_paths():

@@ -32,7 +32,7 @@ from nuscenes.eval.common.data_classes import EvalBoxes
 from nuscenes.eval.detection.data_classes import DetectionBox
 from nuscenes.eval.common.utils import center_distance
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-from stages.evaluation.detection import Box3D, DetectionAccumulator
+from carlaocc.stages.evaluation.detection import Box3D, DetectionAccumulator
 
 CLASSES = ("car", "pedestrian", "truck")
 worst = 0.0

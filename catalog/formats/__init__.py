@@ -90,22 +90,22 @@ def read_npz(path: PathLike, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
 
 
 # Public API, re-exported (defined after FormatError, which the modules import from here).
-from catalog.formats.carlaocc_npz import (
+from carlaocc.catalog.formats.carlaocc_npz import (
     CarlaOccFrame,
     load_carlaocc_npz,
     published_instance_ids,
     remap_instances,
     save_carlaocc_npz,
 )
-from catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
-from catalog.formats.semantickitti import (
+from carlaocc.catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
+from carlaocc.catalog.formats.semantickitti import (
     SemanticKittiVoxels,
     load_semantickitti,
     save_semantickitti,
     to_learning,
     to_raw,
 )
-from catalog.formats.surroundocc import (
+from carlaocc.catalog.formats.surroundocc import (
     dense_to_surroundocc,
     load_surroundocc,
     save_surroundocc,

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from catalog.formats import FormatError, PathLike, atomic_write, read_npz
+from carlaocc.catalog.formats import FormatError, PathLike, atomic_write, read_npz
 
 __all__ = [
     "OCC3D_FREE",

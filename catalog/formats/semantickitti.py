@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from catalog.formats import FormatError, PathLike, atomic_write
+from carlaocc.catalog.formats import FormatError, PathLike, atomic_write
 
 __all__ = [
     "LEARNING_MAP",

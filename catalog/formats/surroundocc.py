@@ -24,7 +24,7 @@ import os
 
 import numpy as np
 
-from catalog.formats import FormatError, PathLike, atomic_write
+from carlaocc.catalog.formats import FormatError, PathLike, atomic_write
 
 __all__ = [
     "SURROUNDOCC_DTYPE",

@@ -39,10 +39,10 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from catalog.sources._collada import ColladaError, read_dae
-from catalog.sources._obj import mtl_files, obj_materials
-from catalog.sources.base import Axis, SourceError, SourcePart
-from schemas.taxonomy import SemanticClass, by_id, by_name
+from carlaocc.catalog.sources._collada import ColladaError, read_dae
+from carlaocc.catalog.sources._obj import mtl_files, obj_materials
+from carlaocc.catalog.sources.base import Axis, SourceError, SourcePart
+from carlaocc.schemas.taxonomy import SemanticClass, by_id, by_name
 
 MESH_EXTS: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".dae")
 AXES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")

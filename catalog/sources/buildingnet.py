@@ -57,11 +57,11 @@ from __future__ import annotations
 import os
 import re
 
-from catalog.sources._common import (check_subclass, compact, make_part, read_json_object, semantic_class,
+from carlaocc.catalog.sources._common import (check_subclass, compact, make_part, read_json_object, semantic_class,
                                       sidecar_files)
-from catalog.sources._obj import ObjError, obj_materials, read_obj
-from catalog.sources.base import SourceAsset, SourceError, SourceItem
-from schemas.taxonomy import by_name
+from carlaocc.catalog.sources._obj import ObjError, obj_materials, read_obj
+from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.schemas.taxonomy import by_name
 
 LICENCE = "BuildingNet terms of use"
 

@@ -85,7 +85,7 @@ import os
 
 import numpy as np
 
-from catalog.sources._common import (
+from carlaocc.catalog.sources._common import (
     check_subclass,
     compact,
     default_subclass,
@@ -93,8 +93,8 @@ from catalog.sources._common import (
     read_json_object,
     semantic_class,
 )
-from catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
-from catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
+from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
 
 FORMAT = "carlaocc-ue-export/1"
 UE_TO_OURS = np.diag([0.01, -0.01, 0.01])  # mirror y, centimetres -> metres

@@ -45,7 +45,7 @@ import math
 import os
 import stat
 
-from catalog.sources._common import (
+from carlaocc.catalog.sources._common import (
     UNITS,
     check_axes,
     check_subclass,
@@ -58,7 +58,7 @@ from catalog.sources._common import (
     semantic_class,
     sidecar_files,
 )
-from catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
 
 _REQUIRED = ("glob", "category", "subclass")
 _OPTIONAL = ("length_m", "up", "forward", "units")

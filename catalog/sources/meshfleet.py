@@ -53,7 +53,7 @@ import os
 import re
 import sys
 
-from catalog.sources._common import (
+from carlaocc.catalog.sources._common import (
     MESH_EXTS,
     check_axes,
     default_axes,
@@ -61,7 +61,7 @@ from catalog.sources._common import (
     semantic_class,
     sidecar_files,
 )
-from catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
 
 DEFAULT_CSV = "meshfleet_with_vehicle_categories_df.csv"
 _REQUIRED = ("sha256", "category", "license")

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import inspect
 
-from catalog.sources.buildingnet import BuildingNetAdapter
-from catalog.sources.carla import CarlaAdapter
-from catalog.sources.folder import FolderAdapter
-from catalog.sources.meshfleet import MeshFleetAdapter
-from catalog.sources.shapenet import ShapeNetAdapter
+from carlaocc.catalog.sources.buildingnet import BuildingNetAdapter
+from carlaocc.catalog.sources.carla import CarlaAdapter
+from carlaocc.catalog.sources.folder import FolderAdapter
+from carlaocc.catalog.sources.meshfleet import MeshFleetAdapter
+from carlaocc.catalog.sources.shapenet import ShapeNetAdapter
 
 ADAPTERS: dict[str, type] = {
     cls.kind: cls

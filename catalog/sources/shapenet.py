@@ -45,9 +45,9 @@ import json
 import os
 import re
 
-from catalog.sources._common import load_parts, semantic_class
-from catalog.sources._obj import mtl_files
-from catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources._common import load_parts, semantic_class
+from carlaocc.catalog.sources._obj import mtl_files
+from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
 
 LICENCE = "ShapeNet terms of use"
 MODEL_FILE = os.path.join("models", "model_normalized.obj")

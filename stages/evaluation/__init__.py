@@ -13,10 +13,10 @@ dataset is scored one frame at a time in bounded memory. Nothing here opens a pa
 (``carlaocc eval``, :mod:`pipeline.evaluate`) reads the files and feeds the arrays in.
 """
 
-from stages.evaluation.depth import DepthAccumulator, DepthResult
-from stages.evaluation.detection import Box3D, DetectionAccumulator, DetectionResult
-from stages.evaluation.panoptic import PanopticAccumulator, PanopticResult
-from stages.evaluation.ssc import LABEL_MAPS, LabelMap, SSCAccumulator, SSCResult, confusion_matrix, label_map
+from carlaocc.stages.evaluation.depth import DepthAccumulator, DepthResult
+from carlaocc.stages.evaluation.detection import Box3D, DetectionAccumulator, DetectionResult
+from carlaocc.stages.evaluation.panoptic import PanopticAccumulator, PanopticResult
+from carlaocc.stages.evaluation.ssc import LABEL_MAPS, LabelMap, SSCAccumulator, SSCResult, confusion_matrix, label_map
 
 __all__ = [
     "LABEL_MAPS",

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stages.evaluation.ssc import DEFAULT_IGNORE, LabelMap
+from carlaocc.stages.evaluation.ssc import DEFAULT_IGNORE, LabelMap
 
 __all__ = ["PanopticAccumulator", "PanopticResult", "frame_counts"]
 

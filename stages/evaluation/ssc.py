@@ -29,7 +29,7 @@ from functools import cached_property
 import numba
 import numpy as np
 
-from schemas import taxonomy
+from carlaocc.schemas import taxonomy
 
 __all__ = [
     "DEFAULT_IGNORE",

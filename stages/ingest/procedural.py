@@ -52,10 +52,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import trimesh
 
-from schemas import taxonomy
-from schemas.configs import IngestConfig
-from schemas.records import AssetRecord, PartRecord
-from stages.geometry import (AssetGeometry, MeshPart, concatenate, geometry_hash, is_watertight,
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import IngestConfig
+from carlaocc.schemas.records import AssetRecord, PartRecord
+from carlaocc.stages.geometry import (AssetGeometry, MeshPart, concatenate, geometry_hash, is_watertight,
                              signed_volume, surface_area)
 
 __all__ = ["IngestResult", "ingest_procedural", "asset_id_for", "SOURCE", "LICENCE", "CATALOGUE"]

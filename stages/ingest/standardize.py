@@ -55,11 +55,11 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from schemas import taxonomy
-from schemas.records import AssetRecord, PartRecord
-from stages.geometry import (AssetGeometry, MeshPart, geometry_hash, is_watertight, signed_volume,
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import AssetRecord, PartRecord
+from carlaocc.stages.geometry import (AssetGeometry, MeshPart, geometry_hash, is_watertight, signed_volume,
                              surface_area)
-from stages.ingest.raw import RawAsset, RawPart, Rejection
+from carlaocc.stages.ingest.raw import RawAsset, RawPart, Rejection
 
 __all__ = [
     "StandardizedAsset", "standardize", "SIZE_RANGES", "SUBCLASS_SIZE_RANGES", "size_range",

@@ -1,12 +1,12 @@
 """Dataset-quality metrics over occupancy grids."""
 
-from stages.metrics.continuity import (
+from carlaocc.stages.metrics.continuity import (
     ContinuityCounts,
     isolated_mask_reference,
     sequence_continuity,
     spatial_continuity_counts,
 )
-from stages.metrics.temporal import (
+from carlaocc.stages.metrics.temporal import (
     TemporalCounts,
     column_ranges,
     relative_pose,

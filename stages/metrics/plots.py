@@ -19,10 +19,10 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter
 
-from schemas import taxonomy
-from schemas.records import QualityRecord
-from schemas.records import AssetStatisticsRecord
-from stages.metrics.statistics import N_CLASSES, MotionShare
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import QualityRecord
+from carlaocc.schemas.records import AssetStatisticsRecord
+from carlaocc.stages.metrics.statistics import N_CLASSES, MotionShare
 
 DPI = 100
 _SOURCE_COLOURS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#ff9da7",

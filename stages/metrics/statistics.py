@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from schemas import taxonomy
-from schemas.records import AssetRecord, AssetStatisticsRecord
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import AssetRecord, AssetStatisticsRecord
 
 N_CLASSES = len(taxonomy.CLASSES)  # 30: ids 0..29
 

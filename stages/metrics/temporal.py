@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from schemas.taxonomy import dynamic_ids
+from carlaocc.schemas.taxonomy import dynamic_ids
 
 N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from schemas.configs import ScenesConfig, TownSpec
-from schemas.records import AssetRecord
-from stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
-from stages.scenes.traffic import TRAFFIC_LEVELS, SequenceResult, ego_starts, simulate_sequence, simulate_town
+from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.records import AssetRecord
+from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
+from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, SequenceResult, ego_starts, simulate_sequence, simulate_town
 
 __all__ = [
     "Lane", "RoadNetwork", "SequenceResult", "TRAFFIC_LEVELS", "Town", "Walkway", "build_town", "check_network",
@@ -24,9 +24,9 @@ def build_town(
     if spec.style == "opendrive":
         if opendrive is None:
             raise ValueError(f"town {index}: the opendrive style needs the parsed network of {spec.opendrive}")
-        from stages.scenes.odr_town import build_opendrive_town
+        from carlaocc.stages.scenes.odr_town import build_opendrive_town
 
         return build_opendrive_town(opendrive, spec, scenes, index, assets, source)
-    from stages.scenes.town import build_procedural_town
+    from carlaocc.stages.scenes.town import build_procedural_town
 
     return build_procedural_town(spec, scenes, index, assets)

@@ -48,10 +48,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas import taxonomy
-from schemas.grid import GridSpec
-from schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
-from stages.geometry import AssetGeometry, SceneMesh, invert_pose, pose_from_list, transform_points
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
+from carlaocc.stages.geometry import AssetGeometry, SceneMesh, invert_pose, pose_from_list, transform_points
 
 __all__ = [
     "PanopticMesh",

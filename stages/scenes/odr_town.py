@@ -71,12 +71,12 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from schemas.configs import ScenesConfig, TownSpec
-from schemas.records import AssetRecord
-from stages.geometry import concatenate
-from stages.scenes import opendrive as od
-from stages.scenes.network import URBAN_SPEED_LIMIT, Lane, RoadNetwork, Town, Walkway
-from stages.scenes.placing import POLE_RADIUS, AssetPools, Placer, rot2, stuff_geometry
+from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.records import AssetRecord
+from carlaocc.stages.geometry import concatenate
+from carlaocc.stages.scenes import opendrive as od
+from carlaocc.stages.scenes.network import URBAN_SPEED_LIMIT, Lane, RoadNetwork, Town, Walkway
+from carlaocc.stages.scenes.placing import POLE_RADIUS, AssetPools, Placer, rot2, stuff_geometry
 
 __all__ = ["build_opendrive_town", "build_opendrive_town_with_stats", "build_opendrive_network",
            "SURFACE_MESHES", "SIGN_SUBCLASSES"]  # fmt: skip

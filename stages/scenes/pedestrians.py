@@ -28,8 +28,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from stages.geometry import AssetGeometry, MeshPart
-from stages.scenes.gait import (
+from carlaocc.stages.geometry import AssetGeometry, MeshPart
+from carlaocc.stages.scenes.gait import (
     CanonicalCycle,
     GaitModel,
     add_joint_noise,

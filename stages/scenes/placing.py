@@ -12,9 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from schemas import taxonomy
-from schemas.records import AssetRecord, PlacementRecord
-from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight, pose_matrix, pose_to_list
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import AssetRecord, PlacementRecord
+from carlaocc.stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight, pose_matrix, pose_to_list
 
 __all__ = [
     "SURFACE", "STUFF_TILE", "POLE_RADIUS", "grid_slab", "slab", "slabs", "stuff_geometry", "rot2", "yaw_of", "Placer",

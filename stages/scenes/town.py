@@ -44,11 +44,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from schemas.configs import ScenesConfig, TownSpec
-from schemas.records import AssetRecord
-from stages.geometry import concatenate
-from stages.scenes.network import Lane, RoadNetwork, Town, Walkway, polyline_lengths
-from stages.scenes.placing import (
+from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.records import AssetRecord
+from carlaocc.stages.geometry import concatenate
+from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, polyline_lengths
+from carlaocc.stages.scenes.placing import (
     POLE_RADIUS,
     STUFF_TILE,
     SURFACE,

@@ -45,10 +45,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from schemas.configs import ScenesConfig, TownSpec
-from schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
-from stages.geometry import pose_matrix, pose_to_list
-from stages.scenes.network import Lane, RoadNetwork, Town, Walkway
+from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
+from carlaocc.stages.geometry import pose_matrix, pose_to_list
+from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway
 
 __all__ = [
     "SequenceResult", "TrafficLevel", "TRAFFIC_LEVELS", "simulate_sequence", "simulate_town", "sequence_name",

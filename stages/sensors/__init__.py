@@ -1,13 +1,13 @@
 """Sensors stage compute: ray-cast camera maps and LiDAR, the simulator artifact model and the
 instance-guided rectification (paper, section 3.2 and its appendix)."""
 
-from stages.sensors.artifacts import unlabelled_meshes
-from stages.sensors.frame import (CameraFrame, CameraStats, SensorFrame, camera_poses, rectify_cameras,
+from carlaocc.stages.sensors.artifacts import unlabelled_meshes
+from carlaocc.stages.sensors.frame import (CameraFrame, CameraStats, SensorFrame, camera_poses, rectify_cameras,
                                   recorded_stats, simulate_frame)
-from stages.sensors.normals import depth_normals
-from stages.sensors.raycast import (SKY, UNLABELLED, CameraMaps, RayScene, camera_ray_bundle, covered_pixels, lidar_scan,
+from carlaocc.stages.sensors.normals import depth_normals
+from carlaocc.stages.sensors.raycast import (SKY, UNLABELLED, CameraMaps, RayScene, camera_ray_bundle, covered_pixels, lidar_scan,
                                     render_camera)
-from stages.sensors.rectify import Rectification, compact_mesh, rectify
+from carlaocc.stages.sensors.rectify import Rectification, compact_mesh, rectify
 
 __all__ = [
     "SKY", "UNLABELLED", "CameraFrame", "CameraMaps", "CameraStats", "RayScene", "Rectification", "SensorFrame",

@@ -14,9 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from schemas import taxonomy
-from schemas.configs import SimulatorArtifacts
-from stages.geometry import SceneMesh
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import SimulatorArtifacts
+from carlaocc.stages.geometry import SceneMesh
 
 
 def asset_fraction(asset_id: str, seed: int) -> float:

@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas.configs import SensorsConfig
-from schemas.rig import CameraSpec, RigConfig
-from stages.geometry import SceneMesh
-from stages.scenes.assembly import flatten
-from stages.sensors.artifacts import unlabelled_meshes
-from stages.sensors.normals import depth_normals
-from stages.sensors.raycast import CameraMaps, RayScene, covered_pixels, lidar_scan, render_camera
-from stages.sensors.rectify import Rectification, compact_mesh, rectify
+from carlaocc.schemas.configs import SensorsConfig
+from carlaocc.schemas.rig import CameraSpec, RigConfig
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.scenes.assembly import flatten
+from carlaocc.stages.sensors.artifacts import unlabelled_meshes
+from carlaocc.stages.sensors.normals import depth_normals
+from carlaocc.stages.sensors.raycast import CameraMaps, RayScene, covered_pixels, lidar_scan, render_camera
+from carlaocc.stages.sensors.rectify import Rectification, compact_mesh, rectify
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ class SensorFrame:
 
 def camera_poses(rig: RigConfig) -> dict[str, np.ndarray]:
     """4x4 pose of each camera's OpenCV optical frame in the LiDAR frame."""
-    from stages.voxelize.visibility import sensor_to_lidar
+    from carlaocc.stages.voxelize.visibility import sensor_to_lidar
 
     return sensor_to_lidar(rig)
 

@@ -22,8 +22,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from schemas.rig import CameraSpec, LidarSpec
-from stages.scenes.assembly import PanopticMesh
+from carlaocc.schemas.rig import CameraSpec, LidarSpec
+from carlaocc.stages.scenes.assembly import PanopticMesh
 
 SKY = 11  # taxonomy id of Sky: the label of pixels whose ray meets no surface
 UNLABELLED = 0  # the empty label a simulator's semantic pass leaves on assets it does not render
@@ -251,7 +251,7 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
 
 @lru_cache(maxsize=8)
 def _lidar_beams(lidar: LidarSpec) -> tuple[np.ndarray, np.ndarray]:
-    from stages.voxelize.visibility import lidar_directions
+    from carlaocc.stages.voxelize.visibility import lidar_directions
 
     d = lidar_directions(lidar)
     steps = len(d) // lidar.channels

@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stages.geometry import SceneMesh
-from stages.scenes.assembly import PanopticMesh, flatten
-from stages.sensors.raycast import UNLABELLED, CameraMaps
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.scenes.assembly import PanopticMesh, flatten
+from carlaocc.stages.sensors.raycast import UNLABELLED, CameraMaps
 
 
 @dataclass(frozen=True)

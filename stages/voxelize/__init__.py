@@ -8,9 +8,9 @@ camera and LiDAR rays through them (DDA ray traversal; the rig's rays as vertica
 coarser grids and other datasets' grids.
 """
 
-from stages.voxelize.compose import FILL_MODES, elevation_order, voxelize_scene, voxelize_tiles
-from stages.voxelize.kernels import fill_interior, surface_voxels
-from stages.voxelize.visibility import ray_mask, visibility_masks
+from carlaocc.stages.voxelize.compose import FILL_MODES, elevation_order, voxelize_scene, voxelize_tiles
+from carlaocc.stages.voxelize.kernels import fill_interior, surface_voxels
+from carlaocc.stages.voxelize.visibility import ray_mask, visibility_masks
 
 __all__ = ["voxelize_scene", "voxelize_tiles", "elevation_order", "surface_voxels", "fill_interior",
            "visibility_masks", "ray_mask", "FILL_MODES"]

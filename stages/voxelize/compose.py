@@ -48,10 +48,10 @@ from typing import Literal
 
 import numpy as np
 
-from schemas.grid import GridSpec
-from stages.geometry import SceneMesh
-from stages.scratch import scratch
-from stages.voxelize.kernels import paint_interior, paint_surface, to_voxel_units
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.scratch import scratch
+from carlaocc.stages.voxelize.kernels import paint_interior, paint_surface, to_voxel_units
 
 __all__ = ["voxelize_scene", "voxelize_tiles", "Tile", "elevation_order", "composition_plan", "PlannedMesh",
            "FillMode", "FILL_MODES"]

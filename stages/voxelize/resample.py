@@ -45,8 +45,8 @@ from typing import Literal
 
 import numpy as np
 
-from schemas.grid import GridSpec
-from schemas.taxonomy import CLASSES, TARGETS, by_name, mapping, thing_ids
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.taxonomy import CLASSES, TARGETS, by_name, mapping, thing_ids
 
 __all__ = [
     "DEFAULT_POOLING_PRIORITY",

@@ -98,9 +98,9 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 from numba.extending import intrinsic
 
-from schemas.grid import GridSpec
-from schemas.rig import CameraSpec, LidarSpec, RigConfig
-from stages.scratch import scratch
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
+from carlaocc.stages.scratch import scratch
 
 __all__ = [
     "PARALLEL_MIN_FANS",

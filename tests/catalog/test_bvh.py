@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from catalog.bvh import BvhClip, BvhError, parse_bvh, read_bvh
+from carlaocc.catalog.bvh import BvhClip, BvhError, parse_bvh, read_bvh
 
 CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
 

@@ -11,21 +11,21 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from catalog.formats import FormatError, atomic_write, occ3d, semantickitti, surroundocc
-from catalog.formats import carlaocc_npz as cnpz
-from catalog.formats.carlaocc_npz import (
+from carlaocc.catalog.formats import FormatError, atomic_write, occ3d, semantickitti, surroundocc
+from carlaocc.catalog.formats import carlaocc_npz as cnpz
+from carlaocc.catalog.formats.carlaocc_npz import (
     load_carlaocc_npz,
     published_instance_ids,
     remap_instances,
     save_carlaocc_npz,
 )
-from catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
-from catalog.formats.semantickitti import (
+from carlaocc.catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
+from carlaocc.catalog.formats.semantickitti import (
     SemanticKittiVoxels,
     load_semantickitti,
     save_semantickitti,
 )
-from catalog.formats.surroundocc import (
+from carlaocc.catalog.formats.surroundocc import (
     dense_to_surroundocc,
     load_surroundocc,
     save_surroundocc,
@@ -440,7 +440,7 @@ def test_missing_files_raise_file_not_found(tmp_path):
 
 
 def test_package_reexports():
-    from catalog import formats
+    from carlaocc.catalog import formats
 
     for name in formats.__all__:
         assert hasattr(formats, name), name

@@ -4,7 +4,7 @@ import zlib
 import numpy as np
 import pytest
 
-from catalog.images import png_bytes, save_png
+from carlaocc.catalog.images import png_bytes, save_png
 
 
 def _decode(data: bytes) -> np.ndarray:

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from catalog.occupancy import OccupancyStore
-from schemas.grid import GridSpec
-from schemas.taxonomy import TAXONOMY_VERSION
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 GRID = GridSpec(region_min=(-2.0, -1.0, -0.5), region_max=(2.0, 1.0, 0.5), voxel_size=0.25)
 
@@ -81,7 +81,7 @@ def test_frame_fingerprint_tracks_stored_chunks(store):
 
 @pytest.mark.parametrize("memory", [False, True])
 def test_write_tile_round_trips_through_zarr_with_edge_chunks_and_empty_chunks(tmp_path, memory):
-    from catalog.store import Store
+    from carlaocc.catalog.store import Store
 
     store = Store(f"memory://occ-tiles-{memory}") if memory else Store(str(tmp_path / "root"))
     grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(4.0, 2.5, 1.0), voxel_size=0.1)  # 40x25x10
@@ -137,7 +137,7 @@ from hypothesis import strategies as st
        dtype=st.sampled_from(["uint8", "uint32", "float16"]), trailing=st.sampled_from([(), (3,)]),
        seed=st.integers(0, 2**32 - 1))
 def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing, seed):
-    from catalog.occupancy import chunk_flags
+    from carlaocc.catalog.occupancy import chunk_flags
 
     rng = np.random.default_rng(seed)
     data = np.zeros((nx, ny, nz, *trailing), dtype=dtype)
@@ -159,7 +159,7 @@ def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing
 
 
 def test_write_chunks_from_a_block_function(tmp_path):
-    from catalog.store import Store
+    from carlaocc.catalog.store import Store
 
     store = Store(str(tmp_path / "root"))
     grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(4.0, 2.5, 1.0), voxel_size=0.1)  # 40x25x10

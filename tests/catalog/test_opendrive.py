@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from catalog.opendrive import OpenDriveError, OpenDriveNetwork, parse_opendrive, read_opendrive
+from carlaocc.catalog.opendrive import OpenDriveError, OpenDriveNetwork, parse_opendrive, read_opendrive
 
 DATA = Path("/work/shared/testdata/opendrive")
 NAMES = ["Town01", "Town02", "Town10HD", "Issue274", "shoulders", "zero_width"]

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from catalog import panoptic
-from catalog.panoptic import TRANSPARENT_ALPHA, load_panoptic_glb, panoptic_glb_bytes
-from schemas import taxonomy
+from carlaocc.catalog import panoptic
+from carlaocc.catalog.panoptic import TRANSPARENT_ALPHA, load_panoptic_glb, panoptic_glb_bytes
+from carlaocc.schemas import taxonomy
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -159,6 +159,7 @@ def test_glb_container_is_well_formed():
 
 def test_catalog_panoptic_imports_no_stages():
     tree = ast.parse((ROOT / "catalog" / "panoptic.py").read_text())
-    mods = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    mods |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+    names += [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module]
+    mods = {m.removeprefix("carlaocc.").split(".")[0] for m in names}
     assert not mods & {"stages", "pipeline", "dask", "distributed", "typer"}

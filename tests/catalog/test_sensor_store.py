@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 import zarr
 
-from catalog.sensors import CAMERA_MAPS, LIDAR_COLUMNS, SENSOR_MAPS, LidarStore, SensorStore
-from catalog.store import StoreError
-from catalog.zarrio import frame_fingerprint, parse_frame_key, zarr_store
-from pipeline.runner import outputs_intact
-from schemas.taxonomy import TAXONOMY_VERSION
+from carlaocc.catalog.sensors import CAMERA_MAPS, LIDAR_COLUMNS, SENSOR_MAPS, LidarStore, SensorStore
+from carlaocc.catalog.store import StoreError
+from carlaocc.catalog.zarrio import frame_fingerprint, parse_frame_key, zarr_store
+from carlaocc.pipeline.runner import outputs_intact
+from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 W, H = 12, 8
 K = [[10.0, 0.0, 6.0], [0.0, 10.0, 4.0], [0.0, 0.0, 1.0]]
@@ -159,7 +159,7 @@ def test_outputs_intact_checks_sensor_frames(store):
 
 
 def test_parse_frame_key():
-    from catalog.occupancy import parse_output_key
+    from carlaocc.catalog.occupancy import parse_output_key
 
     assert parse_frame_key("occupancy.zarr/s/0.25/semantic[12]") == ("occupancy.zarr", "s/0.25/semantic", 12)
     assert parse_output_key("occupancy.zarr/s/0.25/semantic[12]") == ("s/0.25/semantic", 12)

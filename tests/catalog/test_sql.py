@@ -1,8 +1,8 @@
 import pytest
 
-from catalog.parquet import ParquetTable
-from catalog.sql import QueryError, QueryRefused, check_read_only, query
-from schemas.records import SequenceRecord
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sql import QueryError, QueryRefused, check_read_only, query
+from carlaocc.schemas.records import SequenceRecord
 
 
 def _seed(store):
@@ -66,7 +66,7 @@ def test_read_pragma_allowed(store):
 def test_timestamps_and_nan_are_queryable(store):
     from datetime import datetime, timezone
 
-    from schemas.records import QualityRecord, RunRecord
+    from carlaocc.schemas.records import QualityRecord, RunRecord
 
     t = datetime(2026, 5, 1, 12, 0, tzinfo=timezone.utc)
     ParquetTable(store, RunRecord).save("stage=x/r", [RunRecord(

@@ -3,11 +3,11 @@ import os
 import numpy as np
 import pytest
 
-from catalog.meshes import MeshStore
-from catalog.parquet import ParquetTable
-from catalog.store import Store, StoreError
-from schemas.records import QuarantineRecord
-from stages.geometry import MeshPart
+from carlaocc.catalog.meshes import MeshStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas.records import QuarantineRecord
+from carlaocc.stages.geometry import MeshPart
 
 
 def _q(reason: str) -> QuarantineRecord:

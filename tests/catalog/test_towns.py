@@ -6,8 +6,8 @@ import collections
 
 import pytest
 
-from catalog.opendrive import read_opendrive
-from catalog.towns import builtin_names, resolve_opendrive
+from carlaocc.catalog.opendrive import read_opendrive
+from carlaocc.catalog.towns import builtin_names, resolve_opendrive
 
 
 def test_builtin_names_lists_crossroads():

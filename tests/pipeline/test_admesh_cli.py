@@ -7,9 +7,9 @@ import struct
 import pytest
 from typer.testing import CliRunner
 
-from catalog.sql import query
-from catalog.store import Store
-from pipeline.cli import app
+from carlaocc.catalog.sql import query
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli import app
 
 cli = CliRunner()
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from catalog.formats import (Occ3DFrame, SemanticKittiVoxels, dense_to_surroundocc, load_occ3d, save_carlaocc_npz,
+from carlaocc.catalog.formats import (Occ3DFrame, SemanticKittiVoxels, dense_to_surroundocc, load_occ3d, save_carlaocc_npz,
                              save_occ3d, save_semantickitti, save_surroundocc, to_raw)
-from pipeline.audit import (FORMATS, AuditError, KeyedPoses, audit, audit_command, collect_inputs, load_poses,
+from carlaocc.pipeline.audit import (FORMATS, AuditError, KeyedPoses, audit, audit_command, collect_inputs, load_poses,
                             plan_sequences)
-from pipeline.cli import app
-from stages.metrics import isolated_mask_reference, spatial_continuity_counts
+from carlaocc.pipeline.cli import app
+from carlaocc.stages.metrics import isolated_mask_reference, spatial_continuity_counts
 
 cli = CliRunner()
 OCC3D_SAMPLE = Path("/work/shared/testdata/occupancy/occ3d-nuscenes/labels.npz")

@@ -6,10 +6,10 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from catalog.parquet import ParquetTable
-from catalog.store import Store
-from pipeline.cli import app
-from schemas.records import SequenceRecord
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli import app
+from carlaocc.schemas.records import SequenceRecord
 
 cli = CliRunner()
 
@@ -121,7 +121,7 @@ def test_help_lists_commands():
 def test_query_json_has_no_nan(tmp_path):
     import json
 
-    from schemas.records import QualityRecord
+    from carlaocc.schemas.records import QualityRecord
 
     store = Store(str(tmp_path / "r"))
     ParquetTable(store, QualityRecord).save("q", [QualityRecord(

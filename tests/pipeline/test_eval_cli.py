@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from catalog.formats import save_carlaocc_npz
-from pipeline.cli import app
-from stages.evaluation import SSCAccumulator, label_map
+from carlaocc.catalog.formats import save_carlaocc_npz
+from carlaocc.pipeline.cli import app
+from carlaocc.stages.evaluation import SSCAccumulator, label_map
 
 cli = CliRunner()
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.export import SEMANTICKITTI_GRID, _coverage
-from schemas.grid import GridSpec
-from schemas.rig import RigConfig
-from stages.voxelize.resample import OCC3D_NUSCENES
+from carlaocc.pipeline.export import SEMANTICKITTI_GRID, _coverage
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.rig import RigConfig
+from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES
 
 
 def test_coverage_without_masks_is_our_region_in_the_target_grid():

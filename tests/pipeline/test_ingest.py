@@ -9,9 +9,9 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from catalog.sql import query
-from catalog.store import Store
-from pipeline.cli import app
+from carlaocc.catalog.sql import query
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli import app
 
 cli = CliRunner()
 
@@ -153,7 +153,7 @@ def test_unusable_sources_exit_2(source, tmp_path):
 def test_carla_export_through_the_cli(tmp_path):
     """The documented CARLA export (made here by the adapter's example writer) assembles
     hierarchically, converts once to our frame, and keeps part-level classes."""
-    from catalog.sources.carla import write_example_export
+    from carlaocc.catalog.sources.carla import write_example_export
 
     export = write_example_export(str(tmp_path / "export"))
     root = Store(str(tmp_path / "data"))
@@ -200,7 +200,7 @@ def test_shapenet_model_in_its_own_frame_comes_out_upright_and_forward(tmp_path)
     import json
     import os
 
-    from stages.ingest.standardize import rotation_to_asset_frame
+    from carlaocc.stages.ingest.standardize import rotation_to_asset_frame
 
     hull = "/work/shared/testdata/meshes/scenic/bmwx5_hull.obj"
     if not os.path.exists(hull):

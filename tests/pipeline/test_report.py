@@ -11,19 +11,19 @@ from datetime import datetime, timedelta, timezone
 import numpy as np
 import pytest
 
-from catalog.lineage import LineageLog
-from catalog.occupancy import OccupancyStore
-from catalog.parquet import ParquetTable
-from catalog.sql import query
-from catalog.store import Store
-from catalog.usage import store_usage
-from pipeline.registry import Context, Partition
-from pipeline.report import PLOTS_DIR, REPORT_HTML, SECTIONS, report_task, stage_lineage
-from pipeline.stages import STAGES
-from schemas import taxonomy
-from schemas.configs import DatasetConfig, MetricsConfig
-from schemas.grid import GridSpec
-from schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, QualityRecord, RunRecord,
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sql import query
+from carlaocc.catalog.store import Store
+from carlaocc.catalog.usage import store_usage
+from carlaocc.pipeline.registry import Context, Partition
+from carlaocc.pipeline.report import PLOTS_DIR, REPORT_HTML, SECTIONS, report_task, stage_lineage
+from carlaocc.pipeline.stages import STAGES
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import DatasetConfig, MetricsConfig
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, QualityRecord, RunRecord,
                              SequenceRecord)
 
 CAR, BUILDING, ROAD = (taxonomy.by_name(n).id for n in ("Car", "Building", "Road"))

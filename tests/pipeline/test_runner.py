@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from catalog.lineage import LineageLog
-from catalog.parquet import ParquetTable
-from pipeline import runner
-from pipeline.registry import Partition, StageSpec
-from schemas.configs import DatasetConfig
-from schemas.records import QuarantineRecord
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.pipeline import runner
+from carlaocc.pipeline.registry import Partition, StageSpec
+from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.schemas.records import QuarantineRecord
 
 
 def _rec(reason: str) -> QuarantineRecord:
@@ -33,9 +33,9 @@ def task_b(store, cfg, part):
 
 
 STAGES = {
-    "ingest": StageSpec("ingest", "a", (), ("stages.geometry",), (), (),
+    "ingest": StageSpec("ingest", "a", (), ("carlaocc.stages.geometry",), (), (),
                         lambda ctx: [Partition("x"), Partition("y")], task_a),
-    "scenes": StageSpec("scenes", "b", ("ingest",), ("stages.geometry",), (), (),
+    "scenes": StageSpec("scenes", "b", ("ingest",), ("carlaocc.stages.geometry",), (), (),
                         lambda ctx: [Partition(f"p{i}", {"up": "xy"[i]}, (("ingest", "xy"[i]),)) for i in range(2)],
                         task_b),
 }
@@ -143,7 +143,7 @@ def test_single_stage_run_refuses_a_stale_upstream(store):
 def test_latest_is_ordered_by_run_id_not_worker_clock(store):
     from datetime import datetime, timezone
 
-    from schemas.records import RunRecord
+    from carlaocc.schemas.records import RunRecord
 
     def rec(run_id, status, hour):
         t = datetime(2026, 1, 1, hour, tzinfo=timezone.utc)

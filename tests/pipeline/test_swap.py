@@ -8,12 +8,12 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from catalog.lineage import LineageLog
-from catalog.parquet import ParquetTable
-from catalog.store import Store, StoreError
-from pipeline.cli import app
-from pipeline.scenes import SWAP_STAGE, compatible, swap_class
-from schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.cli import app
+from carlaocc.pipeline.scenes import SWAP_STAGE, compatible, swap_class
+from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
 
 POSE = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
 cli = CliRunner()

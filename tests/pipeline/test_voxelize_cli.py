@@ -9,7 +9,7 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-from pipeline.cli import app
+from carlaocc.pipeline.cli import app
 
 cli = CliRunner()
 MODELS = Path(__file__).resolve().parents[3] / "shared" / "testdata" / "meshes" / "trimesh-models"
@@ -48,7 +48,7 @@ def test_per_file_classes_and_default_grid(tmp_path, cube_obj):
                          "--class", "Sidewalk", "--voxel-size", "0.05", "--out", str(out)])
     assert r.exit_code == 0, r.output
     d = np.load(out)
-    from schemas import taxonomy
+    from carlaocc.schemas import taxonomy
 
     car, walk = taxonomy.by_name("Car").id, taxonomy.by_name("Sidewalk").id
     assert {car, walk} <= set(np.unique(d["semantic"]))

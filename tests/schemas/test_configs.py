@@ -1,7 +1,7 @@
 import pytest
 from pydantic import ValidationError
 
-from schemas.configs import DatasetConfig, parse_resolutions
+from carlaocc.schemas.configs import DatasetConfig, parse_resolutions
 
 
 def test_unknown_key_refused_at_every_level():
@@ -47,7 +47,7 @@ def test_default_dataset_has_a_procedural_and_an_opendrive_town_at_several_level
 
 
 def test_town_spec_checks():
-    from schemas.configs import TownSpec
+    from carlaocc.schemas.configs import TownSpec
 
     with pytest.raises(ValidationError, match="opendrive file exactly"):
         TownSpec(style="opendrive")
@@ -64,7 +64,7 @@ def test_town_spec_checks():
 
 
 def test_camera_ray_stride_defaults_to_every_pixel_and_null_means_it_too():
-    from schemas.configs import VoxelizeConfig
+    from carlaocc.schemas.configs import VoxelizeConfig
 
     assert VoxelizeConfig().camera_ray_stride == 1
     assert VoxelizeConfig(camera_ray_stride=None).camera_ray_stride == 1

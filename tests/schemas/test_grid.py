@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from schemas.grid import GridSpec, resolution_key
+from carlaocc.schemas.grid import GridSpec, resolution_key
 
 
 @pytest.mark.parametrize(

@@ -5,8 +5,8 @@ from datetime import datetime, timezone
 import pytest
 from pydantic import ValidationError
 
-from catalog.parquet import ParquetTable, arrow_schema, from_table, to_table
-from schemas import records as R
+from carlaocc.catalog.parquet import ParquetTable, arrow_schema, from_table, to_table
+from carlaocc.schemas import records as R
 
 POSE = [1.0, 0, 0, 2.5, 0, 1.0, 0, -3.25, 0, 0, 1.0, 0.0, 0, 0, 0, 1.0]
 T0 = datetime(2026, 1, 2, 3, 4, 5, 678000, tzinfo=timezone.utc)

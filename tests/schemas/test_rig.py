@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from schemas.rig import CameraSpec, LidarSpec, RigConfig
+from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
 
 
 def _project(cam: CameraSpec, p_ego) -> tuple[float, float, float]:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pydantic
 import pytest
 
-from schemas import taxonomy as tx
+from carlaocc.schemas import taxonomy as tx
 
 SEMANTIC_KITTI_YAML = Path("/work/shared/testdata/occupancy/semantic-kitti/semantic-kitti.yaml")
 

@@ -9,12 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from schemas import taxonomy
-from schemas.grid import GridSpec
-from schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
-from stages.geometry import AssetGeometry, MeshPart, invert_pose, pose_matrix, pose_to_list, transform_points
-from stages.scenes import assembly
-from stages.scenes.assembly import (
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
+from carlaocc.stages.geometry import AssetGeometry, MeshPart, invert_pose, pose_matrix, pose_to_list, transform_points
+from carlaocc.stages.scenes import assembly
+from carlaocc.stages.scenes.assembly import (
     PanopticMesh,
     PlacementIndex,
     assemble_frame,
@@ -318,8 +318,8 @@ def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw, precull):
 
 def test_procedural_assets_realistic_frame():
     """A frame over procedural ADMesh assets: every part class and transparency survives assembly."""
-    from schemas.configs import IngestConfig
-    from stages.ingest import ingest_procedural
+    from carlaocc.schemas.configs import IngestConfig
+    from carlaocc.stages.ingest import ingest_procedural
 
     lib = ingest_procedural(IngestConfig(variants_per_subclass=1))
     geometry = dict(lib.geometry) | {"T/road": ROAD_G}
@@ -381,7 +381,7 @@ def test_town_mesh_world_frame_ids():
 
 
 def test_frame_export_round_trip():
-    from catalog.panoptic import load_panoptic_glb, panoptic_glb_bytes
+    from carlaocc.catalog.panoptic import load_panoptic_glb, panoptic_glb_bytes
 
     out = assemble_frame(frame(yaw=0.4), [actor(7, CAR_G, 10.0, 0.0)],
                          PlacementIndex([place(0, ROAD_G, name="road"), place(1, HOUSE_G, x=20.0, y=10.0)]),

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from stages.evaluation.depth import DepthAccumulator
+from carlaocc.stages.evaluation.depth import DepthAccumulator
 
 
 def test_hand_values_pixel_and_image_averages():

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from stages.evaluation.detection import Box3D, DetectionAccumulator
+from carlaocc.stages.evaluation.detection import Box3D, DetectionAccumulator
 
 THS = (0.5, 1.0, 2.0, 4.0)
 

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from stages.evaluation.panoptic import PanopticAccumulator
-from stages.evaluation.ssc import LabelMap
+from carlaocc.stages.evaluation.panoptic import PanopticAccumulator
+from carlaocc.stages.evaluation.ssc import LabelMap
 
 # 0 free, 1 road (stuff), 2 car (thing), 3 wall (stuff), 4 person (thing)
 SMALL = LabelMap("small", ("free", "road", "car", "wall", "person"), 0, (2, 4), (0,) * 30)

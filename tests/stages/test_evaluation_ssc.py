@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from schemas import taxonomy
-from stages.evaluation.ssc import LABEL_MAPS, LabelMap, SSCAccumulator, confusion_matrix, label_map
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.evaluation.ssc import LABEL_MAPS, LabelMap, SSCAccumulator, confusion_matrix, label_map
 
 OCC3D_SAMPLE = Path(__file__).resolve().parents[2] / ".." / "shared" / "testdata" / "occupancy" / "occ3d-nuscenes" / "labels.npz"
 

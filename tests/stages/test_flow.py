@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.voxelize.flow import instance_flow
+from carlaocc.stages.voxelize.flow import instance_flow
 
 
 def _yaw(theta: float, t=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -106,7 +106,7 @@ def test_tile_equals_slice_of_whole():
 
 
 def test_actor_voxels_inside_boxes_give_the_dense_flow():
-    from stages.voxelize.flow import actor_voxels, voxel_flow
+    from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
 
     rng = np.random.default_rng(3)
     inst = np.zeros((9, 8, 7), dtype=np.uint32)
@@ -132,7 +132,7 @@ def test_actor_voxels_inside_boxes_give_the_dense_flow():
 
 
 def test_actor_voxels_refuses_repeated_ids():
-    from stages.voxelize.flow import actor_voxels
+    from carlaocc.stages.voxelize.flow import actor_voxels
 
     with pytest.raises(ValueError, match="unique"):
         actor_voxels(np.zeros((2, 2, 2), np.uint32), np.zeros((0, 7), np.int64), np.array([4, 4]))

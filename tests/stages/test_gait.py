@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stages.scenes import gait as G
+from carlaocc.stages.scenes import gait as G
 
 CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
 SPEEDS = (0.8, 1.2, 1.6)
@@ -22,7 +22,7 @@ D, W, RATE = 32, 11, 20.0
 def cmu():
     if not CLIP.exists():
         pytest.skip("test clip not available")
-    from catalog.bvh import read_bvh  # tests may cross layers; the module under test does not
+    from carlaocc.catalog.bvh import read_bvh  # tests may cross layers; the module under test does not
 
     clip = read_bvh(str(CLIP))
     pos = G.clip_positions(clip)

@@ -3,7 +3,7 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stages.geometry import (concatenate, invert_pose, is_watertight, pose_from_list, pose_matrix,
+from carlaocc.stages.geometry import (concatenate, invert_pose, is_watertight, pose_from_list, pose_matrix,
                              pose_to_list, transform_points)
 
 MESHES = [trimesh.creation.box((1, 2, 3)), trimesh.creation.icosphere(2), trimesh.creation.cylinder(0.5, 2.0),

@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from schemas import taxonomy
-from schemas.configs import IngestConfig
-from stages.geometry import is_watertight
-from stages.ingest import IngestResult, asset_id_for, ingest_procedural
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import IngestConfig
+from carlaocc.stages.geometry import is_watertight
+from carlaocc.stages.ingest import IngestResult, asset_id_for, ingest_procedural
 
 ID = {name: taxonomy.by_name(name).id for name in (
     "Car", "Truck", "Bus", "Train", "Building", "Vegetation", "Pole", "TrafficLight", "TrafficSign", "Pedestrian",

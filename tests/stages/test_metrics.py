@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from stages.metrics import isolated_mask_reference, sequence_continuity, spatial_continuity_counts
+from carlaocc.stages.metrics import isolated_mask_reference, sequence_continuity, spatial_continuity_counts
 
 
 def test_single_voxel_is_isolated_and_pair_is_not():
@@ -58,10 +58,10 @@ def test_sequence_sums_frames():
 # -- the metrics stage's task: s_sc and s_tc per frame, pair and sequence from the store --------
 def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
     """A sequence's occupancy frames and LiDAR poses in ``store`` (grid 1 m over 6 x 5 x 3 m)."""
-    from catalog.occupancy import OccupancyStore
-    from catalog.parquet import ParquetTable
-    from schemas.grid import GridSpec
-    from schemas.records import FrameRecord
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.grid import GridSpec
+    from carlaocc.schemas.records import FrameRecord
 
     grid = GridSpec(region_min=(0, 0, 0), region_max=(6, 5, 3), voxel_size=1.0)
     occ = OccupancyStore(store)
@@ -79,11 +79,11 @@ def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
 
 
 def _run_metrics(store, grid, seq="seq0"):
-    from catalog.parquet import ParquetTable
-    from pipeline.registry import Partition
-    from pipeline.tasks import metrics_task
-    from schemas.configs import MetricsConfig
-    from schemas.records import QualityRecord
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.pipeline.registry import Partition
+    from carlaocc.pipeline.tasks import metrics_task
+    from carlaocc.schemas.configs import MetricsConfig
+    from carlaocc.schemas.records import QualityRecord
 
     part = Partition(f"{seq}/{grid.key}", {"sequence_id": seq, "resolution": grid.voxel_size,
                                             "grid": grid.model_dump(mode="json")})
@@ -144,7 +144,7 @@ def test_metrics_task_uses_poses_and_the_mask_union(store):
 
 
 def test_metrics_task_names_a_missing_pose(store):
-    from catalog.store import StoreError
+    from carlaocc.catalog.store import StoreError
 
     grid = _write_sequence(store, [_moving_street(0), _moving_street(1)], [np.eye(4)])
     with pytest.raises(StoreError, match=r"no LiDAR pose for frame\(s\) \[1\]"):

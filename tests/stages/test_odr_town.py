@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from catalog.opendrive import parse_opendrive, read_opendrive
-from catalog.towns import resolve_opendrive
-from schemas import taxonomy
-from schemas.configs import IngestConfig, ScenesConfig, TownSpec
-from stages.geometry import pose_from_list
-from stages.ingest import ingest_procedural
-from stages.scenes.network import check_network
-from stages.scenes.odr_town import build_opendrive_network, build_opendrive_town, build_opendrive_town_with_stats
+from carlaocc.catalog.opendrive import parse_opendrive, read_opendrive
+from carlaocc.catalog.towns import resolve_opendrive
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
+from carlaocc.stages.geometry import pose_from_list
+from carlaocc.stages.ingest import ingest_procedural
+from carlaocc.stages.scenes.network import check_network
+from carlaocc.stages.scenes.odr_town import build_opendrive_network, build_opendrive_town, build_opendrive_town_with_stats
 
 DATA = Path("/work/shared/testdata/opendrive")
 SEM = {n: taxonomy.by_name(n).id for n in ("Building", "Vegetation", "TrafficLight", "TrafficSign", "Terrain")}
@@ -327,7 +327,7 @@ def test_crossroads_signals(crossroads, extents):
         by.setdefault(a.subclass, []).append((pole, yaw, T[2, 3]))
     assert len(by["vehicle_signal"]) == 4 and len(by["stop"]) == 3 and len(by["yield"]) == 1
     assert len(by["speed_limit"]) == 2
-    from stages.scenes import opendrive as od
+    from carlaocc.stages.scenes import opendrive as od
 
     for road in odr.roads:
         for sig in road.signals:

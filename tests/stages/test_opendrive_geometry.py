@@ -13,7 +13,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 from scipy.special import fresnel
 
-from stages.scenes import opendrive as od
+from carlaocc.stages.scenes import opendrive as od
 
 DATA = Path("/work/shared/testdata/opendrive")
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared OpenDRIVE test data not present")
@@ -240,7 +240,7 @@ def test_surface_kinds():
 @needs_data
 @pytest.mark.parametrize("name", ["Town01", "Town02", "Town10HD", "Issue274", "shoulders", "zero_width"])
 def test_real_reference_lines_are_continuous(name):
-    from catalog.opendrive import read_opendrive
+    from carlaocc.catalog.opendrive import read_opendrive
 
     net = read_opendrive(DATA / f"{name}.xodr")
     for r in net.roads:
@@ -254,7 +254,7 @@ def test_real_reference_lines_are_continuous(name):
 
 @needs_data
 def test_town01_surface_builds_fast_with_plausible_extent():
-    from catalog.opendrive import read_opendrive
+    from carlaocc.catalog.opendrive import read_opendrive
 
     t0 = time.perf_counter()
     net = read_opendrive(DATA / "Town01.xodr")

@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight
-from stages.ingest.procedural import (  # tests may reach into the builders
+from carlaocc.stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight
+from carlaocc.stages.ingest.procedural import (  # tests may reach into the builders
     _pedestrian,
     _records,
 )
-from stages.scenes import gait as G
-from stages.scenes import pedestrians as P
-from stages.scenes.traffic import GAIT_STEP  # the simulation's step length / body height
+from carlaocc.stages.scenes import gait as G
+from carlaocc.stages.scenes import pedestrians as P
+from carlaocc.stages.scenes.traffic import GAIT_STEP  # the simulation's step length / body height
 
 D = 32
 RATE = 20.0
@@ -361,5 +361,5 @@ def test_pedestrians_module_is_pure_compute():
             mods |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom) and node.level == 0:
             mods.add(node.module)
-    assert mods <= {"__future__", "re", "dataclasses", "functools", "numpy", "stages.geometry", "stages.scenes.gait"}
+    assert mods <= {"__future__", "re", "dataclasses", "functools", "numpy", "carlaocc.stages.geometry", "carlaocc.stages.scenes.gait"}
     assert "open(" not in src

@@ -9,14 +9,14 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from schemas.configs import SensorsConfig, SimulatorArtifacts
-from schemas.rig import CameraSpec, LidarSpec, RigConfig
-from stages.geometry import SceneMesh
-from stages.scenes.assembly import flatten
-from stages.sensors import (SKY, UNLABELLED, CameraMaps, RayScene, camera_poses, camera_ray_bundle, compact_mesh,
+from carlaocc.schemas.configs import SensorsConfig, SimulatorArtifacts
+from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.scenes.assembly import flatten
+from carlaocc.stages.sensors import (SKY, UNLABELLED, CameraMaps, RayScene, camera_poses, camera_ray_bundle, compact_mesh,
                             covered_pixels,
                             depth_normals, lidar_scan, rectify, render_camera, simulate_frame, unlabelled_meshes)
-from stages.sensors.artifacts import asset_fraction
+from carlaocc.stages.sensors.artifacts import asset_fraction
 
 BUILDING, TERRAIN, CAR, STATIC = 3, 10, 14, 20
 

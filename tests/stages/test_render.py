@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from stages.geometry import MeshPart
-from stages.render import (FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, render_asset,
+from carlaocc.stages.geometry import MeshPart
+from carlaocc.stages.render import (FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, render_asset,
                            text_width)
 
 WHITE = np.array([255, 255, 255], dtype=np.uint8)

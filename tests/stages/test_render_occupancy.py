@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from schemas.grid import GridSpec
-from schemas.taxonomy import by_name, palette
-from stages.render_occupancy import (FREE_RGB, bev_height_map, classes_present, instance_colors,
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.taxonomy import by_name, palette
+from carlaocc.stages.render_occupancy import (FREE_RGB, bev_height_map, classes_present, instance_colors,
                                      multi_resolution_figure, occupancy_figure, perspective_view,
                                      pool_occupancy, surface_voxels, top_surface)  # fmt: skip
 

@@ -14,9 +14,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from schemas.grid import GridSpec
-from schemas.rig import LidarSpec
-from schemas.taxonomy import (
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.rig import LidarSpec
+from carlaocc.schemas.taxonomy import (
     CLASSES,
     OCC3D_NUSCENES_NAMES,
     SSCBENCH_KITTI360_NAMES,
@@ -25,7 +25,7 @@ from schemas.taxonomy import (
     mapping,
     thing_ids,
 )
-from stages.voxelize.resample import (
+from carlaocc.stages.voxelize.resample import (
     DEFAULT_POOLING_PRIORITY,
     OCC3D_NUSCENES,
     SSCBENCH_KITTI360,
@@ -407,7 +407,7 @@ def test_translation_fast_path_equals_binning_the_centres(seed, shift, target, v
 def test_classes_mapped_to_target_empty_do_not_erase_road():
     """A prop or wall voxel inside a target voxel of road keeps it road (review finding): classes
     the target maps to its empty label rank below every class it keeps."""
-    from schemas import taxonomy
+    from carlaocc.schemas import taxonomy
 
     skitti = TargetGrid("sk", (256, 256, 32), 0.2, (0.0, -25.6, -2.0), "lidar", "semantickitti", 0)
     grid = GridSpec(region_min=(0.0, -25.6, -2.0), region_max=(51.2, 25.6, 4.4), voxel_size=0.1)

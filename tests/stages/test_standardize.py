@@ -18,10 +18,10 @@ import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from schemas import taxonomy
-from stages.geometry import is_watertight, signed_volume
-from stages.ingest.raw import RawAsset, RawPart, Rejection
-from stages.ingest.standardize import (
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.geometry import is_watertight, signed_volume
+from carlaocc.stages.ingest.raw import RawAsset, RawPart, Rejection
+from carlaocc.stages.ingest.standardize import (
     SIZE_RANGES, SUBCLASS_SIZE_RANGES, StandardizedAsset, rotation_to_asset_frame, size_range,
     standardize,
 )  # fmt: skip
@@ -224,7 +224,7 @@ def test_milk_truck_multipart_yup():
     assert glass.transparent and glass.vertices[:, 0].mean() > 0.0  # the cab stays in front
     # right-handed: the source's +z side (the truck's right when +y up, +x forward) is -Y
     # right-handed: with +y up and +x forward, the source's +z side (the truck's right) is -Y
-    from stages.ingest.standardize import rotation_to_asset_frame
+    from carlaocc.stages.ingest.standardize import rotation_to_asset_frame
 
     R = rotation_to_asset_frame("+y", "+x")
     np.testing.assert_allclose(R @ [0.0, 0.0, 1.0], [0.0, -1.0, 0.0], atol=1e-12)

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from schemas import taxonomy
-from schemas.records import AssetRecord, AssetStatisticsRecord, QualityRecord
-from stages.metrics import plots
-from stages.metrics.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import AssetRecord, AssetStatisticsRecord, QualityRecord
+from carlaocc.stages.metrics import plots
+from carlaocc.stages.metrics.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
                                        class_voxel_counts, frame_statistics, instance_class_pairs,
                                        instances_per_class, motion_share, split_pairs)
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stages.metrics import (relative_pose, sequence_temporal, static_table, temporal_consistency_counts)
-from schemas.taxonomy import by_name
+from carlaocc.stages.metrics import (relative_pose, sequence_temporal, static_table, temporal_consistency_counts)
+from carlaocc.schemas.taxonomy import by_name
 
 CAR = by_name("Car").id
 ROAD, BUILDING, VEG = by_name("Road").id, by_name("Building").id, by_name("Vegetation").id

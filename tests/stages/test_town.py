@@ -11,12 +11,12 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from schemas import taxonomy
-from schemas.configs import IngestConfig, ScenesConfig, TownSpec
-from stages.geometry import is_watertight, pose_from_list, transform_points
-from stages.ingest import ingest_procedural
-from stages.scenes.network import check_network
-from stages.scenes.town import LANE_WIDTH, STYLES, build_procedural_town, town_name
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
+from carlaocc.stages.geometry import is_watertight, pose_from_list, transform_points
+from carlaocc.stages.ingest import ingest_procedural
+from carlaocc.stages.scenes.network import check_network
+from carlaocc.stages.scenes.town import LANE_WIDTH, STYLES, build_procedural_town, town_name
 
 THINGS = set(taxonomy.thing_ids())
 CURB = ScenesConfig().curb_height

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from schemas.configs import IngestConfig, ScenesConfig, TownSpec
-from stages.geometry import pose_from_list
-from stages.ingest import ingest_procedural
-from stages.scenes import traffic
-from stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
-from stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts, simulate_sequence, simulate_town
+from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
+from carlaocc.stages.geometry import pose_from_list
+from carlaocc.stages.ingest import ingest_procedural
+from carlaocc.stages.scenes import traffic
+from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
+from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts, simulate_sequence, simulate_town
 
 R_CENTRE = 30.0  # m, road centre line radius
 HALF = 0.22  # rad: the junction spans angles -HALF .. HALF

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from schemas.configs import IngestConfig, ScenesConfig, TownSpec
-from stages.ingest import ingest_procedural
-from stages.scenes import build_town, simulate_sequence
-from stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts
+from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
+from carlaocc.stages.ingest import ingest_procedural
+from carlaocc.stages.scenes import build_town, simulate_sequence
+from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_traffic import _boxes, _overlap  # noqa: E402
@@ -42,7 +42,7 @@ def test_crowded_suburb_walkers(lib, monkeypatch):
 
 @pytest.mark.skipif(not TOWN10.exists(), reason="shared test data not present")
 def test_town10hd_dense_vehicles(lib, monkeypatch):
-    from catalog.opendrive import read_opendrive
+    from carlaocc.catalog.opendrive import read_opendrive
 
     monkeypatch.setitem(TRAFFIC_LEVELS, "high", TrafficLevel(40.0, 8.0, 2.0, 0.4))
     cfg = ScenesConfig(frame_count=250, actor_range=1000.0)

@@ -14,10 +14,10 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from schemas.grid import GridSpec
-from schemas.rig import CameraSpec, RigConfig
-from stages.voxelize import visibility as vis
-from stages.voxelize.visibility import (
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.rig import CameraSpec, RigConfig
+from carlaocc.stages.voxelize import visibility as vis
+from carlaocc.stages.voxelize.visibility import (
     Fans,
     camera_fans,
     camera_rays,

@@ -14,11 +14,11 @@ import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from schemas.grid import GridSpec
-from stages.geometry import SceneMesh
-from stages.voxelize import elevation_order, fill_interior, surface_voxels, voxelize_scene
-from stages.voxelize.compose import composition_plan
-from stages.voxelize.kernels import to_voxel_units, warmup
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.stages.geometry import SceneMesh
+from carlaocc.stages.voxelize import elevation_order, fill_interior, surface_voxels, voxelize_scene
+from carlaocc.stages.voxelize.compose import composition_plan
+from carlaocc.stages.voxelize.kernels import to_voxel_units, warmup
 
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -440,7 +440,7 @@ def test_culling_keeps_stuff_inside_region_only_and_sets_its_elevation():
 
 
 def test_parallel_and_serial_kernels_agree(monkeypatch):
-    import stages.voxelize.kernels as K
+    import carlaocc.stages.voxelize.kernels as K
 
     m = trimesh.creation.icosphere(subdivisions=4, radius=1.7)
     V = m.vertices + np.array([2.1, 2.0, 1.9])
@@ -633,7 +633,7 @@ def test_rotated_ego_headings_see_the_same_world_occupancy():
 def test_tile_thing_boxes_hold_every_voxel_of_their_instance(seed, tile):
     # Tile.things is what the pipeline reads instead of scanning instance tiles (chunks it never
     # reaches are not read; flow looks for an actor's voxels only inside its boxes)
-    from stages.voxelize import voxelize_tiles
+    from carlaocc.stages.voxelize import voxelize_tiles
 
     rng = np.random.default_rng(seed)
     grid = GridSpec(region_min=(-4.0, -4.0, -1.0), region_max=(4.0, 4.0, 3.0), voxel_size=0.2)

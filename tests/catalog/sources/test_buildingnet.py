@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from catalog.sources.base import SourceError
-from catalog.sources.buildingnet import BuildingNetAdapter, label_class, subclass_from_name
-from schemas.taxonomy import by_name
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.buildingnet import BuildingNetAdapter, label_class, subclass_from_name
+from carlaocc.schemas.taxonomy import by_name
 
 # a unit cube per component, shifted along x: "o <index>" components as BuildingNet writes
 # them, plus "g" groups (named groups are tried first)

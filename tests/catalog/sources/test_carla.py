@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from catalog.sources.base import SourceError
-from catalog.sources.carla import CarlaAdapter, rotator_matrix, write_example_export
-from schemas.taxonomy import by_name
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.carla import CarlaAdapter, rotator_matrix, write_example_export
+from carlaocc.schemas.taxonomy import by_name
 
 
 def signed_volume(v, f):

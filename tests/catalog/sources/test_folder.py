@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from catalog.sources.base import SourceError
-from catalog.sources.folder import FolderAdapter
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.folder import FolderAdapter
 
 MESHES = "/work/shared/testdata/meshes"
 pytestmark = pytest.mark.skipif(not os.path.isdir(MESHES), reason="shared test meshes not present")

@@ -8,8 +8,8 @@ import os
 import pytest
 import trimesh
 
-from catalog.sources.base import SourceError
-from catalog.sources.meshfleet import MeshFleetAdapter
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.meshfleet import MeshFleetAdapter
 
 CSV = "/work/shared/testdata/meshfleet/meshfleet_with_vehicle_categories_df.csv"
 pytestmark = pytest.mark.skipif(not os.path.isfile(CSV), reason="shared MeshFleet CSV not present")

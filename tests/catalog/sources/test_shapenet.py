@@ -8,8 +8,8 @@ import shutil
 
 import pytest
 
-from catalog.sources.base import SourceError
-from catalog.sources.shapenet import ShapeNetAdapter, classify
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.shapenet import ShapeNetAdapter, classify
 
 HULL = "/work/shared/testdata/meshes/scenic/bmwx5_hull.obj"
 pytestmark = pytest.mark.skipif(not os.path.isfile(HULL), reason="shared test meshes not present")

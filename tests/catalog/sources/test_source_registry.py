@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from catalog.sources.base import SourceAdapter
-from catalog.sources.registry import ADAPTERS, adapter
+from carlaocc.catalog.sources.base import SourceAdapter
+from carlaocc.catalog.sources.registry import ADAPTERS, adapter
 
 
 def test_kinds():
