@@ -21,9 +21,8 @@ import numba
 numba.set_num_threads(1)
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.registry import Partition
-from carlaocc.pipeline.stages import voxelize_config
-from carlaocc.pipeline.tasks import occupancy_arrays, voxelize_task
+from carlaocc.pipeline.spec import Partition
+from carlaocc.pipeline.tasks.voxelize import occupancy_arrays, voxelize_config, voxelize_task
 from carlaocc.schemas.configs import DatasetConfig
 root, res, masks, frames = sys.argv[1], float(sys.argv[2]), sys.argv[3] == "1", int(sys.argv[4])
 store = Store(root)
@@ -31,7 +30,7 @@ cfg = voxelize_config(DatasetConfig()).model_copy(update={"masks": masks})
 grid = cfg.grid(res)
 seq = "town00_high_seq000"
 OccupancyStore(store).create(seq, grid, 20, cfg.chunk_edge, names=occupancy_arrays(cfg))
-run = lambda t: voxelize_task(store, cfg, Partition("b", {"sequence_id": seq, "resolution": res, "frame_index": t}))
+run = lambda t: voxelize_task(store, cfg, Partition("b", {"sequence_id": seq, "voxel_size": res, "frame_index": t}))
 run(0)  # JIT and per-worker caches
 times = []
 for t in range(1, frames + 1):

@@ -21,8 +21,8 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.metrics import spatial_continuity_counts, temporal_consistency_counts
-from carlaocc.stages.metrics.temporal import relative_pose, warp_to_voxels
+from carlaocc.stages.quality import spatial_continuity_counts, temporal_consistency_counts
+from carlaocc.stages.quality.temporal import relative_pose, warp_to_voxels
 
 ROAD, SIDEWALK, BUILDING, POLE, VEGETATION, CAR = 1, 2, 3, 6, 9, 14
 GROUND_Z = -1.73

@@ -1,7 +1,7 @@
 """Report-stage speed: the per-frame statistics kernel on synthetic frames, and the whole report
 task on a built dataset.
 
-1. :func:`stages.metrics.statistics.frame_statistics` (voxels per class and distinct instance
+1. :func:`stages.report.statistics.frame_statistics` (voxels per class and distinct instance
    pairs in one pass) on a synthetic street at 0.2 m and 0.1 m (semantic uint8 + instance uint32:
    buildings and cars are instances), one thread, best of ``REPEAT``.
 2. With ``ROOT RES`` arguments (or ``CARLAOCC_BENCH_ROOT`` / ``CARLAOCC_BENCH_RES``), the report
@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.metrics.statistics import frame_statistics
+from carlaocc.stages.report.statistics import frame_statistics
 
 REPEAT = 3
 
@@ -59,9 +59,9 @@ def bench_kernel() -> None:
 
 def bench_task(root: str, res: float) -> None:
     from carlaocc.catalog.store import Store
-    from carlaocc.pipeline.registry import Context
-    from carlaocc.pipeline.report import REPORT_HTML, report_task
-    from carlaocc.pipeline.stages import STAGES
+    from carlaocc.pipeline.registry import STAGES
+    from carlaocc.pipeline.spec import Context
+    from carlaocc.pipeline.tasks.report import REPORT_HTML, report_task
     from carlaocc.schemas.configs import DatasetConfig
 
     store, spec, cfg = Store(root), STAGES["report"], DatasetConfig()

@@ -1,9 +1,10 @@
-"""Scenes throughput, in one run: placements per second of town building (each procedural style,
-the builtin OpenDRIVE town and, when the shared test data is present, CARLA's Town10HD), frames
-per second of traffic simulation (high traffic, with and without the Skeletal Motion Analyzer's
-phase matching), and frames per second of per-frame panoptic assembly (placement index
-selection, actors, posed pedestrians) for the default occupancy region and for an 80 m sensor
-range.
+"""Scenes throughput, in one run: seconds to read an OpenDRIVE town and build its road surfaces
+(the builtin town and, when the shared test data is present, CARLA's Town01 and Town10HD),
+placements per second of town building (each procedural style, the builtin OpenDRIVE town and
+Town10HD), frames per second of traffic simulation (high traffic, with and without the Skeletal
+Motion Analyzer's phase matching), and frames per second of per-frame panoptic assembly
+(placement index selection, actors, posed pedestrians) for the default occupancy region and for
+an 80 m sensor range.
 
 Usage: ``python -m benchmarks.bench_scenes [FRAMES]`` (default 200 simulated frames).
 """
@@ -16,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-TOWN10 = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "opendrive" / "Town10HD.xodr"
+OPENDRIVE_DATA = Path(__file__).resolve().parents[2] / "shared" / "testdata" / "opendrive"
+TOWN10 = OPENDRIVE_DATA / "Town10HD.xodr"
 
 
 def _best(fn, repeat: int = 3) -> tuple[float, object]:
@@ -26,6 +28,26 @@ def _best(fn, repeat: int = 3) -> tuple[float, object]:
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
+
+
+def _road_surfaces() -> None:
+    """Seconds to read an ``.xodr`` file and build the surface meshes of all its roads (0.5 m)."""
+    from carlaocc.catalog.opendrive import read_opendrive
+    from carlaocc.catalog.towns import resolve_opendrive
+    from carlaocc.stages.scenes.opendrive import road_surface_meshes
+
+    paths = [resolve_opendrive("builtin:crossroads.xodr")]
+    paths += [p for p in (OPENDRIVE_DATA / "Town01.xodr", TOWN10) if p.exists()]
+    print("\nOpenDRIVE road surfaces, read + meshes of every road at 0.5 m (best of 3)")
+    print(f"{'town':>18} {'roads':>6} {'triangles':>10} {'seconds':>8}")
+    for path in paths:
+        def build(path=path):
+            net = read_opendrive(path)
+            return net, [road_surface_meshes(r, step=0.5) for r in net.roads]
+
+        t, (net, parts) = _best(build)
+        tris = sum(len(f) for m in parts for _v, f in m.values())
+        print(f"{path.name:>18} {len(net.roads):>6} {tris:>10,} {t:>8.3f}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -44,6 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     lib = ingest_procedural(IngestConfig())
     scenes = ScenesConfig()
     print(f"{len(lib.assets)} procedural assets")
+    _road_surfaces()
 
     # 1. town building
     towns = {}

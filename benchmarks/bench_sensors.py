@@ -29,9 +29,9 @@ import numpy as np
 import open3d as o3d
 from carlaocc.catalog.store import Store
 from carlaocc.catalog.sensors import SensorStore
-from carlaocc.pipeline.registry import Partition
-from carlaocc.pipeline.stages import sensors_config
-from carlaocc.pipeline.tasks import frame_inputs, sensor_arrays, sensor_region, sensors_task
+from carlaocc.pipeline.spec import Partition
+from carlaocc.pipeline.tasks.frame import frame_inputs
+from carlaocc.pipeline.tasks.sensors import sensor_arrays, sensor_region, sensors_config, sensors_task
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors import camera_poses

@@ -36,7 +36,7 @@ import numpy as np
 import trimesh
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.geometry import SceneMesh
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.voxelize import fill_interior, surface_voxels, voxelize_scene
 from carlaocc.stages.voxelize.kernels import warmup
 

@@ -18,7 +18,7 @@ def default_scenes_root() -> Iterator[str]:
     with tempfile.TemporaryDirectory() as tmp:
         root = f"{tmp}/data"
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "carlaocc.pipeline.cli", "run", "--stages", "ingest,scenes", "--root", root,
+        subprocess.run([sys.executable, "-m", "carlaocc", "run", "--stages", "ingest,scenes", "--root", root,
                         "--scheduler", "synchronous"], check=True, capture_output=True)
         print(f"ingest + scenes of the embedded default: {time.perf_counter() - t0:.1f} s")
         yield root

@@ -39,7 +39,7 @@ _API: dict[str, tuple[str, str]] = {
     "StoreError": ("carlaocc.catalog.store", "StoreError"),
     "OccupancyStore": ("carlaocc.catalog.occupancy", "OccupancyStore"),
     "SensorStore": ("carlaocc.catalog.sensors", "SensorStore"),
-    "STAGES": ("carlaocc.pipeline.stages", "STAGES"),
+    "STAGES": ("carlaocc.pipeline.registry", "STAGES"),
     "status": ("carlaocc.pipeline.runner", "status"),
 }
 

@@ -1,8 +1,9 @@
 """BVH (Biovision Hierarchy) motion-capture reader.
 
-``read_bvh(path)`` / ``parse_bvh(text)`` return a frozen :class:`BvhClip` holding the skeleton
-exactly as the file states it -- no unit or axis conversion happens here (BVH is Y-up; the
-Y-up -> Z-up conversion is done once, in :func:`stages.scenes.gait.forward_kinematics`).
+``read_bvh(path)`` / ``parse_bvh(text)`` return a :class:`~carlaocc.schemas.motion.MotionClip`
+holding the skeleton exactly as the file states it -- no unit or axis conversion happens here
+(BVH is Y-up; the Y-up -> Z-up conversion is done once, in
+:func:`carlaocc.stages.scenes.gait.kinematics.forward_kinematics`).
 
 ``End Site`` blocks are kept as ``end_offsets`` (NaN rows for joints without one); they carry no
 channels. Malformed input raises :class:`BvhError` naming the 1-based line number.
@@ -10,58 +11,15 @@ channels. Malformed input raises :class:`BvhError` naming the 1-based line numbe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from carlaocc.schemas.motion import MotionClip
 
 VALID_CHANNELS = frozenset({"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"})
 
 
 class BvhError(ValueError):
     """Malformed BVH input; the message names the offending line."""
-
-
-@dataclass(frozen=True)
-class BvhClip:
-    """A parsed BVH clip (units as in the file; angles in degrees; BVH axes, Y up).
-
-    joint_names: one name per joint, depth-first file order (root first).
-    parents:     (J,) int64, parent index of each joint, -1 for the root.
-    offsets:     (J, 3) float64 joint offsets from the parent, in the parent's frame.
-    channels:    per joint, the tuple of channel names in file order (e.g.
-                 ``("Xposition", ..., "Zrotation", "Yrotation", "Xrotation")``).
-    frame_time:  seconds per frame.
-    motion:      (F, C) float64, C = total channel count, columns in joint-then-channel order.
-    end_offsets: (J, 3) float64 offset of the joint's End Site (NaN when it has none).
-    """
-
-    joint_names: tuple[str, ...]
-    parents: np.ndarray
-    offsets: np.ndarray
-    channels: tuple[tuple[str, ...], ...]
-    frame_time: float
-    motion: np.ndarray
-    end_offsets: np.ndarray
-
-    @property
-    def n_joints(self) -> int:
-        return len(self.joint_names)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.motion.shape[0])
-
-    @property
-    def channel_start(self) -> np.ndarray:
-        """(J,) index of each joint's first column in ``motion``."""
-        counts = np.array([len(c) for c in self.channels], dtype=np.int64)
-        return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-
-    def joint_index(self, name: str) -> int:
-        try:
-            return self.joint_names.index(name)
-        except ValueError:
-            raise KeyError(f"no joint {name!r} in BVH clip") from None
 
 
 def _floats(tokens: list[str], lineno: int, what: str) -> list[float]:
@@ -71,8 +29,8 @@ def _floats(tokens: list[str], lineno: int, what: str) -> list[float]:
         raise BvhError(f"line {lineno}: {what}: expected numbers, got {' '.join(tokens)!r}") from None
 
 
-def parse_bvh(text: str) -> BvhClip:
-    """Parse BVH text into a :class:`BvhClip`; raise :class:`BvhError` on malformed input."""
+def parse_bvh(text: str) -> MotionClip:
+    """Parse BVH text into a :class:`~carlaocc.schemas.motion.MotionClip`; raise :class:`BvhError` on malformed input."""
     lines = text.splitlines()
     names: list[str] = []
     parents: list[int] = []
@@ -213,10 +171,10 @@ def parse_bvh(text: str) -> BvhClip:
     ends = np.asarray(end_offsets, dtype=np.float64)
     for a in (par, offs, ends, motion):
         a.flags.writeable = False
-    return BvhClip(tuple(names), par, offs, tuple(channels), frame_time, motion, ends)
+    return MotionClip(tuple(names), par, offs, tuple(channels), frame_time, motion, ends)
 
 
-def read_bvh(path: str) -> BvhClip:
+def read_bvh(path: str) -> MotionClip:
     """Read a BVH file (local path or fsspec URL) in place."""
     import fsspec
 

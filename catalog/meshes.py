@@ -14,16 +14,7 @@ import numpy as np
 import trimesh
 
 from carlaocc.catalog.store import Store, StoreError
-
-
-class MeshPartLike(typing.Protocol):
-    """What a mesh part must offer to be saved (``stages.geometry.MeshPart`` does): a name,
-    (N, 3) vertices in metres in the Z-up asset frame, (M, 3) faces and an RGBA colour."""
-
-    name: str
-    vertices: np.ndarray
-    faces: np.ndarray
-    color: tuple[int, int, int, int]
+from carlaocc.schemas.meshes import MeshPart
 
 _Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
@@ -38,8 +29,9 @@ def from_gltf_axes(vertices: np.ndarray) -> np.ndarray:
     return np.asarray(vertices, dtype=np.float64) @ _Z_UP_TO_Y_UP
 
 
-def glb_bytes(parts: typing.Sequence[MeshPartLike]) -> bytes:
-    """Serialize parts into one GLB (geometry names ``p000``, ``p001``... keep the part order)."""
+def glb_bytes(parts: typing.Sequence[MeshPart]) -> bytes:
+    """Serialize parts (asset frame, Z up, metres) into one GLB (geometry names ``p000``, ``p001``...
+    keep the part order; each part's RGBA ``color`` becomes its face colour)."""
     scene = trimesh.Scene()
     for i, part in enumerate(parts):
         mesh = trimesh.Trimesh(vertices=to_gltf_axes(part.vertices), faces=part.faces,
@@ -68,7 +60,7 @@ class MeshStore:
     def __init__(self, store: Store):
         self.store = store
 
-    def save(self, rel: str, parts: typing.Sequence[MeshPartLike]) -> str:
+    def save(self, rel: str, parts: typing.Sequence[MeshPart]) -> str:
         if not parts:
             raise ValueError(f"{rel}: a mesh needs at least one part")
         return self.store.write_bytes(rel, glb_bytes(parts))

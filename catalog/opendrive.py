@@ -1,11 +1,9 @@
-"""OpenDRIVE (.xodr) reader: parse a road network into plain frozen dataclasses.
+"""OpenDRIVE (.xodr) reader: parse a road network into the records of
+:mod:`carlaocc.schemas.opendrive` (an :class:`~carlaocc.schemas.opendrive.OpenDriveNetwork`).
 
-Only the parts the scene stage needs are kept: the header, roads (links, road types,
-planView geometries, elevation and superelevation profiles, lane offsets, lane sections with
-their lanes, widths, borders and road marks, signals, objects) and junctions (connections with
-lane links). Everything else (controllers, userData, vendor extensions, surface CRG, ...) is
-ignored. Geometry evaluation lives in :mod:`stages.scenes.opendrive`, which reads these
-dataclasses by attribute (duck typing, since stages must not import catalog).
+Only the parts the scene stage needs are read (see the schema module); everything else
+(controllers, userData, vendor extensions, surface CRG, ...) is ignored. Geometry evaluation
+lives in :mod:`carlaocc.stages.scenes.opendrive`, which takes these records.
 
 Why no third-party reader: the only candidates in the package index are ``pyxodr`` (0.1.3,
 2023, read-only wrapper pulling ``lxml``/``shapely``, its own object model and no line numbers
@@ -28,267 +26,33 @@ from __future__ import annotations
 import math
 import os
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
 from pathlib import Path
 from xml.parsers import expat
 
-__all__ = [
-    "OpenDriveError",
-    "Header",
-    "Poly3Record",
-    "Geometry",
-    "RoadLink",
-    "RoadTypeRecord",
-    "RoadMarkLine",
-    "RoadMark",
-    "Lane",
-    "LaneSection",
-    "Signal",
-    "RoadObject",
-    "Road",
-    "LaneLink",
-    "Connection",
-    "Junction",
-    "OpenDriveNetwork",
-    "GEOMETRY_KINDS",
-    "read_opendrive",
-    "parse_opendrive",
-]
+from carlaocc.schemas.opendrive import (
+    Connection,
+    Geometry,
+    Header,
+    Junction,
+    LaneRecord,
+    LaneLink,
+    LaneSection,
+    OpenDriveNetwork,
+    Poly3Record,
+    Road,
+    RoadLink,
+    RoadMark,
+    RoadMarkLine,
+    RoadObject,
+    RoadTypeRecord,
+    Signal,
+)
 
-GEOMETRY_KINDS = ("line", "arc", "spiral", "poly3", "paramPoly3")
+__all__ = ["OpenDriveError", "read_opendrive", "parse_opendrive"]
 
 
 class OpenDriveError(ValueError):
     """A malformed or unsupported OpenDRIVE input; the message names the element and line."""
-
-
-# ---------------------------------------------------------------------------------------------
-# data model
-
-
-@dataclass(frozen=True)
-class Header:
-    rev_major: int | None = None
-    rev_minor: int | None = None
-    name: str = ""
-    version: str = ""
-    date: str = ""
-    north: float | None = None
-    south: float | None = None
-    east: float | None = None
-    west: float | None = None
-    vendor: str = ""
-    geo_reference: str = ""
-
-
-@dataclass(frozen=True)
-class Poly3Record:
-    """``a + b ds + c ds^2 + d ds^3`` valid from ``s`` on (``s`` is ``sOffset`` for lane
-    widths/borders, relative to the lane section start; road-absolute elsewhere)."""
-
-    s: float
-    a: float
-    b: float = 0.0
-    c: float = 0.0
-    d: float = 0.0
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """One planView record. ``kind`` is one of :data:`GEOMETRY_KINDS`; the fields that do not
-    apply to the kind are left at their defaults.
-
-    arc: ``curvature``. spiral: ``curv_start``, ``curv_end``. poly3: ``a, b, c, d`` (v(u)).
-    paramPoly3: ``au..du, av..dv`` and ``p_range`` in {"arcLength", "normalized"}.
-    """
-
-    s: float
-    x: float
-    y: float
-    hdg: float
-    length: float
-    kind: str
-    curvature: float = 0.0
-    curv_start: float = 0.0
-    curv_end: float = 0.0
-    a: float = 0.0
-    b: float = 0.0
-    c: float = 0.0
-    d: float = 0.0
-    au: float = 0.0
-    bu: float = 0.0
-    cu: float = 0.0
-    du: float = 0.0
-    av: float = 0.0
-    bv: float = 0.0
-    cv: float = 0.0
-    dv: float = 0.0
-    p_range: str = "normalized"
-    line: int | None = None
-
-
-@dataclass(frozen=True)
-class RoadLink:
-    element_type: str  # "road" or "junction"
-    element_id: str
-    contact_point: str | None = None  # "start" / "end" (roads only)
-
-
-@dataclass(frozen=True)
-class RoadTypeRecord:
-    s: float
-    type: str
-    speed_max: float | None = None
-    speed_unit: str | None = None
-
-
-@dataclass(frozen=True)
-class RoadMarkLine:
-    """An explicit line of a ``<roadMark><type>`` definition."""
-
-    length: float
-    space: float
-    t_offset: float = 0.0
-    s_offset: float = 0.0
-    width: float | None = None
-    rule: str = "none"
-
-
-@dataclass(frozen=True)
-class RoadMark:
-    s_offset: float
-    type: str  # solid, broken, "solid solid", "broken broken", "solid broken", curb, none, ...
-    weight: str = "standard"
-    color: str = "standard"
-    material: str = "standard"
-    width: float | None = None
-    lane_change: str = "both"
-    height: float = 0.0
-    lines: tuple[RoadMarkLine, ...] = ()
-
-
-@dataclass(frozen=True)
-class Lane:
-    id: int
-    type: str
-    level: bool = False
-    widths: tuple[Poly3Record, ...] = ()
-    borders: tuple[Poly3Record, ...] = ()
-    road_marks: tuple[RoadMark, ...] = ()
-    predecessor: int | None = None
-    successor: int | None = None
-
-
-@dataclass(frozen=True)
-class LaneSection:
-    s: float
-    single_side: bool = False
-    left: tuple[Lane, ...] = ()  # ids 1, 2, 3, ... (sorted inner to outer)
-    center: tuple[Lane, ...] = ()  # id 0
-    right: tuple[Lane, ...] = ()  # ids -1, -2, -3, ... (sorted inner to outer)
-
-
-@dataclass(frozen=True)
-class Signal:
-    id: str
-    name: str
-    s: float
-    t: float
-    z_offset: float = 0.0
-    h_offset: float = 0.0
-    orientation: str = "none"
-    dynamic: bool = False
-    country: str = ""
-    type: str = ""
-    subtype: str = ""
-    value: float | None = None
-    text: str = ""
-    height: float | None = None
-    width: float | None = None
-    pitch: float = 0.0
-    roll: float = 0.0
-
-
-@dataclass(frozen=True)
-class RoadObject:
-    id: str
-    name: str
-    type: str
-    s: float
-    t: float
-    z_offset: float = 0.0
-    hdg: float = 0.0
-    pitch: float = 0.0
-    roll: float = 0.0
-    orientation: str = "none"
-    length: float | None = None
-    width: float | None = None
-    height: float | None = None
-    radius: float | None = None
-
-
-@dataclass(frozen=True)
-class Road:
-    id: str
-    name: str
-    length: float
-    junction: str  # "-1" when not in a junction
-    geometries: tuple[Geometry, ...]
-    elevations: tuple[Poly3Record, ...] = ()
-    superelevations: tuple[Poly3Record, ...] = ()
-    lane_offsets: tuple[Poly3Record, ...] = ()
-    lane_sections: tuple[LaneSection, ...] = ()
-    predecessor: RoadLink | None = None
-    successor: RoadLink | None = None
-    types: tuple[RoadTypeRecord, ...] = ()
-    signals: tuple[Signal, ...] = ()
-    objects: tuple[RoadObject, ...] = ()
-    line: int | None = None
-
-
-@dataclass(frozen=True)
-class LaneLink:
-    from_lane: int
-    to_lane: int
-
-
-@dataclass(frozen=True)
-class Connection:
-    id: str
-    incoming_road: str
-    connecting_road: str
-    contact_point: str | None = None
-    lane_links: tuple[LaneLink, ...] = ()
-
-
-@dataclass(frozen=True)
-class Junction:
-    id: str
-    name: str
-    connections: tuple[Connection, ...] = ()
-
-
-@dataclass(frozen=True)
-class OpenDriveNetwork:
-    header: Header
-    roads: tuple[Road, ...]
-    junctions: tuple[Junction, ...] = ()
-    source: str = ""
-    _road_index: dict = field(default_factory=dict, repr=False, compare=False)
-
-    def road(self, road_id: str | int) -> Road:
-        """The road with this id (``KeyError`` if absent)."""
-        if not self._road_index:
-            self._road_index.update({r.id: r for r in self.roads})
-        return self._road_index[str(road_id)]
-
-    @property
-    def signals(self) -> tuple[Signal, ...]:
-        return tuple(sig for r in self.roads for sig in r.signals)
-
-    @property
-    def objects(self) -> tuple[RoadObject, ...]:
-        return tuple(obj for r in self.roads for obj in r.objects)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -463,7 +227,7 @@ def _road_mark(ctx: _Ctx, where: str, elem: ET.Element) -> RoadMark:
     )
 
 
-def _lane(ctx: _Ctx, where: str, elem: ET.Element) -> Lane:
+def _lane(ctx: _Ctx, where: str, elem: ET.Element) -> LaneRecord:
     lane_id = ctx.int_(where, elem, "id", required=True)
     w = f"{where}: lane {lane_id}"
     link = elem.find("link")
@@ -472,7 +236,7 @@ def _lane(ctx: _Ctx, where: str, elem: ET.Element) -> Lane:
         p, s_ = link.find("predecessor"), link.find("successor")
         pred = ctx.int_(w, p, "id", required=True) if p is not None else None
         succ = ctx.int_(w, s_, "id", required=True) if s_ is not None else None
-    return Lane(
+    return LaneRecord(
         id=lane_id,
         type=elem.get("type", "none"),
         level=_bool(elem.get("level")),
@@ -488,7 +252,7 @@ def _lane(ctx: _Ctx, where: str, elem: ET.Element) -> Lane:
 
 
 def _lane_section(ctx: _Ctx, where: str, elem: ET.Element) -> LaneSection:
-    def side(name: str, sign: int) -> tuple[Lane, ...]:
+    def side(name: str, sign: int) -> tuple[LaneRecord, ...]:
         node = elem.find(name)
         if node is None:
             return ()

@@ -5,9 +5,11 @@ A camera map is an array ``(frame, v, u)`` (``normal`` has a trailing axis of 3 
 one chunk per image, so a task that writes one frame of one camera writes whole chunks and no two
 tasks touch the same chunk. The arrays are created by the driver before tasks run
 (:meth:`SensorStore.create`) and carry the camera, sequence, taxonomy version and whatever the
-caller adds (intrinsics ``K``, ``camera_to_ego``) in their attributes. Images are encoded here
-(:mod:`catalog.zarrio`) and stored as one object each; an all-zero image is not stored (its
-chunk is removed), as zarr does with ``write_empty_chunks=False``. Reads go through zarr-python.
+caller adds (intrinsics ``K``, ``camera_to_ego``) in their attributes. Creating, writing (each
+image encoded as one object; an all-zero image is not stored, its chunk removed, as zarr does with
+``write_empty_chunks=False``), lineage keys and fingerprints are those of every frame-indexed
+hierarchy (:class:`carlaocc.catalog.zarrstore.FrameArrayStore`); images are read through
+zarr-python, so a recorder may write its ``*_raw`` arrays with any codec.
 
 A LiDAR frame is one Parquet file of points in the LiDAR frame (x forward, y left, z up, metres),
 written atomically with :meth:`Store.write_bytes`.
@@ -22,11 +24,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import zarr
-from zarr.codecs import ZstdCodec
 
 from carlaocc.catalog.parquet import table_bytes
 from carlaocc.catalog.store import LIDAR_DIR, SENSORS_ZARR, Store, StoreError
-from carlaocc.catalog.zarrio import ZSTD_LEVEL, encode_chunk, frame_fingerprint, put_object, remove_object, zarr_store
+from carlaocc.catalog.zarrstore import FrameArrayStore
 from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 _RAW = "as the simulator delivers it (before rectification): "
@@ -81,29 +82,17 @@ def _cast(data: np.ndarray, dtype: str, what: str) -> np.ndarray:
     return data.astype(target, copy=False)
 
 
-class SensorStore:
-    """``sensors.zarr/<seq>/<camera>/<name>``: arrays (frame, height, width[, 3]), one chunk per image."""
+class SensorStore(FrameArrayStore):
+    """``sensors.zarr/<seq>/<camera>/<name>``: arrays (frame, height, width[, 3]), one chunk per
+    image, addressed ``(sequence_id, camera, name)``."""
 
-    def __init__(self, store: Store):
-        self.store = store
-
-    def _root(self, mode: str) -> zarr.Group:
-        return zarr.open_group(store=zarr_store(self.store, SENSORS_ZARR), mode=mode)
-
-    def _node(self, path: str):
-        """The node at ``path`` of the hierarchy, or None when it (or the hierarchy) is missing."""
-        try:
-            return self._root("r")[path]
-        except (KeyError, FileNotFoundError, zarr.errors.GroupNotFoundError):
-            return None
+    zarr_root = SENSORS_ZARR
+    arrays = SENSOR_MAPS
+    kind = "camera maps"
 
     @staticmethod
     def array_path(sequence_id: str, camera: str, name: str) -> str:
         return f"{sequence_id}/{camera}/{name}"
-
-    def output_key(self, sequence_id: str, camera: str, name: str, frame: int) -> str:
-        """Lineage key of one image: ``sensors.zarr/<seq>/<camera>/<name>[<frame>]``."""
-        return f"{SENSORS_ZARR}/{self.array_path(sequence_id, camera, name)}[{frame}]"
 
     def create(self, sequence_id: str, camera: str, width: int, height: int, frame_count: int,
                names: tuple[str, ...], extra_attrs: dict | None = None, keep_others: bool = False) -> bool:
@@ -117,17 +106,6 @@ class SensorStore:
         input and are never touched). ``extra_attrs`` must be
         JSON-serialisable (intrinsics ``K`` and ``camera_to_ego`` as nested lists).
         """
-        names = tuple(names)
-        unknown = set(names) - set(SENSOR_MAPS)
-        if unknown:
-            raise ValueError(f"unknown camera maps {sorted(unknown)}; known: {', '.join(SENSOR_MAPS)}")
-        replaced = False
-        self.__dict__.pop("_layouts", None)  # arrays may be recreated with another layout
-        root = self._root("a")
-        group = f"{sequence_id}/{camera}"
-        if not keep_others and group in root and isinstance(root[group], zarr.Group):
-            for stale in sorted(set(root[group].array_keys()) - set(names)):
-                del root[f"{group}/{stale}"]
         # attributes as stored (JSON): tuples become lists, so an identical call compares equal
         attrs = json.loads(json.dumps({
             "dims": ["frame", "v", "u"],
@@ -136,34 +114,12 @@ class SensorStore:
             "taxonomy_version": TAXONOMY_VERSION,
             **(extra_attrs or {}),
         }))
-        for name in names:
-            dtype, description, trailing = SENSOR_MAPS[name]
-            path = self.array_path(sequence_id, camera, name)
-            shape = (frame_count, height, width, *trailing)
-            chunks = (1, height, width, *trailing)
-            want = {**attrs, "description": description}
-            if trailing:
-                want["dims"] = [*attrs["dims"], "component"]
-            if path in root:
-                arr = root[path]
-                if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
-                        and str(arr.dtype) == dtype and dict(arr.attrs) == want):
-                    continue
-                replaced = True
-            root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
-                              compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
-        return replaced
+        return self._create_arrays(sequence_id, camera, names, frame_count, (height, width), (height, width),
+                                   attrs, drop_others=not keep_others)
 
-    def _layout(self, sequence_id: str, camera: str, name: str) -> tuple[tuple, np.dtype]:
-        """(shape, dtype) of an array, read once from its metadata per store object."""
-        cache = self.__dict__.setdefault("_layouts", {})
-        path = self.array_path(sequence_id, camera, name)
-        if path not in cache:
-            arr = self._node(path)
-            if not isinstance(arr, zarr.Array):
-                raise ValueError(f"{SENSORS_ZARR}/{path} does not exist (create it before writing)")
-            cache[path] = (tuple(arr.shape), np.dtype(arr.dtype))
-        return cache[path]
+    def _values(self, data: np.ndarray, dtype: np.dtype, what: str) -> np.ndarray:
+        """``data`` cast to the map's dtype; ValueError naming the image when the values do not fit."""
+        return _cast(data, dtype.name, what)
 
     def _chunk_key(self, sequence_id: str, camera: str, name: str, frame: int, ndim: int) -> str:
         """Store-relative key of the one chunk of an image (chunk grid ``(frame, 0, 0[, 0])``)."""
@@ -172,35 +128,24 @@ class SensorStore:
     def write_image(self, sequence_id: str, camera: str, frame: int, name: str, data: np.ndarray) -> None:
         """Write one image (height, width[, 3]) of one map as its whole chunk, atomically; an
         all-zero image (bitwise: -0.0 counts as data) removes the chunk instead."""
-        what = f"{sequence_id}/{camera}/{name} frame {frame}"
-        shape, dtype = self._layout(sequence_id, camera, name)
-        if not 0 <= frame < shape[0]:
-            raise ValueError(f"{what}: frame outside [0, {shape[0]})")
+        shape = self._layout(sequence_id, camera, name)[0]
         data = np.asarray(data)
         if data.shape != shape[1:]:
-            raise ValueError(f"{what}: image shape {data.shape} does not match the array's {shape[1:]}")
-        block = np.ascontiguousarray(_cast(data, dtype.name, what), dtype=dtype.newbyteorder("<"))
-        key = self._chunk_key(sequence_id, camera, name, frame, len(shape))
-        if not block.reshape(-1).view(np.uint8).any():
-            remove_object(self.store, key)
-            return
-        put_object(self.store, key, encode_chunk(block, dtype))
-
-    def open(self, sequence_id: str, camera: str, name: str) -> zarr.Array:
-        """The zarr array of one map (read-only use); StoreError naming it when missing."""
-        path = self.array_path(sequence_id, camera, name)
-        arr = self._node(path)
-        if not isinstance(arr, zarr.Array):
-            raise StoreError(f"missing in the store {self.store.url}: {SENSORS_ZARR}/{path}")
-        return arr
+            raise ValueError(f"{sequence_id}/{camera}/{name} frame {frame}: image shape {data.shape} "
+                             f"does not match the array's {shape[1:]}")
+        self.write_tile(sequence_id, camera, frame, name, data, 0)
 
     def read_image(self, sequence_id: str, camera: str, frame: int, name: str) -> np.ndarray:
-        """One image (height, width[, 3]) of one map, through zarr-python (zeros where not written)."""
-        path = self.array_path(sequence_id, camera, name)
-        arr = self._node(path)
-        if not isinstance(arr, zarr.Array):
-            raise StoreError(f"missing in the store {self.store.url}: {SENSORS_ZARR}/{path}")
-        return arr[frame]
+        """One image (height, width[, 3]) of one map, through zarr-python (zeros where not written:
+        a recorder may write its ``*_raw`` arrays with other codecs); StoreError naming the array
+        when it is missing or its chunk cannot be decoded."""
+        arr = self.open(sequence_id, camera, name)
+        try:
+            return arr[frame]
+        except (RuntimeError, ValueError) as exc:  # a damaged chunk
+            path = self.array_path(sequence_id, camera, name)
+            raise StoreError(f"damaged in the store {self.store.url}: {SENSORS_ZARR}/{path} frame {frame}: "
+                             f"{exc}") from exc
 
     def exists(self, sequence_id: str, camera: str, name: str, frame: int | None = None) -> bool:
         """The array exists; with ``frame``: also within its frame count and the image's chunk is
@@ -222,21 +167,6 @@ class SensorStore:
         """Map arrays of one camera, sorted."""
         group = self._node(f"{sequence_id}/{camera}")
         return sorted(group.array_keys()) if isinstance(group, zarr.Group) else []
-
-    def attrs(self, sequence_id: str, camera: str, name: str) -> dict:
-        """The attributes of one array (dims, camera, taxonomy version, intrinsics...)."""
-        path = self.array_path(sequence_id, camera, name)
-        arr = self._node(path)
-        if arr is None:
-            raise StoreError(f"missing in the store {self.store.url}: {SENSORS_ZARR}/{path}")
-        return dict(arr.attrs)
-
-    def fingerprints(self, sequence_id: str, camera: str, frame: int, names: tuple[str, ...]) -> dict[str, str]:
-        """Lineage key -> fingerprint of one frame of each named map (see
-        :func:`catalog.zarrio.frame_fingerprint`)."""
-        return {self.output_key(sequence_id, camera, n, frame):
-                frame_fingerprint(self.store, SENSORS_ZARR, self.array_path(sequence_id, camera, n), frame)
-                for n in names}
 
 
 class LidarStore:

@@ -5,7 +5,8 @@ arrays' declared codec pipeline ``bytes`` + ``zstd``) and stored as one object e
 and decoded here too (:func:`decode_chunk`), which is about 4x faster than reading through
 zarr-python. A frame of an array is named in lineage by its frame key
 ``<root>.zarr/<array path>[<frame>]`` and fingerprinted by its stored chunks
-(:func:`frame_fingerprint`).
+(:func:`frame_fingerprint`). The arrays that use this codec, their creation, tile writes and
+reads, are :class:`carlaocc.catalog.zarrstore.FrameArrayStore`.
 """
 
 from __future__ import annotations

@@ -23,8 +23,8 @@ from typing import Callable
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.store import Store
 from carlaocc.catalog.zarrio import frame_fingerprint, parse_frame_key
-from carlaocc.pipeline.registry import Context, Partition, StageSpec, UpstreamMissing, cache_key
-from carlaocc.pipeline.stages import STAGES
+from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
+from carlaocc.pipeline.spec import Context, Partition, StageSpec, UpstreamMissing, cache_key
 from carlaocc.schemas.configs import DatasetConfig, StageConfig
 from carlaocc.schemas.records import RunRecord
 
@@ -292,18 +292,20 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
 
 
 def stage_order(names: list[str] | None, registry: dict[str, StageSpec] | None = None) -> list[StageSpec]:
-    """Registered stages in dependency order, optionally restricted to ``names`` (validated)."""
+    """Registered stages in dependency order, optionally restricted to ``names`` (validated;
+    earlier stage names are read as the stage's name, e.g. ``metrics`` as ``quality``)."""
     registry = STAGES if registry is None else registry
     if names:
+        names = [STAGE_ALIASES.get(n, n) if n not in registry else n for n in names]
         unknown = [n for n in names if n not in registry]
         if unknown:
             raise PlanError(f"unknown stage {unknown[0]!r} (stages: {', '.join(registry)})")
     return [s for s in registry.values() if not names or s.name in names]
 
 
-def status(store: Store, config: DatasetConfig, resolutions: tuple[float, ...]) -> list[StagePlan]:
+def status(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...]) -> list[StagePlan]:
     """Plan every stage without running anything (what is stale and why)."""
-    ctx, lineage = Context(store, config, resolutions), LineageLog(store)
+    ctx, lineage = Context(store, config, voxel_sizes), LineageLog(store)
     plans, stale = [], {}
     for spec in stage_order(None):
         plan = plan_stage(spec, ctx, lineage, False, stale)
@@ -331,7 +333,7 @@ class Progress:
     def stop(self, stage: str) -> None: ...
 
 
-def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
+def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
         stages: list[str] | None = None, scheduler: str | None = None, force: bool = False,
         progress: Progress | None = None, workers: int | None = None,
         log: Callable[[str], None] = lambda s: None,
@@ -340,7 +342,7 @@ def run(store: Store, config: DatasetConfig, resolutions: tuple[float, ...],
     default) in order; stops after a stage with failures."""
     progress = progress or Progress()
     selected = stage_order(stages, registry)
-    ctx, lineage = Context(store, config, resolutions), LineageLog(store)
+    ctx, lineage = Context(store, config, voxel_sizes), LineageLog(store)
     scheduler = resolve_scheduler(scheduler)
     # stages not selected but upstream of a selected one: what of theirs is stale blocks the run
     stale: dict[str, set[str]] = {}

@@ -20,7 +20,8 @@ import numpy as np
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.geometry import SceneMesh, is_watertight
+from carlaocc.schemas.meshes import SceneMesh
+from carlaocc.stages.geometry import is_watertight
 
 MAX_VOXELS = 2**31  # a grid beyond this is almost always a unit mistake (millimetres as metres)
 
@@ -81,7 +82,7 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     labels = iter(_classes(classes, len(files)))
     assets = {}
     if missing:
-        from carlaocc.pipeline.tasks import load_geometry
+        from carlaocc.pipeline.tasks.frame import load_geometry
 
         try:
             assets = load_geometry(store, set(missing), [])

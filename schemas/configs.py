@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
 from carlaocc.schemas.rig import RigConfig
@@ -184,8 +184,8 @@ class SensorsConfig(StageConfig):
         return tuple(c for c in rig.cameras if c.name in self.cameras)
 
 
-class MetricsConfig(StageConfig):
-    """Dataset-quality metrics."""
+class QualityConfig(StageConfig):
+    """Dataset-quality scores (spatial continuity, temporal consistency) and the report."""
 
     neighbourhood: Literal[6] = 6
 
@@ -197,7 +197,8 @@ class DatasetConfig(StageConfig):
     scenes: ScenesConfig = ScenesConfig()
     voxelize: VoxelizeConfig = VoxelizeConfig()
     sensors: SensorsConfig = SensorsConfig()
-    metrics: MetricsConfig = MetricsConfig()
+    # ``metrics`` is the section's earlier name, still read
+    quality: QualityConfig = Field(QualityConfig(), validation_alias=AliasChoices("quality", "metrics"))
 
     @model_validator(mode="after")
     def _region_is_valid(self) -> DatasetConfig:
@@ -209,7 +210,7 @@ class DatasetConfig(StageConfig):
         return self
 
 
-def parse_resolutions(text: str) -> tuple[float, ...]:
+def parse_voxel_size_list(text: str) -> tuple[float, ...]:
     """Parse ``"0.2"`` or ``"0.2,0.05"`` into voxel sizes (m); each must be positive and finite.
     Sizes that share a store key (``0.4`` and ``0.4000001`` are both ``"0.4"``) are one
     resolution: the first spelling is kept."""
@@ -235,11 +236,11 @@ def parse_resolutions(text: str) -> tuple[float, ...]:
 __all__ = [
     "DatasetConfig",
     "IngestConfig",
-    "MetricsConfig",
+    "QualityConfig",
     "ScenesConfig",
     "SourceIngestConfig",
     "StageConfig",
     "TownSpec",
     "VoxelizeConfig",
-    "parse_resolutions",
+    "parse_voxel_size_list",
 ]

@@ -1,57 +1,16 @@
-"""Geometry shared by the stages: mesh parts, scene meshes and rigid transforms.
+"""Geometry helpers shared by the stages: rigid transforms, mesh measures and checks.
 
-Small pure numpy functions in the trimesh style. Units are metres; poses are 4x4 float64
-homogeneous matrices mapping a source frame into a target frame (``p_target = T @ p_source``).
+Small pure numpy functions in the trimesh style over ``(N, 3)`` float64 vertices and ``(M, 3)``
+int64 faces (the mesh types themselves, :class:`~carlaocc.schemas.meshes.MeshPart` and friends,
+live in ``schemas.meshes``). Units are metres; poses are 4x4 float64 homogeneous matrices mapping
+a source frame into a target frame (``p_target = T @ p_source``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import hashlib
 
 import numpy as np
-
-
-@dataclass(frozen=True)
-class MeshPart:
-    """A sub-mesh of an asset in the asset frame (+X forward, Z up, metres, origin at the bottom
-    centre of the asset's bounding box), with its material and semantic class."""
-
-    name: str
-    vertices: np.ndarray  # (N, 3) float64
-    faces: np.ndarray  # (M, 3) int64
-    semantic_id: int
-    material: str = "default"
-    transparent: bool = False
-    color: tuple[int, int, int, int] = (200, 200, 200, 255)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
-        object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
-
-
-@dataclass(frozen=True)
-class SceneMesh:
-    """A mesh of one frame's panoptic scene, in the grid's frame (LiDAR frame, metres).
-
-    ``closed`` meshes are watertight things whose interior is filled by voxelization; stuff and
-    open meshes are surfaces. ``instance_id`` is 0 for stuff.
-    """
-
-    vertices: np.ndarray  # (N, 3) float64
-    faces: np.ndarray  # (M, 3) int64
-    semantic_id: int
-    instance_id: int
-    is_stuff: bool
-    closed: bool
-    name: str = field(default="")
-    transparent: bool = False  # glass and other see-through parts (cameras see past them)
-    asset_id: str = ""  # the ADMesh asset (or town stuff key) the mesh is a part of
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
-        object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
 
 
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -120,16 +79,6 @@ def concatenate(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray,
         faces.append(np.asarray(f, dtype=np.int64) + offset)
         offset += len(v)
     return np.concatenate(verts), np.concatenate(faces)
-
-
-@dataclass(frozen=True)
-class AssetGeometry:
-    """The geometry of one asset (or town stuff mesh) as the scene composer consumes it:
-    its parts in the asset frame and, per part, whether it is closed (watertight)."""
-
-    asset_id: str
-    parts: tuple[MeshPart, ...]
-    part_closed: tuple[bool, ...]
 
 
 def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:

@@ -110,7 +110,7 @@ def test_catalog_tables_and_metrics(built):
     _, rows = query(built, "SELECT value FROM quality WHERE frame_index IS NULL AND metric = 'spatial_continuity'")
     assert len(rows) == n_seq and all(0.9 < r[0] <= 1.0 for r in rows)
     _, rows = query(built, "SELECT DISTINCT stage FROM runs WHERE status = 'completed' ORDER BY 1")
-    assert [r[0] for r in rows] == ["ingest", "metrics", "report", "scenes", "sensors", "voxelize"]
+    assert [r[0] for r in rows] == ["ingest", "quality", "report", "scenes", "sensors", "voxelize"]
     _, rows = query(built, "SELECT count(*) FROM quality_classes q JOIN classes c ON q.semantic_id = c.id WHERE c.name = 'Car'")
     assert rows[0][0] > 0
 
@@ -220,7 +220,7 @@ def test_tampered_frame_is_detected_and_rebuilt(config_file, built, tmp_path):
     assert "voxelize  stale 1/" in r.output and f"{seq}/{grid.key}/0003: outputs missing or modified" in r.output
     r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
     # the rebuilt frame is byte-identical, so what metrics read is unchanged: it stays up to date
-    assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "metrics: 3 up to date" in r.output
+    assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "quality: 3 up to date" in r.output
     np.testing.assert_array_equal(OccupancyStore(copy).read_frame(seq, grid, 3)["semantic"],
                                   OccupancyStore(built).read_frame(seq, grid, 3)["semantic"])
 
@@ -432,9 +432,8 @@ def test_recorded_path_rectifies_stored_raw_maps_like_the_raycast_path(built, tm
 
     from carlaocc.catalog.sensors import SensorStore
     from carlaocc.catalog.store import StoreError
-    from carlaocc.pipeline.registry import Partition
-    from carlaocc.pipeline.stages import sensors_config
-    from carlaocc.pipeline.tasks import sensors_task
+    from carlaocc.pipeline.spec import Partition
+    from carlaocc.pipeline.tasks.sensors import sensors_config, sensors_task
 
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)

@@ -80,3 +80,56 @@ def test_stages_never_open_paths():
         calls = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
         assert "open" not in calls, f"{path} calls open()"
         assert "pathlib" not in _imports(path) and "os" not in _imports(path), f"{path} touches the filesystem"
+
+
+# the in-memory contracts have one home in schemas/ (catalog readers return them, stages accept
+# them typed); these names may be defined nowhere else, and the duplicates and bridges they
+# replaced may not come back anywhere
+CONTRACT_MODULES = ("meshes", "motion", "opendrive")
+RETIRED = {"RawAsset", "RawPart", "MeshPartLike", "BvhClip", "_raw_asset", "SHARED_CODE", "code_modules"}
+
+
+def _contract_names() -> set[str]:
+    names = set()
+    for mod in CONTRACT_MODULES:
+        tree = ast.parse((ROOT / "schemas" / f"{mod}.py").read_text())
+        for node in tree.body:
+            if isinstance(node, ast.ClassDef):
+                names.add(node.name)
+            elif isinstance(node, ast.Assign):
+                names |= {t.id for t in node.targets if isinstance(t, ast.Name) and not t.id.isupper() and not t.id.startswith("__")}
+    return names
+
+
+def _definitions(path: Path) -> set[str]:
+    """Classes, functions, module-level names and keyword arguments defined in ``path``."""
+    tree = ast.parse(path.read_text())
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.ClassDef, ast.FunctionDef)):
+            out.add(node.name)
+        elif isinstance(node, ast.keyword) and node.arg:
+            out.add(node.arg)
+    for node in tree.body:
+        if isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return out
+
+
+def test_contracts_are_defined_once_in_schemas():
+    contracts = _contract_names()
+    assert {"MeshPart", "SceneMesh", "AssetGeometry", "SourceAsset", "SourcePart", "Axis", "Units", "MotionClip",
+            "Road", "OpenDriveNetwork"} <= contracts
+    for layer in ("stages", "catalog", "pipeline"):
+        for path in sorted((ROOT / layer).rglob("*.py")):
+            again = _definitions(path) & contracts
+            assert not again, f"{path.relative_to(ROOT)} defines {sorted(again)}: import them from carlaocc.schemas"
+
+
+@pytest.mark.parametrize("path", ALL_FILES, ids=[str(p.relative_to(ROOT)) for p in ALL_FILES])
+def test_retired_duplicates_stay_gone(path):
+    if path.name in ("test_layering.py", "test_meshes.py"):
+        return  # the lists of what may not come back
+    back = _definitions(path) & RETIRED
+    assert not back, f"{path.relative_to(ROOT)} brings back {sorted(back)}"

@@ -3,6 +3,7 @@
 The wheel is built offline from this checkout (no build isolation: the test environment's
 setuptools) and its top-level names and modules are checked against the source tree."""
 
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -16,11 +17,16 @@ LAYERS = ("schemas", "stages", "catalog", "pipeline")
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> zipfile.ZipFile:
+    # built from a copy of the sources: setuptools builds in-tree (build/), where modules deleted
+    # from the source would linger and be packed
+    src = tmp_path_factory.mktemp("src")
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(ROOT / name, src / name)
+    for name in (*LAYERS, "carlaocc"):
+        shutil.copytree(ROOT / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
     out = tmp_path_factory.mktemp("wheel")
-    build = tmp_path_factory.mktemp("build")
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index",
-                        "-q", "-w", str(out), str(ROOT)], capture_output=True, text=True,
-                       env={**_env(), "TMPDIR": str(build)})
+                        "-q", "-w", str(out), str(src)], capture_output=True, text=True, env=_env())
     assert r.returncode == 0, r.stderr[-3000:]
     (whl,) = out.glob("carlaocc-*.whl")
     return zipfile.ZipFile(whl)

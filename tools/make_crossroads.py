@@ -4,9 +4,9 @@ Usage: ``python tools/make_crossroads.py catalog/towns/crossroads.xodr``.
 """
 import math, sys
 from pathlib import Path
-from types import SimpleNamespace as NS
 import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from carlaocc.schemas.opendrive import Geometry
 from carlaocc.stages.scenes.opendrive import evaluate_geometry
 
 W, SW = 3.5, 3.0  # lane, sidewalk width
@@ -25,7 +25,7 @@ def chain(x, y, hdg, parts):
     out, s = [], 0.0
     for p in parts:
         g = dict(p, s=s, x=x, y=y, hdg=hdg)
-        ex, ey, eh = evaluate_geometry(NS(**g), [p["length"]])
+        ex, ey, eh = evaluate_geometry(Geometry(**g), [p["length"]])
         x, y, hdg = float(ex[0]), float(ey[0]), float(eh[0])
         s += p["length"]
         out.append(g)
@@ -117,7 +117,7 @@ def arm_pose(rid, cp):
         g0 = gs[0]
         return np.array([g0["x"], g0["y"]]), g0["hdg"]
     gl = gs[-1]
-    x, y, h = evaluate_geometry(NS(**gl), [gl["length"]])
+    x, y, h = evaluate_geometry(Geometry(**gl), [gl["length"]])
     return np.array([x[0], y[0]]), float(h[0]) + PI
 
 

@@ -1,12 +1,21 @@
 """Readers and writers of the external occupancy formats that models train on.
 
-One module per format, each with ``save_*`` / ``load_*`` (one place per format):
+One module per format, each with ``save_*`` / ``load_*`` (one place per format), a
+``load_*_grid`` reading a frame as a :class:`~catalog.formats.layout.LabelGrid` for the quality
+scores, and its ``*_FORMAT`` layout (file ending, sequences, class names; :data:`FORMATS` by name):
 
 * :mod:`catalog.formats.occ3d` -- Occ3D-nuScenes ``labels.npz`` (dense uint8, ego frame).
 * :mod:`catalog.formats.semantickitti` -- SemanticKITTI SSC voxels (``.bin/.invalid/.occluded``
   bit-packed grids, ``.label`` uint16), LiDAR frame.
 * :mod:`catalog.formats.surroundocc` -- SurroundOcc sparse ``(N, 4)`` voxel rows, LiDAR frame.
 * :mod:`catalog.formats.carlaocc_npz` -- the published CarlaOcc ``.npz`` (``sem << 11 | inst``).
+
+Shared by the audit of these datasets:
+
+* :mod:`catalog.formats.layout` -- :class:`DatasetFormat` (how a format lies on disk),
+  :class:`LabelGrid`, collecting a dataset's files, grouping them into sequences, reading a frame.
+* :mod:`catalog.formats.poses` -- pose files (``.npy``, ``.json`` keyed by frame, KITTI
+  ``poses.txt`` and ``calib.txt``) and the sequences their frames form with them.
 
 Conventions shared by every module:
 
@@ -38,6 +47,11 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 class FormatError(ValueError):
     """A file (or an array about to be written) is not a valid instance of its format."""
+
+
+class DatasetInputError(ValueError):
+    """Bad input naming a dataset's files: an unknown format, a path without files, an unreadable
+    file (the reader's message, naming it), poses that do not fit the frames."""
 
 
 def atomic_write(path: PathLike, write: Callable[[IO[bytes]], None]) -> Path:
@@ -91,14 +105,17 @@ def read_npz(path: PathLike, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
 
 # Public API, re-exported (defined after FormatError, which the modules import from here).
 from carlaocc.catalog.formats.carlaocc_npz import (
+    CARLAOCC_NPZ_FORMAT,
     CarlaOccFrame,
     load_carlaocc_npz,
     published_instance_ids,
     remap_instances,
     save_carlaocc_npz,
 )
-from carlaocc.catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
+from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid
+from carlaocc.catalog.formats.occ3d import OCC3D_FORMAT, Occ3DFrame, load_occ3d, save_occ3d
 from carlaocc.catalog.formats.semantickitti import (
+    SEMANTICKITTI_FORMAT,
     SemanticKittiVoxels,
     load_semantickitti,
     save_semantickitti,
@@ -106,27 +123,47 @@ from carlaocc.catalog.formats.semantickitti import (
     to_raw,
 )
 from carlaocc.catalog.formats.surroundocc import (
+    SURROUNDOCC_FORMAT,
     dense_to_surroundocc,
     load_surroundocc,
     save_surroundocc,
     surroundocc_to_dense,
 )
 
+FORMATS: dict[str, DatasetFormat] = {
+    f.name: f for f in (OCC3D_FORMAT, SEMANTICKITTI_FORMAT, SURROUNDOCC_FORMAT, CARLAOCC_NPZ_FORMAT)
+}
+"""The dataset layouts by their command-line name: occ3d, semantickitti, surroundocc, carlaocc-npz."""
+
+
+def dataset_format(name: str) -> DatasetFormat:
+    """The layout named ``name``; :class:`DatasetInputError` naming the known ones otherwise."""
+    try:
+        return FORMATS[name]
+    except KeyError:
+        raise DatasetInputError(f"unknown format {name!r}; choose one of {', '.join(FORMATS)}") from None
+
+
 __all__ = [
+    "FORMATS",
     "CarlaOccFrame",
+    "DatasetFormat",
+    "DatasetInputError",
     "FormatError",
+    "LabelGrid",
     "Occ3DFrame",
     "PathLike",
     "SemanticKittiVoxels",
     "atomic_write",
-    "published_instance_ids",
-    "remap_instances",
+    "dataset_format",
     "dense_to_surroundocc",
     "load_carlaocc_npz",
     "load_occ3d",
     "load_semantickitti",
     "load_surroundocc",
+    "published_instance_ids",
     "read_npz",
+    "remap_instances",
     "save_carlaocc_npz",
     "save_occ3d",
     "save_semantickitti",

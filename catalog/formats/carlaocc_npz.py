@@ -27,22 +27,27 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from carlaocc.catalog.formats import FormatError, PathLike, atomic_write, read_npz
+from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid
+from carlaocc.schemas import taxonomy
 
 __all__ = [
     "CARLAOCC_KEYS",
+    "CARLAOCC_NPZ_FORMAT",
     "INSTANCE_BITS",
     "MAX_INDEX",
     "MAX_INSTANCE",
     "MAX_SEMANTIC",
     "CarlaOccFrame",
-    "published_instance_ids",
-    "remap_instances",
+    "load_carlaocc_grid",
     "load_carlaocc_npz",
     "pack_ids",
+    "published_instance_ids",
+    "remap_instances",
     "save_carlaocc_npz",
     "unpack_ids",
 ]
@@ -208,3 +213,16 @@ def remap_instances(instance: np.ndarray, ids: np.ndarray, new: np.ndarray) -> n
         return np.zeros(f.shape, dtype=np.uint32)
     pos = np.minimum(np.searchsorted(ids, f), len(ids) - 1)  # the clip only guards zeros
     return np.where(f == 0, 0, np.asarray(new)[pos]).astype(np.uint32)
+
+
+def load_carlaocc_grid(path: Path) -> LabelGrid:
+    """A CarlaOcc ``.npz`` as a :class:`LabelGrid`: its semantic ids (0 = free), no visibility
+    mask, the file's own voxel size and origin (LiDAR frame)."""
+    f = load_carlaocc_npz(path)
+    return LabelGrid(str(path), f.semantic, None, f.voxel_size, f.voxel_origin)
+
+
+CARLAOCC_NPZ_FORMAT = DatasetFormat(
+    "carlaocc-npz", "CarlaOcc", ".npz", load_carlaocc_grid, tuple(c.name for c in taxonomy.CLASSES),
+    lambda i: i, taxonomy.dynamic_ids(), "none")
+"""The published CarlaOcc ``.npz`` layout (:mod:`catalog.formats.layout`)."""

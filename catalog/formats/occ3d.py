@@ -23,12 +23,17 @@ from __future__ import annotations
 import io
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from carlaocc.catalog.formats import FormatError, PathLike, atomic_write, read_npz
+from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid, grid_origin
+from carlaocc.schemas import taxonomy
 
 __all__ = [
+    "NUSCENES_DYNAMIC",
+    "OCC3D_FORMAT",
     "OCC3D_FREE",
     "OCC3D_KEYS",
     "OCC3D_RANGE",
@@ -36,6 +41,7 @@ __all__ = [
     "OCC3D_VOXEL_SIZE",
     "Occ3DFrame",
     "load_occ3d",
+    "load_occ3d_grid",
     "save_occ3d",
 ]
 
@@ -45,6 +51,9 @@ OCC3D_VOXEL_SIZE: float = 0.4
 OCC3D_RANGE: tuple[float, float, float, float, float, float] = (-40.0, -40.0, -1.0, 40.0, 40.0, 5.4)
 """(x_min, y_min, z_min, x_max, y_max, z_max), metres, ego frame."""
 OCC3D_KEYS: tuple[str, str, str] = ("semantics", "mask_lidar", "mask_camera")
+NUSCENES_DYNAMIC: tuple[str, ...] = ("bicycle", "bus", "car", "construction_vehicle", "motorcycle", "pedestrian",
+                                     "trailer", "truck")
+"""The nuScenes classes of road users (Occ3D and SurroundOcc names), left out of temporal scores."""
 
 
 @dataclass(frozen=True)
@@ -93,3 +102,32 @@ def load_occ3d(path: PathLike) -> Occ3DFrame:
     arrays = read_npz(path, OCC3D_KEYS)
     _validate(arrays, os.fspath(path))
     return Occ3DFrame(**arrays)
+
+
+def load_occ3d_grid(path: Path) -> LabelGrid:
+    """An Occ3D-nuScenes ``labels.npz`` as a :class:`LabelGrid`: ids shifted by one so that 0 is
+    free (free 17 -> 0, class k -> k + 1), ``mask_camera`` as the visibility mask, the nuScenes
+    geometry (0.4 m from :data:`OCC3D_RANGE`, ego frame). ``FormatError`` naming the file for
+    another shape or an id above 17."""
+    f = load_occ3d(path)
+    sem = f.semantics
+    # the reader takes any Occ3D variant; the audit's geometry and names are Occ3D-nuScenes'
+    if sem.shape != OCC3D_SHAPE:
+        raise FormatError(f"{path}: Occ3D-nuScenes grids are {OCC3D_SHAPE} (0.4 m from {OCC3D_RANGE[:3]}), "
+                          f"got {sem.shape}")
+    if sem.size and int(sem.max()) > OCC3D_FREE:
+        raise FormatError(f"{path}: Occ3D-nuScenes ids are 0..{OCC3D_FREE} ({OCC3D_FREE} = free), "
+                          f"found {int(sem.max())}")
+    # free (17) -> 0, class k -> k + 1
+    lut = (np.arange(256) + 1).astype(np.uint8)
+    lut[OCC3D_FREE] = 0
+    return LabelGrid(str(path), lut[sem], f.mask_camera.astype(bool), OCC3D_VOXEL_SIZE, grid_origin(OCC3D_RANGE))
+
+
+_NAMES = taxonomy.OCC3D_NUSCENES_NAMES
+OCC3D_FORMAT = DatasetFormat(
+    "occ3d", "Occ3D-nuScenes", "labels.npz", load_occ3d_grid, _NAMES, lambda i: i - 1,
+    tuple(_NAMES.index(n) + 1 for n in NUSCENES_DYNAMIC), "mask_camera",
+    # gts/<scene>/<sample_token>/labels.npz: the scene is the sequence, the token names the frame
+    sequence=lambda p: p.parent.parent, numbered=False, token=lambda p: p.parent.name)
+"""The Occ3D-nuScenes layout (:mod:`catalog.formats.layout`)."""

@@ -26,15 +26,19 @@ from pathlib import Path
 import numpy as np
 
 from carlaocc.catalog.formats import FormatError, PathLike, atomic_write
+from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid, grid_origin
+from carlaocc.schemas import taxonomy
 
 __all__ = [
     "LEARNING_MAP",
     "LEARNING_MAP_INV",
+    "SEMANTICKITTI_FORMAT",
     "SEMANTICKITTI_RANGE",
     "SEMANTICKITTI_SHAPE",
     "SEMANTICKITTI_VOXEL_SIZE",
     "SemanticKittiVoxels",
     "load_semantickitti",
+    "load_semantickitti_grid",
     "save_semantickitti",
     "scan_paths",
     "to_learning",
@@ -167,3 +171,23 @@ def load_semantickitti(directory: PathLike, stem: str) -> SemanticKittiVoxels:
     return SemanticKittiVoxels(
         occupied=grids["bin"], invalid=grids["invalid"], occluded=grids["occluded"], labels=labels
     )
+
+
+def load_semantickitti_grid(path: Path) -> LabelGrid:
+    """The scan of a SemanticKITTI ``<stem>.label`` as a :class:`LabelGrid`: the learning ids
+    (0 = empty), not ``.invalid`` as the visibility mask, 0.2 m from :data:`SEMANTICKITTI_RANGE`
+    (LiDAR frame). ``FormatError`` naming the file for a raw id without a learning id."""
+    v = load_semantickitti(path.parent, path.name[: -len(".label")])
+    try:
+        sem = to_learning(v.labels)
+    except ValueError as exc:
+        raise FormatError(f"{path}: {exc}") from None
+    return LabelGrid(str(path), sem, ~v.invalid, SEMANTICKITTI_VOXEL_SIZE, grid_origin(SEMANTICKITTI_RANGE))
+
+
+SEMANTICKITTI_FORMAT = DatasetFormat(
+    "semantickitti", "SemanticKITTI", ".label", load_semantickitti_grid, taxonomy.SEMANTICKITTI_NAMES,
+    lambda i: i, tuple(range(1, 9)), "not .invalid",
+    # voxel scans only: the point-cloud labels/*.label of a sequence have no .invalid beside them
+    accept=lambda p: p.with_suffix(".invalid").is_file())
+"""The SemanticKITTI voxel layout (:mod:`catalog.formats.layout`)."""

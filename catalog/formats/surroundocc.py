@@ -21,18 +21,25 @@ from __future__ import annotations
 
 import io
 import os
+from pathlib import Path
 
 import numpy as np
 
 from carlaocc.catalog.formats import FormatError, PathLike, atomic_write
+from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid, grid_origin
+from carlaocc.catalog.formats.occ3d import NUSCENES_DYNAMIC
+from carlaocc.schemas import taxonomy
 
 __all__ = [
     "SURROUNDOCC_DTYPE",
+    "SURROUNDOCC_FORMAT",
+    "SURROUNDOCC_NAMES",
     "SURROUNDOCC_RANGE",
     "SURROUNDOCC_SHAPE",
     "SURROUNDOCC_VOXEL_SIZE",
     "dense_to_surroundocc",
     "load_surroundocc",
+    "load_surroundocc_grid",
     "save_surroundocc",
     "surroundocc_to_dense",
 ]
@@ -131,3 +138,29 @@ def load_surroundocc(path: PathLike, shape: tuple[int, int, int] = SURROUNDOCC_S
         raise FormatError(f"{p}: an npz archive, expected a single (N, 4) .npy array")
     _check_rows(rows, tuple(shape), p)
     return rows.astype(SURROUNDOCC_DTYPE, copy=False)
+
+
+def load_surroundocc_grid(path: Path) -> LabelGrid:
+    """A SurroundOcc ``.npy`` as a :class:`LabelGrid`: label k -> k + 1 so that 0 can be free (a
+    voxel without a row; SurroundOcc's label 0 "noise" becomes class 1), no visibility mask, 0.5 m
+    from :data:`SURROUNDOCC_RANGE` (LiDAR frame). ``FormatError`` naming the file for a label that
+    does not fit the uint8 ids (0..254) or rows that do not make a grid."""
+    rows = load_surroundocc(path)
+    if len(rows) and int(rows[:, 3].max()) >= 255:
+        raise FormatError(f"{path}: label {int(rows[:, 3].max())} does not fit the audit's uint8 ids (0..254)")
+    shifted = rows.copy()
+    shifted[:, 3] += 1  # label k -> k + 1 so that 0 can be free (SurroundOcc's label 0 is "noise")
+    try:
+        sem = surroundocc_to_dense(shifted, SURROUNDOCC_SHAPE, free=0)
+    except ValueError as exc:
+        raise FormatError(f"{path}: {exc}") from None
+    return LabelGrid(str(path), sem, None, SURROUNDOCC_VOXEL_SIZE, grid_origin(SURROUNDOCC_RANGE))
+
+
+SURROUNDOCC_NAMES: tuple[str, ...] = ("noise",) + taxonomy.OCC3D_NUSCENES_NAMES[1:17]
+"""SurroundOcc's label names: the nuScenes-lidarseg learning ids 0-16."""
+
+SURROUNDOCC_FORMAT = DatasetFormat(
+    "surroundocc", "SurroundOcc", ".npy", load_surroundocc_grid, SURROUNDOCC_NAMES, lambda i: i - 1,
+    tuple(SURROUNDOCC_NAMES.index(n) + 1 for n in NUSCENES_DYNAMIC), "none")
+"""The SurroundOcc layout (:mod:`catalog.formats.layout`)."""

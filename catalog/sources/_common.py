@@ -41,7 +41,8 @@ import numpy as np
 
 from carlaocc.catalog.sources._collada import ColladaError, read_dae
 from carlaocc.catalog.sources._obj import mtl_files, obj_materials
-from carlaocc.catalog.sources.base import Axis, SourceError, SourcePart
+from carlaocc.catalog.sources.base import SourceError
+from carlaocc.schemas.meshes import Axis, SourcePart
 from carlaocc.schemas.taxonomy import SemanticClass, by_id, by_name
 
 MESH_EXTS: tuple[str, ...] = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf", ".dae")

@@ -94,7 +94,8 @@ from carlaocc.catalog.sources._common import (
     semantic_class,
 )
 from carlaocc.catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
-from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceError, SourceItem
+from carlaocc.schemas.meshes import SourceAsset
 
 FORMAT = "carlaocc-ue-export/1"
 UE_TO_OURS = np.diag([0.01, -0.01, 0.01])  # mirror y, centimetres -> metres

@@ -58,7 +58,8 @@ from carlaocc.catalog.sources._common import (
     semantic_class,
     sidecar_files,
 )
-from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceError, SourceItem
+from carlaocc.schemas.meshes import SourceAsset
 
 _REQUIRED = ("glob", "category", "subclass")
 _OPTIONAL = ("length_m", "up", "forward", "units")

@@ -61,7 +61,8 @@ from carlaocc.catalog.sources._common import (
     semantic_class,
     sidecar_files,
 )
-from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceError, SourceItem
+from carlaocc.schemas.meshes import SourceAsset
 
 DEFAULT_CSV = "meshfleet_with_vehicle_categories_df.csv"
 _REQUIRED = ("sha256", "category", "license")

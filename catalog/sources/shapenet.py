@@ -47,7 +47,8 @@ import re
 
 from carlaocc.catalog.sources._common import load_parts, semantic_class
 from carlaocc.catalog.sources._obj import mtl_files
-from carlaocc.catalog.sources.base import SourceAsset, SourceError, SourceItem
+from carlaocc.catalog.sources.base import SourceError, SourceItem
+from carlaocc.schemas.meshes import SourceAsset
 
 LICENCE = "ShapeNet terms of use"
 MODEL_FILE = os.path.join("models", "model_normalized.obj")

@@ -1,4 +1,13 @@
-"""Ingestion stage: sources of ADMesh assets (the built-in procedural source)."""
+"""Ingestion stage: source objects to standardized ADMesh assets, and the built-in procedural source.
+
+* ``procedural/``  — the built-in procedural source (parametric assets by family; the catalogue
+  and :func:`ingest_procedural`).
+* ``standardize``  — a :class:`~carlaocc.schemas.meshes.SourceAsset` to an ADMesh asset (records
+  and geometry in the asset frame) or a ``Rejection``; the driver of the steps below.
+* ``checks``       — ``Rejection`` and the label and array checks.
+* ``repair``       — mesh cleaning (weld, degenerate and duplicate faces) and winding repair.
+* ``sizes``        — the size table per class and sub-class, and the scale to metres.
+"""
 
 from carlaocc.stages.ingest.procedural import IngestResult, asset_id_for, ingest_procedural
 

@@ -1,5 +1,28 @@
 """Scenes stage: towns (procedural styles and OpenDRIVE), traffic sequences driven through them,
-and per-frame panoptic scene meshes in the LiDAR frame."""
+and per-frame panoptic scene meshes in the LiDAR frame. :func:`build_town` builds a town of either
+kind; :func:`simulate_town` drives its sequences.
+
+* ``network``           — the town contract: lanes, walkways, road network, town
+* ``placing``           — shared by town builders: stuff slabs, placement records, asset pools
+* ``town``              — procedural towns (downtown, suburb, arterial): the driver
+* ``town_layout``       — a procedural town's plan: styles, cross-sections, grid, the draft
+* ``town_geometry``     — plan geometry: polylines, extruded slabs, polygon tests, footprints
+* ``town_roads``        — carriageways, medians, road markings and the lane graph
+* ``town_walkways``     — sidewalks, kerbs, block grounds and lots, outer ring, walk graph
+* ``town_buildings``    — buildings in the lots and their frontages (fences, hedges, walls)
+* ``town_furniture``    — junction control, lights and signs, street furniture, parked cars, trees
+* ``opendrive``         — OpenDRIVE geometry: reference lines, lane boundaries, surface meshes
+* ``odr_surfaces``      — an OpenDRIVE town's ground: lane surfaces, road marks, raster, terrain
+* ``odr_network``       — an OpenDRIVE town's lane graph and walk graph
+* ``odr_town``          — OpenDRIVE towns: the driver, signals, buildings, vegetation
+* ``traffic``           — traffic sequences: levels, spawning, integration, records
+* ``traffic_vehicles``  — vehicles: IDM, leaders along the lanes, lane changes
+* ``traffic_walkers``   — walkers on the walk graph, gait phase
+* ``traffic_junctions`` — junction reservations shared by vehicles and walkers
+* ``gait/``             — the Skeletal Motion Analyzer: gait-phase matching of walkers
+* ``pedestrians``       — pedestrians posed by gait-phase matching
+* ``assembly``          — per-frame panoptic scene assembly; the town's static mesh
+"""
 
 from __future__ import annotations
 

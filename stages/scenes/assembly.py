@@ -14,7 +14,7 @@ Implements the selection of the paper's "Mesh-Based Scene Reconstruction" for on
    the frame's ego pose (1 cm, 1e-3 rad; and, when ``ego_asset_id`` is given, using that asset)
    is dropped.
 3. **Move into the LiDAR frame** with ``inverse(lidar_pose) @ object_pose`` and emit one
-   :class:`~stages.geometry.SceneMesh` per asset part, with the rules of the former
+   :class:`~schemas.meshes.SceneMesh` per asset part, with the rules of the former
    ``compose_frame_scene``:
 
    * stuff parts (taxonomy stuff classes) are surfaces (``closed=False``, instance 0), culled
@@ -50,8 +50,9 @@ import numpy as np
 
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.meshes import AssetGeometry, SceneMesh
 from carlaocc.schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
-from carlaocc.stages.geometry import AssetGeometry, SceneMesh, invert_pose, pose_from_list, transform_points
+from carlaocc.stages.geometry import invert_pose, pose_from_list, transform_points
 
 __all__ = [
     "PanopticMesh",

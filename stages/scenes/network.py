@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from carlaocc.schemas.meshes import AssetGeometry
 from carlaocc.schemas.records import PlacementRecord
-from carlaocc.stages.geometry import AssetGeometry
 
 __all__ = ["Lane", "Walkway", "RoadNetwork", "Town", "polyline_lengths", "polyline_at", "check_network"]
 

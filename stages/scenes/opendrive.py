@@ -1,18 +1,7 @@
 """OpenDRIVE geometry: reference lines, elevation, lane boundaries, road-surface and road-mark
-meshes. Pure compute (numpy); never opens a file.
-
-Stages must not import :mod:`catalog`, so the parsed network is read by attribute (duck
-typing); :mod:`catalog.opendrive` produces objects with exactly these attributes:
-
-* road: ``length``, ``geometries``, ``elevations``, ``superelevations``, ``lane_offsets``,
-  ``lane_sections`` (sequences sorted by ``s``);
-* geometry: ``s, x, y, hdg, length, kind`` and per kind ``curvature`` (arc), ``curv_start,
-  curv_end`` (spiral), ``a, b, c, d`` (poly3), ``au..du, av..dv, p_range`` (paramPoly3);
-* polynomial record (elevation, superelevation, laneOffset, lane width): ``s, a, b, c, d``
-  (lane widths: ``s`` is the sOffset from the lane-section start);
-* lane section: ``s``, ``left``, ``center``, ``right`` (lanes sorted inner to outer);
-* lane: ``id, type, widths, road_marks``; road mark: ``s_offset, type, color, width, lines``
-  (line: ``length, space, s_offset, t_offset, width``).
+meshes of the roads of a parsed network (:mod:`carlaocc.schemas.opendrive` records, as
+:func:`carlaocc.catalog.opendrive.read_opendrive` returns them). Pure compute (numpy); never opens
+a file. World frame = the file's inertial frame (metres, radians, right-handed, Z up).
 
 Geometry conventions (ASAM OpenDRIVE 1.4-1.8): s along the reference line, t to its left;
 left lanes (positive ids) extend to +t, right lanes to -t, both starting at the lane offset.
@@ -34,9 +23,12 @@ width), lane ``<height>``, road ``<shape>`` (OpenDRIVE 1.6 lateral shape), cross
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from carlaocc.schemas.opendrive import Geometry, LaneRecord, LaneSection, Poly3Record, Road, RoadMark
 
 __all__ = [
     "SURFACE_KINDS",
@@ -145,7 +137,7 @@ def _cumulative_integral_between(f, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (f(nodes) * _GL_W[None, :]).sum(axis=1) * half
 
 
-def evaluate_geometry(geom, ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def evaluate_geometry(geom: Geometry, ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World ``(x, y, heading)`` at distances ``ds`` (array, from the geometry start) along one
     planView geometry."""
     ds = np.atleast_1d(np.asarray(ds, dtype=float))
@@ -159,7 +151,7 @@ def evaluate_geometry(geom, ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         else:
             kind, k = "arc", geom.curv_start
     else:
-        k = getattr(geom, "curvature", 0.0)
+        k = geom.curvature
     if kind == "line":
         return x0 + ds * math.cos(h0), y0 + ds * math.sin(h0), np.full_like(ds, h0)
     if kind == "arc":
@@ -204,7 +196,7 @@ def evaluate_geometry(geom, ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     raise ValueError(f"unknown geometry kind {geom.kind!r}")
 
 
-def _geometry_ranges(road) -> list[tuple[object, float, float]]:
+def _geometry_ranges(road: Road) -> list[tuple[Geometry, float, float]]:
     """(geometry, s_start, s_end) clipped to ``[0, road.length]``; the last geometry extends to
     the road end if the planView is shorter than the declared length."""
     geoms = list(road.geometries)
@@ -218,7 +210,7 @@ def _geometry_ranges(road) -> list[tuple[object, float, float]]:
     return out or [(geoms[0], geoms[0].s, geoms[0].s)]
 
 
-def reference_pose(road, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reference_pose(road: Road, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Reference-line ``(x, y, heading)`` at arbitrary road-absolute ``s`` (array)."""
     s = np.atleast_1d(np.asarray(s, dtype=float))
     ranges = _geometry_ranges(road)
@@ -237,7 +229,7 @@ def _samples(s0: float, s1: float, step: float) -> np.ndarray:
     return np.linspace(s0, s1, n + 1)
 
 
-def reference_line(road, step: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def reference_line(road: Road, step: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sample the reference line every ``<= step`` metres, each geometry's start and end
     included exactly (a geometry's end is replaced by the next one's start). Returns
     ``(s, x, y, heading)``."""
@@ -259,8 +251,8 @@ def reference_line(road, step: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.
 # profiles
 
 
-def _piecewise_poly(records, s, offset: float = 0.0) -> np.ndarray:
-    """Evaluate piecewise cubic records (attributes s, a, b, c, d) at ``s``; 0 where no record
+def _piecewise_poly(records: Sequence[Poly3Record], s, offset: float = 0.0) -> np.ndarray:
+    """Evaluate piecewise cubic records at ``s``; 0 where no record
     applies; the first record also covers ``s`` before its start."""
     s = np.atleast_1d(np.asarray(s, dtype=float))
     out = np.zeros_like(s)
@@ -276,17 +268,17 @@ def _piecewise_poly(records, s, offset: float = 0.0) -> np.ndarray:
     return out
 
 
-def elevation(road, s) -> np.ndarray:
+def elevation(road: Road, s) -> np.ndarray:
     """Reference-line elevation z(s)."""
     return _piecewise_poly(road.elevations, s)
 
 
-def superelevation(road, s) -> np.ndarray:
+def superelevation(road: Road, s) -> np.ndarray:
     """Superelevation (roll, radians) of the cross section at s."""
     return _piecewise_poly(road.superelevations, s)
 
 
-def lane_offset(road, s) -> np.ndarray:
+def lane_offset(road: Road, s) -> np.ndarray:
     """Lateral shift of the lane reference (centre lane) from the road reference line."""
     return _piecewise_poly(road.lane_offsets, s)
 
@@ -307,10 +299,10 @@ class LaneStrip:
     s: np.ndarray
     t_inner: np.ndarray
     t_outer: np.ndarray
-    lane: object = None
+    lane: LaneRecord | None = None
 
 
-def _section_ranges(road) -> list[tuple[int, object, float, float]]:
+def _section_ranges(road: Road) -> list[tuple[int, LaneSection, float, float]]:
     secs = list(road.lane_sections)
     out = []
     for i, sec in enumerate(secs):
@@ -319,7 +311,7 @@ def _section_ranges(road) -> list[tuple[int, object, float, float]]:
     return out
 
 
-def _section_strips(road, index: int, sec, s: np.ndarray) -> list[LaneStrip]:
+def _section_strips(road: Road, index: int, sec: LaneSection, s: np.ndarray) -> list[LaneStrip]:
     base = lane_offset(road, s)
     strips = []
     for lanes, sign in ((sec.left, 1.0), (sec.right, -1.0)):
@@ -332,7 +324,7 @@ def _section_strips(road, index: int, sec, s: np.ndarray) -> list[LaneStrip]:
     return strips
 
 
-def lane_boundaries(road, s_samples) -> list[LaneStrip]:
+def lane_boundaries(road: Road, s_samples) -> list[LaneStrip]:
     """Per lane and lane section, the inner/outer lateral offsets t(s) at those of
     ``s_samples`` that fall in the section (``sec.s <= s < next.s``; the last section also
     takes ``s == road.length``). Offsets = laneOffset + cumulative widths (negative widths
@@ -350,7 +342,7 @@ def lane_boundaries(road, s_samples) -> list[LaneStrip]:
     return out
 
 
-def st_to_world(road, s, t, ref=None) -> np.ndarray:
+def st_to_world(road: Road, s, t, ref=None) -> np.ndarray:
     """World points ``(..., 3)`` of road coordinates (s, t) on the road surface, with
     elevation and superelevation. ``ref`` may pass precomputed ``(x, y, heading)`` at ``s``."""
     s = np.asarray(s, dtype=float)
@@ -361,7 +353,7 @@ def st_to_world(road, s, t, ref=None) -> np.ndarray:
     return np.stack([x - th * np.sin(h), y + th * np.cos(h), elevation(road, s) + tz], axis=-1)
 
 
-def _section_samples(road, s0: float, s1: float, step: float) -> np.ndarray:
+def _section_samples(road: Road, s0: float, s1: float, step: float) -> np.ndarray:
     s = _samples(s0, s1, step)
     knots = [g.s for g in road.geometries if s0 < g.s < s1]
     if knots:
@@ -369,7 +361,9 @@ def _section_samples(road, s0: float, s1: float, step: float) -> np.ndarray:
     return s
 
 
-def section_strips(road, step: float, min_length: float = 1e-9):
+def section_strips(
+    road: Road, step: float, min_length: float = 1e-9
+) -> Iterator[tuple[int, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray], list[LaneStrip]]]:
     """Per lane section at least ``min_length`` m long: ``(section index, s samples (<= step
     apart plus every geometry start inside it), reference pose at s, lane strips)``."""
     for i, sec, s0, s1 in _section_ranges(road):
@@ -408,7 +402,7 @@ def _merge(parts: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.n
     return np.concatenate(verts), np.concatenate(faces).astype(np.int64)
 
 
-def road_surface_meshes(road, step: float = 0.5) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def road_surface_meshes(road: Road, step: float = 0.5) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Road surface as triangle strips between lane borders, in world coordinates, grouped by
     surface kind (see :data:`SURFACE_KINDS`; lanes of type ``none`` are skipped). Values are
     ``(vertices (N, 3) float64, faces (M, 3) int64)`` with upward (+z) face normals. Each lane
@@ -443,7 +437,7 @@ _BROKEN = (3.0, 9.0)  # m: default dash length / gap of a broken line
 _SINGLE = {"solid", "broken"}
 
 
-def _mark_lines(mark) -> list[tuple[float, float | None, float | None, float]]:
+def _mark_lines(mark: RoadMark) -> list[tuple[float, float | None, float | None, float]]:
     """(t offset, dash length or None for solid, gap, width) of each line of a road mark."""
     w = mark.width if mark.width else _DEFAULT_MARK_WIDTH
     if mark.lines:
@@ -458,7 +452,7 @@ def _mark_lines(mark) -> list[tuple[float, float | None, float | None, float]]:
     return [(o, *(_BROKEN if word == "broken" else (None, None)), w) for o, word in zip(offs, words)]
 
 
-def road_marks(road, step: float = 0.5) -> list[dict]:
+def road_marks(road: Road, step: float = 0.5) -> list[dict]:
     """Painted road marks as thin flat strips lying on the road surface (no lift), one entry per
     road-mark record and line: ``{"lane_id", "section", "type", "color", "vertices", "faces"}``.
     Solid lines are continuous; broken lines use the file's ``<type><line>`` pattern or

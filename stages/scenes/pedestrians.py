@@ -1,17 +1,17 @@
 """Pedestrians posed by gait-phase matching (the paper's Skeletal Motion Analyzer, applied).
 
-Pure numpy on arrays and :class:`~stages.geometry.AssetGeometry`; nothing here opens a file.
+Pure numpy on arrays and :class:`~schemas.meshes.AssetGeometry`; nothing here opens a file.
 
 Two halves:
 
 * **Matching** (:func:`match_walker_phases`): the traffic simulation gives each walker a world
   track (asset-origin positions, heading yaws) and a simulated gait phase per frame. We synthesize
   the skeleton an observer would see -- the procedural articulated walker
-  (:func:`stages.scenes.gait.articulated_pose`) posed at the simulated phase, scaled to the body
-  height, placed on the track, with 1.5 cm Gaussian joint noise -- and match every frame to one of
-  the D canonical phases of :func:`walk_cycle` with the Gaussian phase likelihood of
-  :func:`gait_model` (a :class:`~stages.scenes.gait.GaitModel` calibrated on noisy procedural
-  walks at several speeds and strides).
+  (:func:`carlaocc.stages.scenes.gait.walker.articulated_pose`) posed at the simulated phase,
+  scaled to the body height, placed on the track, with 1.5 cm Gaussian joint noise -- and match
+  every frame to one of the D canonical phases of :func:`walk_cycle` with the Gaussian phase
+  likelihood of :func:`gait_model` (a :class:`~carlaocc.stages.scenes.gait.matching.GaitModel`
+  calibrated on noisy procedural walks at several speeds and strides).
 * **Posing** (:func:`rig_pedestrian`, :meth:`PedestrianRig.posed`): the asset's vertices are bound
   to a skeleton fitted to the asset (rest = the asset as modelled) and deformed into the canonical
   phase's limb angles by linear-blend skinning.
@@ -28,22 +28,15 @@ from functools import lru_cache
 
 import numpy as np
 
-from carlaocc.stages.geometry import AssetGeometry, MeshPart
-from carlaocc.stages.scenes.gait import (
-    CanonicalCycle,
-    GaitModel,
-    add_joint_noise,
-    articulated_pose,
-    frame_features,
-    procedural_walk,
-    walker_stride,
-    window_descriptors,
-    window_frame_features,
-)
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
+from carlaocc.stages.scenes.gait.cycles import CanonicalCycle
+from carlaocc.stages.scenes.gait.descriptor import frame_features, window_descriptors, window_frame_features
+from carlaocc.stages.scenes.gait.matching import GaitModel
+from carlaocc.stages.scenes.gait.walker import add_joint_noise, articulated_pose, procedural_walk, walker_stride
 
 STANDING = -1  # phase index of a pedestrian standing still (rest pose)
 
-# The procedural walker's proportions (gait.procedural_walk defaults) belong to a body this tall.
+# The procedural walker's proportions (gait.walker.procedural_walk defaults) belong to a body this tall.
 WALKER_HEIGHT = 1.75  # m
 THIGH, SHIN, HIP_WIDTH = 0.45, 0.43, 0.18  # m, at WALKER_HEIGHT
 OBSERVATION_NOISE = 0.015  # m, std of the synthesized joint noise per coordinate
@@ -70,11 +63,11 @@ _LIMB = re.compile(r"^(leg|arm)[_\- ]?(l|left|r|right)$")
 @lru_cache(maxsize=8)
 def walk_cycle(D: int = 32) -> CanonicalCycle:
     """Canonical walk cycle of D phases of the procedural walker at 1.2 m/s (default proportions):
-    phase d is :func:`stages.scenes.gait.articulated_pose` at the walker's own phase ``d / D`` --
-    the phase the training walks of :func:`gait_model` are labelled with and the traffic
-    simulation's ``gait_phase`` -- in the heading frame, pelvis horizontally at the origin. Phase 0
-    is the left thigh's maximum flexion, which is also (within a phase) the left ankle's maximum
-    lead. Cached."""
+    phase d is :func:`carlaocc.stages.scenes.gait.walker.articulated_pose` at the walker's own
+    phase ``d / D`` -- the phase the training walks of :func:`gait_model` are labelled with and the
+    traffic simulation's ``gait_phase`` -- in the heading frame, pelvis horizontally at the origin.
+    Phase 0 is the left thigh's maximum flexion, which is also (within a phase) the left ankle's
+    maximum lead. Cached."""
     stride = float(walker_stride(1.2, THIGH + SHIN))
     poses = articulated_pose(np.arange(D) / D, stride, THIGH, SHIN, HIP_WIDTH)
     features = frame_features(poses, np.array([1.0, 0.0, 0.0]))

@@ -13,8 +13,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from carlaocc.schemas import taxonomy
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.schemas.records import AssetRecord, PlacementRecord
-from carlaocc.stages.geometry import AssetGeometry, MeshPart, concatenate, is_watertight, pose_matrix, pose_to_list
+from carlaocc.stages.geometry import concatenate, is_watertight, pose_matrix, pose_to_list
 
 __all__ = [
     "SURFACE", "STUFF_TILE", "POLE_RADIUS", "grid_slab", "slab", "slabs", "stuff_geometry", "rot2", "yaw_of", "Placer",

@@ -16,7 +16,7 @@ import numpy as np
 
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import SimulatorArtifacts
-from carlaocc.stages.geometry import SceneMesh
+from carlaocc.schemas.meshes import SceneMesh
 
 
 def asset_fraction(asset_id: str, seed: int) -> float:

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from carlaocc.schemas.configs import SensorsConfig
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.schemas.rig import CameraSpec, RigConfig
-from carlaocc.stages.geometry import SceneMesh
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors.artifacts import unlabelled_meshes
 from carlaocc.stages.sensors.normals import depth_normals

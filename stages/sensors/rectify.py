@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from carlaocc.stages.geometry import SceneMesh
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.scenes.assembly import PanopticMesh, flatten
 from carlaocc.stages.sensors.raycast import UNLABELLED, CameraMaps
 

@@ -49,7 +49,7 @@ from typing import Literal
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.geometry import SceneMesh
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.scratch import scratch
 from carlaocc.stages.voxelize.kernels import paint_interior, paint_surface, to_voxel_units
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carlaocc.catalog.bvh import BvhClip, BvhError, parse_bvh, read_bvh
+from carlaocc.catalog.bvh import BvhError, parse_bvh, read_bvh
+from carlaocc.schemas.motion import MotionClip
 
 CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
 
@@ -36,7 +37,7 @@ Frame Time: 0.05
 
 
 @pytest.fixture(scope="module")
-def clip() -> BvhClip:
+def clip() -> MotionClip:
     if not CLIP.exists():
         pytest.skip("test clip not available")
     return read_bvh(str(CLIP))

@@ -456,3 +456,39 @@ def test_atomic_write_uses_umask_permissions(tmp_path):
     finally:
         os.umask(old)
     assert path.stat().st_mode & 0o777 == 0o644
+
+
+# -- layouts: the registry, label grids, sequences -------------------------------------------------
+def test_layout_registry_and_label_grids(tmp_path):
+    from carlaocc.catalog.formats import FORMATS, DatasetInputError, dataset_format
+    from carlaocc.catalog.formats.layout import collect_inputs, group_sequences, read_frame
+
+    assert list(FORMATS) == ["occ3d", "semantickitti", "surroundocc", "carlaocc-npz"]
+    with pytest.raises(DatasetInputError, match="unknown format 'nusc'; choose one of occ3d, semantickitti"):
+        dataset_format("nusc")
+    # Occ3D: free 17 -> 0, class k -> k + 1, the camera mask, the nuScenes geometry
+    sem = np.full(occ3d.OCC3D_SHAPE, 17, np.uint8)
+    sem[1, 2, 3], sem[4, 5, 6] = 0, 16
+    cam = np.ones(occ3d.OCC3D_SHAPE, np.uint8)
+    cam[0, 0, 0] = 0
+    for tok in ("b1", "a2"):
+        save_occ3d(tmp_path / "gts/scene-1" / tok / "labels.npz", Occ3DFrame(sem, cam, cam))
+    fmt = FORMATS["occ3d"]
+    files = [i.path for i in collect_inputs(fmt, [tmp_path / "gts"])]
+    assert [fmt.frame_token(f) for f in files] == ["a2", "b1"]  # path order: sample tokens carry no time
+    assert group_sequences(fmt, files) == [(str(tmp_path / "gts/scene-1"), files)]
+    grid = read_frame(fmt, files[0])
+    assert (grid.semantic[1, 2, 3], grid.semantic[4, 5, 6], grid.semantic[0, 0, 1]) == (1, 17, 0)
+    assert not grid.mask[0, 0, 0] and grid.mask[0, 0, 1]
+    assert grid.voxel_size == 0.4 and grid.origin == (-40.0, -40.0, -1.0)
+    assert fmt.class_names[fmt.to_dataset_id(17)] == "vegetation"
+    # SurroundOcc: label k -> k + 1 (its "noise" 0 is a class), a missing row is free
+    save_surroundocc(tmp_path / "so/7.npy", np.array([[0, 0, 0, 0], [1, 2, 3, 16]]))
+    grid = read_frame(FORMATS["surroundocc"], tmp_path / "so/7.npy")
+    assert (grid.semantic[0, 0, 0], grid.semantic[1, 2, 3], int(grid.semantic.sum())) == (1, 17, 18)
+    assert grid.mask is None and FORMATS["surroundocc"].class_names[0] == "noise"
+    # an unreadable file is named once
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(DatasetInputError, match="bad.npz: unreadable") as err:
+        read_frame(FORMATS["carlaocc-npz"], tmp_path / "bad.npz")
+    assert str(err.value).count("bad.npz") == 1

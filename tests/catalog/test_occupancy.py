@@ -2,81 +2,61 @@ import numpy as np
 import pytest
 
 from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.zarrstore import chunk_flags
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 GRID = GridSpec(region_min=(-2.0, -1.0, -0.5), region_max=(2.0, 1.0, 0.5), voxel_size=0.25)
 
 
-def test_create_write_read_with_attributes(store):
+def test_attributes_describe_the_grid(store):
     occ = OccupancyStore(store)
-    occ.create("seq", GRID, frame_count=3, chunk_edge=16)
-    sem = np.zeros(GRID.shape, np.uint8)
-    sem[1, 2, 3] = 14
-    inst = np.zeros(GRID.shape, np.uint32)
-    inst[1, 2, 3] = 70000  # beyond uint16: no 11-bit cap
-    out = occ.write_frame("seq", GRID, 1, {"semantic": sem, "instance": inst})
-    assert set(out) == {"occupancy.zarr/seq/0.25/semantic[1]", "occupancy.zarr/seq/0.25/instance[1]"}
-    back = occ.read_frame("seq", GRID, 1)
-    np.testing.assert_array_equal(back["semantic"], sem)
-    np.testing.assert_array_equal(back["instance"], inst)
-    assert not occ.read_frame("seq", GRID, 0)["semantic"].any()
+    occ.create("seq", GRID, frame_count=3, chunk_edge=16, extra_attrs={"lidar_to_ego": [[1.0]]})
     arr = occ.open("seq", GRID, "semantic")
     assert arr.shape == (3, *GRID.shape)
-    assert arr.chunks[0] == 1 and arr.chunks[3] == GRID.shape[2]
-    attrs = dict(arr.attrs)
+    assert arr.chunks == (1, *GRID.shape[:2], GRID.shape[2])  # chunk edges clipped to the grid, z whole
+    attrs = occ.attrs("seq", GRID)  # semantic's by default
+    assert list(attrs) == [*GRID.attrs(), "dims", "sequence_id", "taxonomy_version", "lidar_to_ego", "description"]
     assert attrs["voxel_size"] == 0.25
     assert attrs["origin"] == [-2.0, -1.0, -0.5]
     assert attrs["frame"] == "lidar"
     assert attrs["taxonomy_version"] == TAXONOMY_VERSION
     assert attrs["grid_spec"]["voxel_size"] == 0.25
     assert attrs["dims"] == ["frame", "x", "y", "z"]
+    assert occ.attrs("seq", GRID, "flow")["dims"] == ["frame", "x", "y", "z", "component"]
+    assert occ.stored_grid("seq", 0.25) == GRID
+    assert occ.stored_grid("seq", 0.5) is None and occ.stored_grid("nope", 0.25) is None
 
 
-def test_create_keeps_identical_arrays_and_their_data(store):
+def test_read_frame_reads_semantic_and_instance_by_default(store):
+    occ = OccupancyStore(store)
+    occ.create("seq", GRID, frame_count=2, chunk_edge=16)
+    sem = np.zeros(GRID.shape, np.uint8)
+    sem[1, 2, 3] = 14
+    inst = np.zeros(GRID.shape, np.uint32)
+    inst[1, 2, 3] = 70000  # beyond uint16: no 11-bit cap
+    occ.write_frame("seq", GRID, 1, {"semantic": sem, "instance": inst})
+    back = occ.read_frame("seq", GRID, 1)
+    assert list(back) == ["semantic", "instance"]
+    np.testing.assert_array_equal(back["semantic"], sem)
+    np.testing.assert_array_equal(back["instance"], inst)
+
+
+def test_create_drops_the_arrays_left_out(store):
     occ = OccupancyStore(store)
     occ.create("seq", GRID, 2, 16)
-    sem = np.full(GRID.shape, 3, np.uint8)
-    occ.write_frame("seq", GRID, 0, {"semantic": sem})
-    occ.create("seq", GRID, 2, 16)  # the same spec again: kept
-    assert occ.read_frame("seq", GRID, 0, ("semantic",))["semantic"].min() == 3
-    occ.create("seq", GRID, 4, 16)  # another frame count: replaced
-    assert occ.open("seq", GRID, "semantic").shape[0] == 4
+    assert occ.create("seq", GRID, 2, 16, names=("semantic", "instance")) is False  # kept, others dropped
+    assert occ.exists("seq", GRID, "semantic") and not occ.exists("seq", GRID, "flow")
+    assert not occ.exists("seq", GRID, "mask_camera")
+    with pytest.raises(ValueError, match="unknown occupancy arrays.*colour"):
+        occ.create("seq", GRID, 2, 16, names=("colour",))
 
 
 def test_write_frame_rejects_wrong_shape(store):
     occ = OccupancyStore(store)
     occ.create("seq", GRID, 1, 16)
-    with pytest.raises(ValueError, match="tile shape"):
+    with pytest.raises(ValueError, match="seq/0.25/semantic: tile shape"):
         occ.write_frame("seq", GRID, 0, {"semantic": np.zeros((2, 2, 2), np.uint8)})
-
-
-def test_exists(store):
-    occ = OccupancyStore(store)
-    assert not occ.exists("seq", GRID, "semantic")
-    occ.create("seq", GRID, 2, 16)
-    assert occ.exists("seq", GRID, "semantic", 1) and not occ.exists("seq", GRID, "semantic", 2)
-
-
-def test_frame_fingerprint_tracks_stored_chunks(store):
-    occ = OccupancyStore(store)
-    occ.create("seq", GRID, 2, 8)
-    sem = np.zeros(GRID.shape, np.uint8)
-    sem[:, :, 0] = 1
-    out = occ.write_frame("seq", GRID, 0, {"semantic": sem})
-    (key, fp), = out.items()
-    path = occ.array_path("seq", GRID, "semantic")
-    assert occ.frame_fingerprint(path, 0) == fp
-    assert occ.frame_fingerprint(path, 1) != fp  # another frame, no chunks
-    # rewriting the same data keeps it; other data or a lost chunk changes it
-    assert occ.write_frame("seq", GRID, 0, {"semantic": sem})[key] == fp
-    sem[0, 0, 0] = 2
-    fp2 = occ.write_frame("seq", GRID, 0, {"semantic": sem})[key]
-    assert fp2 != fp
-    chunk = sorted(store.fs.find(store.path(f"occupancy.zarr/{path}/c/0")))[-1]
-    store.fs.rm(chunk)
-    assert occ.frame_fingerprint(path, 0) not in (fp, fp2)
-    assert occ.frame_fingerprint("nope/0.25/semantic", 0) is None
 
 
 @pytest.mark.parametrize("memory", [False, True])
@@ -128,36 +108,6 @@ def test_write_tile_round_trips_through_zarr_with_edge_chunks_and_empty_chunks(t
         occ.write_tile("s", grid, 1, "semantic", sem[0:10], 0)
 
 
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
-
-@settings(max_examples=80, deadline=None)
-@given(nx=st.integers(1, 9), ny=st.integers(1, 9), nz=st.integers(1, 11), cx=st.integers(1, 4), cy=st.integers(1, 4),
-       dtype=st.sampled_from(["uint8", "uint32", "float16"]), trailing=st.sampled_from([(), (3,)]),
-       seed=st.integers(0, 2**32 - 1))
-def test_chunk_flags_match_a_numpy_reference(nx, ny, nz, cx, cy, dtype, trailing, seed):
-    from carlaocc.catalog.occupancy import chunk_flags
-
-    rng = np.random.default_rng(seed)
-    data = np.zeros((nx, ny, nz, *trailing), dtype=dtype)
-    n = rng.integers(0, 4)
-    for _ in range(n):  # a few isolated nonzero values anywhere (unaligned runs included)
-        idx = tuple(rng.integers(0, s) for s in data.shape)
-        data[idx] = 1
-    got = chunk_flags(data, cx, cy)
-    want = np.zeros_like(got)
-    for a in range(got.shape[0]):
-        for b in range(got.shape[1]):
-            want[a, b] = data[a * cx:(a + 1) * cx, b * cy:(b + 1) * cy].any()
-    np.testing.assert_array_equal(got, want)
-    # candidates: only those chunks are read (a chunk left out is reported empty)
-    candidates = rng.random(got.shape) < 0.5
-    np.testing.assert_array_equal(chunk_flags(data, cx, cy, candidates), want & candidates)
-    with pytest.raises(ValueError, match="one flag per chunk"):
-        chunk_flags(data, cx, cy, np.ones((got.shape[0] + 1, got.shape[1]), bool))
-
-
 def test_write_chunks_from_a_block_function(tmp_path):
     from carlaocc.catalog.store import Store
 
@@ -180,3 +130,53 @@ def test_write_chunks_from_a_block_function(tmp_path):
     np.testing.assert_array_equal(occ.read_frame("s", grid, 0, ("mask_camera",))["mask_camera"], want)
     root = f"occupancy.zarr/{occ.array_path('s', grid, 'mask_camera')}/c/0"
     assert not store.fs.exists(store.path(f"{root}/1/1/0")) and store.fs.exists(store.path(f"{root}/2/1/0"))
+
+
+def _tile_grid_store(store, chunk_edge):
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(4.0, 2.5, 1.0), voxel_size=0.1)  # 40x25x10
+    occ = OccupancyStore(store)
+    occ.create("s", grid, frame_count=1, chunk_edge=chunk_edge)
+    return occ, grid
+
+
+@pytest.mark.parametrize("chunk_edge", [16, 7])
+def test_chunks_of_boxes_are_the_chunks_the_boxes_reach(store, chunk_edge):
+    occ, grid = _tile_grid_store(store, chunk_edge)
+    rng = np.random.default_rng(chunk_edge)
+    shape = (chunk_edge * 2, *grid.shape[1:])  # an x-tile of two chunks
+    for _ in range(20):
+        lo = rng.integers(0, shape, size=(5, 3))
+        hi = lo + rng.integers(0, 9, size=(5, 3))  # some boxes empty (hi == lo)
+        hi = np.minimum(hi, shape)
+        things = np.column_stack([np.arange(1, 6), lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1], lo[:, 2], hi[:, 2]])
+        inside = np.zeros(shape, np.uint8)  # a reference: the boxes painted, then chunk_flags
+        for _, i0, i1, j0, j1, k0, k1 in things:
+            inside[i0:i1, j0:j1, k0:k1] = 1
+        got = occ.chunks_of_boxes("s", grid, "instance", things, shape)
+        assert got.dtype == bool
+        np.testing.assert_array_equal(got, chunk_flags(inside, chunk_edge, chunk_edge).astype(bool))
+    assert not occ.chunks_of_boxes("s", grid, "instance", np.zeros((0, 7), np.int64), shape).any()
+
+
+@pytest.mark.parametrize("chunk_edge", [16, 7])
+def test_chunks_of_indices_are_the_chunks_holding_them(store, chunk_edge):
+    occ, grid = _tile_grid_store(store, chunk_edge)
+    rng = np.random.default_rng(chunk_edge)
+    shape = (grid.shape[0] - chunk_edge, *grid.shape[1:])  # an x-tile ending at the array's end
+    for n in (0, 1, 5, 200):
+        flat = rng.choice(int(np.prod(shape)), size=n, replace=False)
+        dense = np.zeros(int(np.prod(shape)), np.uint8)
+        dense[flat] = 1
+        got = occ.chunks_of_indices("s", grid, "flow", flat, shape)
+        np.testing.assert_array_equal(got, chunk_flags(dense.reshape(shape), chunk_edge, chunk_edge).astype(bool))
+
+
+def test_chunk_bookkeeping_feeds_write_tile(store):
+    occ, grid = _tile_grid_store(store, 16)
+    tile = np.zeros((16, *grid.shape[1:]), np.uint32)
+    tile[3:5, 18:20, 2:4] = 7
+    things = np.array([[7, 3, 5, 18, 20, 2, 4]])
+    candidates = occ.chunks_of_boxes("s", grid, "instance", things, tile.shape)
+    np.testing.assert_array_equal(candidates, [[False, True]])
+    occ.write_tile("s", grid, 0, "instance", tile, 16, candidates)
+    np.testing.assert_array_equal(occ.read_tile("s", grid, 0, "instance", 16, 16), tile)

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from carlaocc.catalog.opendrive import OpenDriveError, OpenDriveNetwork, parse_opendrive, read_opendrive
+from carlaocc.catalog.opendrive import OpenDriveError, parse_opendrive, read_opendrive
+from carlaocc.schemas.opendrive import OpenDriveNetwork
 
 DATA = Path("/work/shared/testdata/opendrive")
 NAMES = ["Town01", "Town02", "Town10HD", "Issue274", "shoulders", "zero_width"]

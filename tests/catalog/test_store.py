@@ -6,8 +6,8 @@ import pytest
 from carlaocc.catalog.meshes import MeshStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas.meshes import MeshPart
 from carlaocc.schemas.records import QuarantineRecord
-from carlaocc.stages.geometry import MeshPart
 
 
 def _q(reason: str) -> QuarantineRecord:

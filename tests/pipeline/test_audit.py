@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from carlaocc.catalog.formats import (Occ3DFrame, SemanticKittiVoxels, dense_to_surroundocc, load_occ3d, save_carlaocc_npz,
-                             save_occ3d, save_semantickitti, save_surroundocc, to_raw)
-from carlaocc.pipeline.audit import (FORMATS, AuditError, KeyedPoses, audit, audit_command, collect_inputs, load_poses,
-                            plan_sequences)
+from carlaocc.catalog.formats import (FORMATS, DatasetInputError, Occ3DFrame, SemanticKittiVoxels, dense_to_surroundocc,
+                                      load_occ3d, save_carlaocc_npz, save_occ3d, save_semantickitti, save_surroundocc,
+                                      to_raw)  # fmt: skip
+from carlaocc.catalog.formats.layout import collect_inputs
+from carlaocc.catalog.formats.poses import KeyedPoses, load_poses, plan_sequences
+from carlaocc.pipeline.audit import audit_command
 from carlaocc.pipeline.cli import app
-from carlaocc.stages.metrics import isolated_mask_reference, spatial_continuity_counts
+from carlaocc.stages.quality import isolated_mask_reference, spatial_continuity_counts
 
 cli = CliRunner()
 OCC3D_SAMPLE = Path("/work/shared/testdata/occupancy/occ3d-nuscenes/labels.npz")
@@ -239,7 +241,7 @@ def test_clear_errors(tmp_path):
     npz = FORMATS["carlaocc-npz"]
     inputs = collect_inputs(npz, [tmp_path / "d", tmp_path / "d/a.npz"])  # a file found twice is one frame
     assert [i.path.name for i in inputs] == ["a.npz", "b.npz"]
-    with pytest.raises(AuditError, match="3 poses for fewer carlaocc-npz frames, and a.npz has no frame number"):
+    with pytest.raises(DatasetInputError, match="3 poses for fewer carlaocc-npz frames, and a.npz has no frame number"):
         plan_sequences(npz, inputs, np.stack([np.eye(4)] * 3))
     # a file of a SemanticKITTI scan named once, not twice ("x.label: x.invalid: ...")
     save_semantickitti(tmp_path / "sk", "000000", SemanticKittiVoxels(*(np.zeros((256, 256, 32), bool),) * 3,
@@ -377,5 +379,5 @@ def test_keyed_poses_file(tmp_path):
                          ([{"frame": "a", "pose": [1, 2]}], "entry 0 (a): a pose is"),
                          ([{"frame": "a", "pose": poses[0].tolist()}] * 2, "'a' is listed more than once")):
         (tmp_path / "bad.json").write_text(json.dumps(bad))
-        with pytest.raises(AuditError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        with pytest.raises(DatasetInputError, match=message.replace("(", r"\(").replace(")", r"\)")):
             load_poses(tmp_path / "bad.json")

@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.cli import app
+from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import SequenceRecord
 
 cli = CliRunner()
@@ -31,10 +32,10 @@ def _tree(store):
 
 @pytest.mark.parametrize("args, culprit", [
     (["run", "--stages", "voxelise"], "unknown stage 'voxelise'"),
-    (["run", "--res", "0"], "--res 0"),
-    (["run", "--res", "-0.1"], "--res -0.1"),
-    (["run", "--res", "nan"], "--res nan"),
-    (["run", "--res", "abc"], "--res abc"),
+    (["run", "--res", "0"], "--voxel-size 0"),
+    (["run", "--voxel-size", "-0.1"], "--voxel-size -0.1"),
+    (["run", "--res", "nan"], "--voxel-size nan"),
+    (["run", "--voxel-size", "abc"], "--voxel-size abc"),
     (["run", "--res", "14"], "smaller than one voxel"),
     (["run", "--res", "0.02"], "exceeds"),
     (["run", "--scheduler", "foo"], "--scheduler 'foo'"),
@@ -128,3 +129,18 @@ def test_query_json_has_no_nan(tmp_path):
         sequence_id="s", resolution=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
     r = cli.invoke(app, ["catalog", "query", "SELECT value, frame_index FROM quality", "--root", store.url, "--format", "json"])
     assert r.exit_code == 0 and json.loads(r.output) == [{"value": None, "frame_index": None}]
+
+
+def test_stage_names_and_the_earlier_metrics_name():
+    from carlaocc.pipeline.registry import STAGES
+    from carlaocc.pipeline.runner import PlanError, stage_order
+
+    assert list(STAGES) == ["ingest", "scenes", "voxelize", "sensors", "quality", "report"]
+    assert [s.name for s in stage_order(["metrics", "voxelize"])] == ["voxelize", "quality"]
+    with pytest.raises(PlanError, match="unknown stage 'metric'"):
+        stage_order(["metric"])
+    # the top-level help names every stage
+    r = cli.invoke(app, ["--help"])
+    assert r.exit_code == 0 and all(f"{name}:" in r.output for name in STAGES)
+    # the config section's earlier name is still read
+    assert DatasetConfig.model_validate({"metrics": {"neighbourhood": 6}}) == DatasetConfig()

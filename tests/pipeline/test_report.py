@@ -17,11 +17,12 @@ from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.sql import query
 from carlaocc.catalog.store import Store
 from carlaocc.catalog.usage import store_usage
-from carlaocc.pipeline.registry import Context, Partition
-from carlaocc.pipeline.report import PLOTS_DIR, REPORT_HTML, SECTIONS, report_task, stage_lineage
-from carlaocc.pipeline.stages import STAGES
+from carlaocc.pipeline.spec import Context, Partition
+from carlaocc.pipeline.tasks.report import PLOTS_DIR, REPORT_HTML, report_task
+from carlaocc.pipeline.tasks.report_page import SECTIONS, stage_lineage
+from carlaocc.pipeline.registry import STAGES
 from carlaocc.schemas import taxonomy
-from carlaocc.schemas.configs import DatasetConfig, MetricsConfig
+from carlaocc.schemas.configs import DatasetConfig, QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, QualityRecord, RunRecord,
                              SequenceRecord)
@@ -83,7 +84,7 @@ def small(store: Store, make_asset) -> Store:
         _run("voxelize", f"{s}/0.4/{t:04d}", {f"occupancy.zarr/{s}/0.4/semantic[{t}]": "sha256:aa",
                                                f"occupancy.zarr/{s}/0.4/instance[{t}]": "sha256:bb"},
              {"ingest/procedural": "x1", "scenes/town00": "x2"}) for s in SEQS for t in range(FRAMES)])
-    LineageLog(store).append("metrics", "r1", [
+    LineageLog(store).append("quality", "r1", [
         _run("metrics", f"{s}/0.4", {f"metrics/quality/{s}/0.4.parquet": "sha256:cc"}) for s in SEQS])
     return store
 
@@ -95,7 +96,7 @@ def _partition() -> Partition:
 def test_report_task_writes_statistics_plots_and_page(small):
     stale = f"{PLOTS_DIR}/class_voxels_9.9.png"
     small.write_bytes(stale, b"old")
-    outputs = report_task(small, MetricsConfig(), _partition())
+    outputs = report_task(small, QualityConfig(), _partition())
     # outputs are fingerprinted files that exist; the stale plot of another resolution is gone
     assert REPORT_HTML in outputs and not small.exists(stale)
     for rel, fp in outputs.items():
@@ -123,7 +124,7 @@ def test_report_task_writes_statistics_plots_and_page(small):
 
 
 def test_report_page_is_self_contained(small):
-    report_task(small, MetricsConfig(), _partition())
+    report_task(small, QualityConfig(), _partition())
     page = small.read_bytes(REPORT_HTML).decode()
     # nothing loaded from outside the file: no remote or relative src/href/url(), no scripts
     assert not re.search(r"""(src|href)\s*=\s*["']?\s*(https?:|//|file:)""", page, re.I)
@@ -144,11 +145,11 @@ def test_report_page_is_self_contained(small):
 
 def test_report_partition_needs_every_upstream_output(small):
     ctx = Context(small, DatasetConfig(), (0.4,))
-    assert list(STAGES)[-1] == "report" and STAGES["report"].upstream[-1] == "metrics"
+    assert list(STAGES)[-1] == "report" and STAGES["report"].upstream[-1] == "quality"
     (part,) = STAGES["report"].partitions(ctx)
     needs = set(part.needs)
     for seq in SEQS:
-        assert ("metrics", f"{seq}/0.4") in needs
+        assert ("quality", f"{seq}/0.4") in needs
         assert {("voxelize", f"{seq}/0.4/{t:04d}") for t in range(FRAMES)} <= needs
     assert ("scenes", "town00") in needs and ("ingest", "procedural") in needs
     assert not any(s == "sensors" for s, _ in needs)

@@ -8,7 +8,7 @@ import pytest
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.pipeline import runner
-from carlaocc.pipeline.registry import Partition, StageSpec
+from carlaocc.pipeline.spec import Partition, StageSpec
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import QuarantineRecord
 
@@ -33,9 +33,9 @@ def task_b(store, cfg, part):
 
 
 STAGES = {
-    "ingest": StageSpec("ingest", "a", (), ("carlaocc.stages.geometry",), (), (),
+    "ingest": StageSpec("ingest", "a", (), (), (),
                         lambda ctx: [Partition("x"), Partition("y")], task_a),
-    "scenes": StageSpec("scenes", "b", ("ingest",), ("carlaocc.stages.geometry",), (), (),
+    "scenes": StageSpec("scenes", "b", ("ingest",), (), (),
                         lambda ctx: [Partition(f"p{i}", {"up": "xy"[i]}, (("ingest", "xy"[i]),)) for i in range(2)],
                         task_b),
 }

@@ -12,7 +12,7 @@ from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli import app
-from carlaocc.pipeline.scenes import SWAP_STAGE, compatible, swap_class
+from carlaocc.pipeline.scene_editing import SWAP_STAGE, compatible, swap_class
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
 
 POSE = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]

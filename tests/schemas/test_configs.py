@@ -1,7 +1,7 @@
 import pytest
 from pydantic import ValidationError
 
-from carlaocc.schemas.configs import DatasetConfig, parse_resolutions
+from carlaocc.schemas.configs import DatasetConfig, parse_voxel_size_list
 
 
 def test_unknown_key_refused_at_every_level():
@@ -25,13 +25,13 @@ def test_default_sequence_is_20_frames_at_20hz():
 @pytest.mark.parametrize("text, expected", [("0.2", (0.2,)), ("0.2,0.05", (0.2, 0.05)), (" 0.1 , 0.1", (0.1,)),
                                             ("0.4,0.4000001", (0.4,))])
 def test_parse_resolutions(text, expected):
-    assert parse_resolutions(text) == expected
+    assert parse_voxel_size_list(text) == expected
 
 
 @pytest.mark.parametrize("text", ["", "abc", "0", "-0.1", "inf", "nan", "0.2,x", "1e-7"])
 def test_parse_resolutions_rejects(text):
     with pytest.raises(ValueError):
-        parse_resolutions(text)
+        parse_voxel_size_list(text)
 
 
 def test_region_must_be_ordered():

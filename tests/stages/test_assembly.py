@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
-from carlaocc.stages.geometry import AssetGeometry, MeshPart, invert_pose, pose_matrix, pose_to_list, transform_points
+from carlaocc.stages.geometry import invert_pose, pose_matrix, pose_to_list, transform_points
 from carlaocc.stages.scenes import assembly
 from carlaocc.stages.scenes.assembly import (
     PanopticMesh,

@@ -9,7 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carlaocc.stages.scenes import gait as G
+from carlaocc.stages.scenes import gait
+from carlaocc.stages.scenes.gait.cycles import canonical_cycle, detect_gait_cycles
+from carlaocc.stages.scenes.gait.kinematics import BVH_TO_ZUP, clip_positions, forward_kinematics, select_gait_joints
+from carlaocc.stages.scenes.gait.matching import GaitModel, phase_accuracy
+from carlaocc.stages.scenes.gait.walker import add_joint_noise, procedural_walk, resample_walk
 
 CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
 SPEEDS = (0.8, 1.2, 1.6)
@@ -25,10 +29,10 @@ def cmu():
     from carlaocc.catalog.bvh import read_bvh  # tests may cross layers; the module under test does not
 
     clip = read_bvh(str(CLIP))
-    pos = G.clip_positions(clip)
+    pos = clip_positions(clip)
     t = np.arange(clip.n_frames) * clip.frame_time
-    g = G.select_gait_joints(clip.joint_names, pos)
-    return clip, pos, t, g, G.detect_gait_cycles(g, t)
+    g = select_gait_joints(clip.joint_names, pos)
+    return clip, pos, t, g, detect_gait_cycles(g, t)
 
 
 # --------------------------------------------------------------------------- forward kinematics
@@ -39,13 +43,13 @@ def test_fk_tiny_chain_and_zup():
     offsets = np.array([[0, 0, 0], [0, -1.0, 0], [0, -1.0, 0]])
     channels = [("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"), ("Xrotation",), ()]
     motion = np.array([[1.0, 2.0, 3.0, 0, 0, 0, 0.0], [0, 0, 0, 90.0, 0, 0, 90.0]])
-    p = G.forward_kinematics(parents, offsets, channels, motion, zup=False)
+    p = forward_kinematics(parents, offsets, channels, motion, zup=False)
     np.testing.assert_allclose(p[0], [[1, 2, 3], [1, 1, 3], [1, 0, 3]], atol=1e-12)
     # frame 1: root yawed 90 deg about Z (BVH) sends -Y to +X; the knee bends 90 deg about X
     np.testing.assert_allclose(p[1], [[0, 0, 0], [1, 0, 0], [1, 0, -1]], atol=1e-12)
-    pz = G.forward_kinematics(parents, offsets, channels, motion)
+    pz = forward_kinematics(parents, offsets, channels, motion)
     np.testing.assert_allclose(pz, p[..., [2, 0, 1]])  # ours = (z, x, y)_bvh
-    assert np.linalg.det(G.BVH_TO_ZUP) == pytest.approx(1.0)
+    assert np.linalg.det(BVH_TO_ZUP) == pytest.approx(1.0)
 
 
 def test_fk_real_clip_walks_forward(cmu):
@@ -84,7 +88,7 @@ def test_gait_period_and_canonical_cycle(cmu):
     assert len(cyc.events) >= 2
     labelled = ~np.isnan(cyc.phases)
     assert labelled.sum() > 150 and np.all(cyc.walking[labelled])
-    cc = G.canonical_cycle(pos, t, D, cycles=cyc, pelvis=clip.joint_names.index("Hips"), gait=g)
+    cc = canonical_cycle(pos, t, D, cycles=cyc, pelvis=clip.joint_names.index("Hips"), gait=g)
     assert cc.poses.shape == (D, 31, 3) and cc.features.shape == (D, 5)
     assert 1.0 <= cc.period <= 1.2 and 1.0 <= cc.speed <= 1.6
     np.testing.assert_allclose(cc.pose(0)[0, :2], 0.0, atol=1e-9)  # pelvis at the origin
@@ -97,14 +101,14 @@ def test_gait_period_and_canonical_cycle(cmu):
 
 @pytest.mark.parametrize("speed", SPEEDS)
 def test_procedural_walker(speed):
-    walk = G.procedural_walk(speed, 5.0, rate=100.0, heading=0.7)
+    walk = procedural_walk(speed, 5.0, rate=100.0, heading=0.7)
     p = walk.positions
     assert p.shape == (500, 7, 3)
     v = (p[-1, 0] - p[0, 0]) / (walk.times[-1] - walk.times[0])
     assert np.linalg.norm(v[:2]) == pytest.approx(speed)
     assert np.arctan2(v[1], v[0]) == pytest.approx(0.7)
     assert np.minimum(p[:, 3, 2], p[:, 6, 2]).min() == pytest.approx(0.08)  # a foot on the ground
-    cyc = G.detect_gait_cycles(p, walk.times)
+    cyc = detect_gait_cycles(p, walk.times)
     stride = 1.5 * 0.88 * np.sqrt(speed / 1.2)
     assert cyc.period == pytest.approx(stride / speed, rel=0.02)
     # detected phase-0 events coincide with the analytic phase 0
@@ -117,10 +121,10 @@ def test_procedural_walker(speed):
 
 def _walker(speed, sigma, rng, duration=6.0):
     s = rng.uniform(0.9, 1.1)  # body size
-    walk = G.procedural_walk(
+    walk = procedural_walk(
         speed, duration, RATE, heading=rng.uniform(-np.pi, np.pi), phase0=rng.uniform(), thigh=0.45 * s, shin=0.43 * s
     )
-    return G.add_joint_noise(walk, sigma, rng)
+    return add_joint_noise(walk, sigma, rng)
 
 
 def _bvh_source(cmu):
@@ -128,8 +132,8 @@ def _bvh_source(cmu):
     base = cyc.speed[~np.isnan(cyc.phases)].mean()
 
     def make(speed, sigma, rng):
-        walk = G.resample_walk(g, t, cyc.phases, speed / base, RATE, t_offset=rng.uniform(0, 1 / RATE))
-        return G.add_joint_noise(walk, sigma, rng)
+        walk = resample_walk(g, t, cyc.phases, speed / base, RATE, t_offset=rng.uniform(0, 1 / RATE))
+        return add_joint_noise(walk, sigma, rng)
 
     return make
 
@@ -137,12 +141,12 @@ def _bvh_source(cmu):
 def _accuracy_table(source, reps, seed):
     rng = np.random.default_rng(seed)
     train = [source(sp, sig, rng) for sp in TRAIN_SPEEDS for sig in NOISES for _ in range(reps)]
-    model = G.GaitModel.fit(train, D=D, W=W)
+    model = GaitModel.fit(train, D=D, W=W)
     table = np.zeros((len(SPEEDS), len(NOISES) + 1))
     for i, sp in enumerate(SPEEDS):
         for j, sig in enumerate(NOISES + (0.05,)):
             tests = [source(sp, sig, np.random.default_rng(seed + 1000 + 100 * i + 10 * j + r)) for r in range(reps)]
-            table[i, j] = np.mean([G.phase_accuracy(model, w, tolerance=1) for w in tests])
+            table[i, j] = np.mean([phase_accuracy(model, w, tolerance=1) for w in tests])
     return model, table
 
 
@@ -168,8 +172,8 @@ def test_phase_accuracy_cmu_walk(cmu):
 
 def test_phase_returns_index_and_log_likelihood():
     rng = np.random.default_rng(3)
-    model = G.GaitModel.fit([_walker(sp, 0.01, rng) for sp in TRAIN_SPEEDS], D=D, W=W)
-    walk = G.procedural_walk(1.2, 2.0, RATE, phase0=0.3)
+    model = GaitModel.fit([_walker(sp, 0.01, rng) for sp in TRAIN_SPEEDS], D=D, W=W)
+    walk = procedural_walk(1.2, 2.0, RATE, phase0=0.3)
     d, ll = model.phase(walk.positions[:W], walk.times[:W])
     assert isinstance(d, int) and 0 <= d < D and np.isfinite(ll)
     m = model.match(walk.positions[:W])  # default 20 Hz spacing
@@ -182,8 +186,8 @@ def test_phase_returns_index_and_log_likelihood():
 @pytest.mark.parametrize("sigma", [0.0, 0.03])
 def test_standing_still_has_no_phase(sigma):
     rng = np.random.default_rng(5)
-    model = G.GaitModel.fit([_walker(sp, 0.01, rng) for sp in TRAIN_SPEEDS], D=D, W=W)
-    still = G.add_joint_noise(G.procedural_walk(0.0, 3.0, RATE, heading=1.0), sigma, rng)
+    model = GaitModel.fit([_walker(sp, 0.01, rng) for sp in TRAIN_SPEEDS], D=D, W=W)
+    still = add_joint_noise(procedural_walk(0.0, 3.0, RATE, heading=1.0), sigma, rng)
     assert np.isnan(still.phases).all()
     for s in range(0, len(still.times) - W + 1, 3):
         m = model.match(still.positions[s : s + W], still.times[s : s + W])
@@ -191,13 +195,18 @@ def test_standing_still_has_no_phase(sigma):
         assert model.phase(still.positions[s : s + W])[0] is None
 
 
-def test_gait_module_is_pure_compute():
-    src = Path(G.__file__).read_text()
-    mods = set()
-    for node in ast.walk(ast.parse(src)):
-        if isinstance(node, ast.Import):
-            mods |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0:
-            mods.add(node.module.split(".")[0])
-    assert mods <= {"__future__", "collections", "dataclasses", "typing", "numpy"}
-    assert "open(" not in src
+def test_gait_modules_are_pure_compute():
+    files = sorted(Path(gait.__file__).parent.glob("*.py"))
+    assert {f.stem for f in files} == {"__init__", "kinematics", "descriptor", "cycles", "walker", "matching"}
+    for path in files:
+        src = path.read_text()
+        mods = set()
+        for node in ast.walk(ast.parse(src)):
+            if isinstance(node, ast.Import):
+                mods |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                mods.add(node.module)
+        ours = {m for m in mods if m.startswith("carlaocc.")}
+        assert mods - ours <= {"__future__", "collections.abc", "dataclasses", "typing", "numpy"}, path.name
+        assert all(m == "carlaocc.schemas.motion" or m.startswith("carlaocc.stages.scenes.gait.") for m in ours), path.name
+        assert "open(" not in src

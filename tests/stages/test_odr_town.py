@@ -17,7 +17,8 @@ from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.geometry import pose_from_list
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes.network import check_network
-from carlaocc.stages.scenes.odr_town import build_opendrive_network, build_opendrive_town, build_opendrive_town_with_stats
+from carlaocc.stages.scenes.odr_network import build_opendrive_network
+from carlaocc.stages.scenes.odr_town import build_opendrive_town, build_opendrive_town_with_stats
 
 DATA = Path("/work/shared/testdata/opendrive")
 SEM = {n: taxonomy.by_name(n).id for n in ("Building", "Vegetation", "TrafficLight", "TrafficSign", "Terrain")}

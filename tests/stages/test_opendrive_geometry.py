@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
-from types import SimpleNamespace as NS
 
 import numpy as np
 import pytest
@@ -13,6 +11,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 from scipy.special import fresnel
 
+from carlaocc.schemas.opendrive import Geometry, LaneRecord, LaneSection, Poly3Record, Road, RoadMark
 from carlaocc.stages.scenes import opendrive as od
 
 DATA = Path("/work/shared/testdata/opendrive")
@@ -20,25 +19,26 @@ needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared OpenDRIVE test
 
 
 def geom(kind="line", s=0.0, x=0.0, y=0.0, hdg=0.0, length=10.0, **kw):
-    base = dict(curvature=0.0, curv_start=0.0, curv_end=0.0, a=0.0, b=0.0, c=0.0, d=0.0, au=0.0, bu=0.0,
-                cu=0.0, du=0.0, av=0.0, bv=0.0, cv=0.0, dv=0.0, p_range="normalized")  # fmt: skip
-    base.update(kw)
-    return NS(kind=kind, s=s, x=x, y=y, hdg=hdg, length=length, **base)
+    return Geometry(kind=kind, s=s, x=x, y=y, hdg=hdg, length=length, **kw)
 
 
 def poly(s=0.0, a=0.0, b=0.0, c=0.0, d=0.0):
-    return NS(s=s, a=a, b=b, c=c, d=d)
+    return Poly3Record(s=s, a=a, b=b, c=c, d=d)
 
 
 def lane(lane_id, widths, lane_type="driving", marks=()):
-    return NS(id=lane_id, type=lane_type, widths=tuple(widths), road_marks=tuple(marks))
+    return LaneRecord(id=lane_id, type=lane_type, widths=tuple(widths), road_marks=tuple(marks))
+
+
+def mark(mark_type, color, width):
+    return RoadMark(s_offset=0.0, type=mark_type, color=color, width=width)
 
 
 def road(geoms, length, left=(), right=(), offsets=(), elev=(), sup=(), center=None, sections=None):
     if sections is None:
-        sections = (NS(s=0.0, left=tuple(left), right=tuple(right), center=(center or lane(0, (), "none"),)),)
-    return NS(length=length, geometries=tuple(geoms), elevations=tuple(elev), superelevations=tuple(sup),
-              lane_offsets=tuple(offsets), lane_sections=tuple(sections))  # fmt: skip
+        sections = (LaneSection(s=0.0, left=tuple(left), right=tuple(right), center=(center or lane(0, (), "none"),)),)
+    return Road(id="1", name="", length=length, junction="-1", geometries=tuple(geoms), elevations=tuple(elev),
+                superelevations=tuple(sup), lane_offsets=tuple(offsets), lane_sections=tuple(sections))  # fmt: skip
 
 
 def fine_integral(theta, x0, y0, L, n=2_000_001):
@@ -170,8 +170,8 @@ def test_lane_boundaries_polynomial_widths():
 
 
 def test_lane_offset_shifts_everything_and_sections_split():
-    sec0 = NS(s=0.0, left=(lane(1, [poly(0, 3.0)]),), right=(lane(-1, [poly(0, 3.0)]),), center=(lane(0, (), "none"),))
-    sec1 = NS(s=10.0, left=(), right=(lane(-1, [poly(0, 2.0, 0.1)]),), center=(lane(0, (), "none"),))
+    sec0 = LaneSection(s=0.0, left=(lane(1, [poly(0, 3.0)]),), right=(lane(-1, [poly(0, 3.0)]),), center=(lane(0, (), "none"),))
+    sec1 = LaneSection(s=10.0, left=(), right=(lane(-1, [poly(0, 2.0, 0.1)]),), center=(lane(0, (), "none"),))
     r = road([geom(length=20)], 20, offsets=[poly(0, 1.5), poly(10, 1.5, 0.05)], sections=[sec0, sec1])
     strips = od.lane_boundaries(r, np.array([0.0, 5.0, 10.0, 20.0]))
     first = {st.lane_id: st for st in strips if st.section == 0}
@@ -213,9 +213,9 @@ def test_curved_superelevated_surface_normals_up_and_zero_width_dropped():
 
 
 def test_road_marks_solid_and_broken():
-    center = lane(0, (), "none", marks=[NS(s_offset=0.0, type="solid", color="yellow", width=0.2, lines=())])
-    right = [lane(-1, [poly(0, 3.0)], marks=[NS(s_offset=0.0, type="broken", color="white", width=0.1, lines=())]),
-             lane(-2, [poly(0, 3.0)], marks=[NS(s_offset=0.0, type="none", color="white", width=None, lines=())])]  # fmt: skip
+    center = lane(0, (), "none", marks=[mark("solid", "yellow", 0.2)])
+    right = [lane(-1, [poly(0, 3.0)], marks=[mark("broken", "white", 0.1)]),
+             lane(-2, [poly(0, 3.0)], marks=[mark("none", "white", None)])]  # fmt: skip
     r = road([geom(length=30)], 30, right=right, center=center)
     marks = od.road_marks(r, step=1.0)
     solid = [m for m in marks if m["lane_id"] == 0]
@@ -253,14 +253,12 @@ def test_real_reference_lines_are_continuous(name):
 
 
 @needs_data
-def test_town01_surface_builds_fast_with_plausible_extent():
+def test_town01_surface_has_plausible_extent():
+    # its build time is measured by benchmarks/bench_scenes.py
     from carlaocc.catalog.opendrive import read_opendrive
 
-    t0 = time.perf_counter()
     net = read_opendrive(DATA / "Town01.xodr")
     parts = [od.road_surface_meshes(r, step=0.5) for r in net.roads]
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 10
     driving = [m["driving"] for m in parts if "driving" in m]
     assert len(driving) == 122 - sum("driving" not in m for m in parts)
     v = np.concatenate([d[0] for d in driving])

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from carlaocc.schemas.configs import SensorsConfig, SimulatorArtifacts
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
-from carlaocc.stages.geometry import SceneMesh
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors import (SKY, UNLABELLED, CameraMaps, RayScene, camera_poses, camera_ray_bundle, compact_mesh,
                             covered_pixels,

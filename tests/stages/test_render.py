@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from carlaocc.stages.geometry import MeshPart
-from carlaocc.stages.render import (FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, render_asset,
-                           text_width)
+from carlaocc.schemas.meshes import MeshPart
+from carlaocc.stages.render.assets import render_asset
+from carlaocc.stages.render.sheets import FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, text_width
 
 WHITE = np.array([255, 255, 255], dtype=np.uint8)
 

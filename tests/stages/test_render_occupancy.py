@@ -8,9 +8,10 @@ import pytest
 
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import by_name, palette
-from carlaocc.stages.render_occupancy import (FREE_RGB, bev_height_map, classes_present, instance_colors,
-                                     multi_resolution_figure, occupancy_figure, perspective_view,
-                                     pool_occupancy, surface_voxels, top_surface)  # fmt: skip
+from carlaocc.stages.render.colours import instance_colors
+from carlaocc.stages.render.figures import multi_resolution_figure, occupancy_figure
+from carlaocc.stages.render.occupancy import (FREE_RGB, bev_height_map, classes_present, perspective_view,
+                                             pool_occupancy, surface_voxels, top_surface)  # fmt: skip
 
 ROAD, CAR, POLE, SIGN = (by_name(n).id for n in ("Road", "Car", "Pole", "TrafficSign"))
 CAR_ID = 7

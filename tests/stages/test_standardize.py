@@ -2,7 +2,7 @@
 their inference, cleaning, winding repair, quarantine reasons and content-derived ids.
 
 Real files from the shared test data are read here with trimesh (standardize never opens files);
-this module plays the source adapter: it builds RawAssets with what the reader would declare.
+this module plays the source adapter: it builds SourceAssets with what the reader would declare.
 """
 
 from __future__ import annotations
@@ -19,12 +19,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from carlaocc.schemas import taxonomy
+from carlaocc.schemas.meshes import SourceAsset, SourcePart
 from carlaocc.stages.geometry import is_watertight, signed_volume
-from carlaocc.stages.ingest.raw import RawAsset, RawPart, Rejection
-from carlaocc.stages.ingest.standardize import (
-    SIZE_RANGES, SUBCLASS_SIZE_RANGES, StandardizedAsset, rotation_to_asset_frame, size_range,
-    standardize,
-)  # fmt: skip
+from carlaocc.stages.ingest.checks import Rejection
+from carlaocc.stages.ingest.sizes import SIZE_RANGES, SUBCLASS_SIZE_RANGES, size_range
+from carlaocc.stages.ingest.standardize import StandardizedAsset, rotation_to_asset_frame, standardize
 
 DATA = Path("/work/shared/testdata/meshes")
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared test data not available")
@@ -44,8 +43,8 @@ def _glb_image_uris(path: Path) -> list[str]:
     return [im["uri"] for im in doc.get("images", []) if "uri" in im]
 
 
-def _read(path: Path, **declared) -> RawAsset:
-    """Every geometry instance of the file's scene graph as a RawPart (node transforms applied,
+def _read(path: Path, **declared) -> SourceAsset:
+    """Every geometry instance of the file's scene graph as a SourcePart (node transforms applied,
     source units and frame untouched)."""
     scene = trimesh.load_scene(str(path))
     uris = _glb_image_uris(path) if path.suffix == ".glb" else []
@@ -59,11 +58,11 @@ def _read(path: Path, **declared) -> RawAsset:
         alpha = getattr(mat, "baseColorFactor", None)
         transparent = name == "glass" or getattr(mat, "alphaMode", None) == "BLEND" or (
             alpha is not None and alpha[3] < 255)
-        parts.append(RawPart(name=str(node), vertices=v, faces=np.asarray(g.faces, dtype=np.int64),
+        parts.append(SourcePart(name=str(node), vertices=v, faces=np.asarray(g.faces, dtype=np.int64),
                              material=name, transparent=bool(transparent), texture=uris[0] if uris else ""))
     fields = dict(source="testdata", source_path=str(path), licence="CC0-1.0", category=None, subclass="")
     fields.update(declared)
-    return RawAsset(parts=tuple(parts), **fields)
+    return SourceAsset(parts=tuple(parts), **fields)
 
 
 def _ok(result) -> StandardizedAsset:
@@ -90,17 +89,17 @@ def _cube(size: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     return np.array(b.vertices), np.array(b.faces, dtype=np.int64)
 
 
-def _raw(parts, **kw) -> RawAsset:
+def _raw(parts, **kw) -> SourceAsset:
     fields = dict(source="unit", source_path="mem://cube", licence="CC0-1.0", category="Dynamic",
                   subclass="box", units="m")
     fields.update(kw)
-    parts = tuple(p if isinstance(p, RawPart) else RawPart(name=f"p{k}", vertices=p[0], faces=p[1])
+    parts = tuple(p if isinstance(p, SourcePart) else SourcePart(name=f"p{k}", vertices=p[0], faces=p[1])
                   for k, p in enumerate(parts))
-    return RawAsset(parts=parts, **fields)
+    return SourceAsset(parts=parts, **fields)
 
 
 @pytest.fixture(scope="module")
-def bmw() -> RawAsset:
+def bmw() -> SourceAsset:
     # Scenic's BMW X5 hull: Z up already (height 1.835 is the smallest extent, on z); the hood is
     # the low end at +x (z top ~0.1 there vs ~0.8 at the -x tailgate), mirrors near +x: forward +x
     return _read(DATA / "scenic/bmwx5_hull.obj", category="Car", subclass="suv", up="+z", forward="+x")
@@ -256,7 +255,7 @@ def test_unit_cube_stl_and_storey_building():
 # --------------------------------------------------------------------------------------------
 
 
-def _rejected(raw: RawAsset) -> Rejection:
+def _rejected(raw: SourceAsset) -> Rejection:
     r = standardize(raw)
     assert isinstance(r, Rejection), r
     assert r.reason and r.hint
@@ -299,7 +298,7 @@ def test_rejections():
     r = _rejected(_raw([(line, np.array([[0, 1, 2], [0, 0, 1], [2, 1, 0]]))]))
     assert r.reason == "all faces degenerate"
     # a part class outside the taxonomy
-    r = _rejected(_raw([RawPart("p", v, f, semantic_id=42)]))
+    r = _rejected(_raw([SourcePart("p", v, f, semantic_id=42)]))
     assert r.reason == "unknown part class"
 
 
@@ -375,8 +374,8 @@ def test_hollow_shell_and_open_mesh_left_alone():
 
 def test_part_classes_materials_and_unknown_subclass():
     v, f = _cube()
-    glass = RawPart("window", v + [0, 0, 1.0], f, material="glass", transparent=True, texture="t/glass.png")
-    rider = RawPart("driver", v + [0, 2.0, 0], f, semantic_id=taxonomy.by_name("Rider").id)
+    glass = SourcePart("window", v + [0, 0, 1.0], f, material="glass", transparent=True, texture="t/glass.png")
+    rider = SourcePart("driver", v + [0, 2.0, 0], f, semantic_id=taxonomy.by_name("Rider").id)
     s = _ok(standardize(_raw([(v, f), glass, rider], category="Car", subclass="rocket_car",
                              units="unknown", target_length=4.0)))
     car, rid = taxonomy.by_name("Car"), taxonomy.by_name("Rider")
@@ -439,7 +438,7 @@ def test_rigid_transform_and_declared_units_give_the_same_extents(extents, up, f
 
 def test_unknown_units_rescale_game_units_but_reject_a_10km_car():
     box = lambda L: trimesh.creation.box((L, 0.42 * L, 0.33 * L))
-    part = lambda m: RawPart("body", m.vertices, m.faces)
+    part = lambda m: SourcePart("body", m.vertices, m.faces)
     # a 1.2-unit "car" from a game kit: no unit explains it, it is rescaled to the typical length
     game = standardize(_raw((part(box(1.2)),), category="Car", subclass="sedan", units="unknown"))
     assert not isinstance(game, Rejection) and game.asset.scale_rule.startswith("fallback")

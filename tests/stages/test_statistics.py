@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.records import AssetRecord, AssetStatisticsRecord, QualityRecord
-from carlaocc.stages.metrics import plots
-from carlaocc.stages.metrics.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
+from carlaocc.stages.report import plots
+from carlaocc.stages.report.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
                                        class_voxel_counts, frame_statistics, instance_class_pairs,
                                        instances_per_class, motion_share, split_pairs)
 

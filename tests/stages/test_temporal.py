@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from carlaocc.stages.metrics import (relative_pose, sequence_temporal, static_table, temporal_consistency_counts)
+from carlaocc.stages.quality import (relative_pose, sequence_temporal, static_table, temporal_consistency_counts)
 from carlaocc.schemas.taxonomy import by_name
 
 CAR = by_name("Car").id

@@ -1,4 +1,4 @@
-"""Procedural towns in three styles on the town contract (stages.scenes.town)."""
+"""Procedural towns in three styles on the town contract (stages.scenes.town and its town_* modules)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.geometry import is_watertight, pose_from_list, transform_points
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes.network import check_network
-from carlaocc.stages.scenes.town import LANE_WIDTH, STYLES, build_procedural_town, town_name
+from carlaocc.stages.scenes.town import build_procedural_town, town_name
+from carlaocc.stages.scenes.town_layout import LANE_WIDTH, STYLES
 
 THINGS = set(taxonomy.thing_ids())
 CURB = ScenesConfig().curb_height

@@ -14,6 +14,7 @@ from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes import traffic
 from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
 from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts, simulate_sequence, simulate_town
+from carlaocc.stages.scenes.traffic_vehicles import EGO_GAP, Vehicle
 
 R_CENTRE = 30.0  # m, road centre line radius
 HALF = 0.22  # rad: the junction spans angles -HALF .. HALF
@@ -132,22 +133,22 @@ def test_a_held_up_vehicle_changes_lanes_and_the_follower_waits(lib):
     cars = sorted((a for a in lib.assets if a.category == "Car"), key=lambda a: a.asset_id)
 
     def run(blocker: bool):
-        sim = traffic._Sim(net, np.random.default_rng(0), TrafficLevel(0, 0, 2.0, 0.0), traffic.EGO_GAP)
-        slow = traffic._Vehicle(cars[0], 2, 60.0, 3.0, 1.0, v_fixed=3.0)
-        fast = traffic._Vehicle(cars[1], 2, 40.0, 10.0, 1.0, v_fixed=12.0)
-        sim.vehicles += [slow, fast]
+        sim = traffic.Simulation(net, np.random.default_rng(0), TrafficLevel(0, 0, 2.0, 0.0), EGO_GAP)
+        slow = Vehicle(cars[0], 2, 60.0, 3.0, 1.0, v_fixed=3.0)
+        fast = Vehicle(cars[1], 2, 40.0, 10.0, 1.0, v_fixed=12.0)
+        sim.driving.vehicles += [slow, fast]
         if blocker:  # a car beside the fast one on the neighbour lane, at the same speed
-            sim.vehicles.append(traffic._Vehicle(cars[2], 0, 40.0 * net.lanes[0].length / net.lanes[2].length,
-                                                 10.0, 1.0, v_fixed=10.0))
-        for v in sim.vehicles:
-            sim.plan(v)
+            sim.driving.vehicles.append(Vehicle(cars[2], 0, 40.0 * net.lanes[0].length / net.lanes[2].length,
+                                                10.0, 1.0, v_fixed=10.0))
+        for v in sim.driving.vehicles:
+            sim.driving.plan(v)
         changed_at = None
         for k in range(140):
             sim.step(0.05)
             if fast.lane_changes and changed_at is None:
                 changed_at = k
             # the changing car never touches the slow one, nor the one beside it
-            for other in sim.vehicles:
+            for other in sim.driving.vehicles:
                 if other is not fast and (other.lane == fast.lane or other.lane == fast.lc_from):
                     assert abs(fast.s - other.s) > (fast.length + other.length) / 2 or fast.lane != other.lane \
                         and other.lane != fast.lc_from

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.geometry import SceneMesh
+from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.voxelize import elevation_order, fill_interior, surface_voxels, voxelize_scene
 from carlaocc.stages.voxelize.compose import composition_plan
 from carlaocc.stages.voxelize.kernels import to_voxel_units, warmup

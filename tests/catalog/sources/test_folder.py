@@ -11,6 +11,8 @@ import trimesh
 
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.folder import FolderAdapter
+from carlaocc.schemas.meshes import SourceAsset, SourcePart
+from carlaocc.stages.ingest.standardize import StandardizedAsset, standardize
 
 MESHES = "/work/shared/testdata/meshes"
 pytestmark = pytest.mark.skipif(not os.path.isdir(MESHES), reason="shared test meshes not present")
@@ -58,6 +60,13 @@ def test_kenney_glb_declared_y_up_unknown_units_with_licence(adapter, items):
     # adapters do not re-orient: the tile is flat in the source's x-z plane (y up)
     ext = np.ptp(a.parts[0].vertices, axis=0)
     assert ext[1] < 0.05 < ext[0]
+
+
+def test_reads_the_schema_contract_that_standardize_accepts(adapter, items):
+    """Adapters return ``schemas.meshes.SourceAsset`` itself; standardization takes it as is."""
+    a = adapter.read(MESHES, items["kenney-suburban/building-type-a.glb"])
+    assert type(a) is SourceAsset and all(type(p) is SourcePart for p in a.parts)
+    assert isinstance(standardize(a), StandardizedAsset)
 
 
 def test_empty_subclass_defaults_to_first_of_class(adapter, items):

@@ -1,0 +1,5 @@
+"""``python -m carlaocc.pipeline.cli``: the command line."""
+
+from carlaocc.pipeline.cli import main
+
+main()

@@ -1,0 +1,36 @@
+"""The ``carlaocc`` Typer application and its command groups; each command module registers
+its commands on them."""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="carlaocc",
+    help="Build instance-centric panoptic occupancy datasets from 3D meshes.\n\n"
+    "Stages (carlaocc run runs them in this order; --stages a,b runs some alone):\n\n"
+    "ingest: the procedural ADMesh library (carlaocc ingest adds external sources)\n\n"
+    "scenes: towns, traffic, ego sequences, rig poses, actors\n\n"
+    "voxelize: exact panoptic occupancy of every frame, flow, camera/LiDAR visibility masks\n\n"
+    "sensors: ray-cast camera maps and LiDAR, rectification, normals\n\n"
+    "quality: quality scores (spatial continuity, temporal consistency)\n\n"
+    "report: statistics, plots and metrics/report.html\n\n"
+    "Every stage is Dask tasks over partitions; unchanged work is skipped (lineage in "
+    "<root>/catalog/runs). `carlaocc stages` lists what each reads and writes.",
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
+                          rich_markup_mode=None)
+app.add_typer(catalog_app, name="catalog")
+admesh_app = typer.Typer(help="Look at the ADMesh library: render assets to PNG (headless).",
+                         no_args_is_help=True, rich_markup_mode=None)
+app.add_typer(admesh_app, name="admesh")
+scenes_app = typer.Typer(help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
+                         rich_markup_mode=None)
+app.add_typer(scenes_app, name="scenes")
+show_app = typer.Typer(help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
+                       rich_markup_mode=None)
+app.add_typer(show_app, name="show")

@@ -1,0 +1,161 @@
+"""Building the dataset: ``run`` (all stages or some), ``ingest`` (an external mesh source),
+``status`` (what is stale and why), ``stages`` (what each stage reads and writes), ``config``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from pydantic import ValidationError
+
+from carlaocc.catalog.store import StoreError
+from carlaocc.pipeline.cli.app import app
+from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, _RichProgress, parse_voxel_sizes, _store,
+                                         _validation_message, check_towns, fail, load_config)
+
+
+@app.command()
+def run(
+    voxel_size: VoxelSizeOpt = "0.2",
+    root: RootOpt = "data",
+    stages: Annotated[Optional[str], typer.Option("--stages", help="comma-separated stages to run alone (default: all)")] = None,
+    config: ConfigOpt = None,
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous' for debugging (default: $DASK_SCHEDULER_ADDRESS, else a LocalCluster)")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="re-run the selected stages even when up to date")] = False,
+) -> None:
+    """Build the dataset (or the selected stages) on the embedded default or a --config file."""
+    from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
+
+    cfg = load_config(config)
+    check_towns(cfg)
+    voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
+    names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    try:
+        stage_order(names)
+        resolve_scheduler(scheduler)
+    except PlanError as exc:
+        fail(str(exc))
+    store = _store(root, writable=True)
+    progress = _RichProgress()
+    t0 = time.perf_counter()
+    try:
+        outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
+                                log=lambda s: typer.echo(s, err=True))
+    except PlanError as exc:
+        progress.close()
+        fail(str(exc))
+    except (StoreError, OSError) as exc:
+        progress.close()
+        fail(str(exc))
+    progress.close()
+    failed = [f for o in outcomes for f in o.failed]
+    if failed:
+        for f in failed[:10]:
+            typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
+        if len(failed) > 10:
+            typer.echo(f"... and {len(failed) - 10} more failed tasks (see the runs table)", err=True)
+        raise typer.Exit(1)
+    ran = sum(o.ran for o in outcomes)
+    total = sum(o.total for o in outcomes)
+    if ran == 0:
+        typer.echo(f"nothing to do: all {total} tasks up to date in {store.url} (use --force to re-run)")
+    else:
+        typer.echo(f"done: ran {ran} of {total} tasks in {time.perf_counter() - t0:.1f} s; dataset at {store.url}")
+
+
+@app.command()
+def ingest(
+    kind: Annotated[str, typer.Argument(help="source kind: folder, shapenet, buildingnet, meshfleet or carla")],
+    path: Annotated[Path, typer.Argument(help="the source's root directory")],
+    category_map: Annotated[Optional[Path], typer.Option("--category-map", help="folder sources: CSV with columns glob,category,subclass[,length_m]")] = None,
+    root: RootOpt = "data",
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous'")] = None,
+    workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="re-ingest items even when unchanged")] = False,
+) -> None:
+    """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
+    are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
+    from carlaocc.pipeline.tasks.ingest import IngestError, ingest_source
+    from carlaocc.pipeline.runner import PlanError, resolve_scheduler
+    from carlaocc.schemas.configs import SourceIngestConfig
+
+    try:
+        cfg = SourceIngestConfig(kind=kind, root=str(path.resolve()),
+                                 category_map=str(category_map.resolve()) if category_map else None)
+    except ValidationError as exc:
+        fail(_validation_message("ingest", exc).replace("ingest: kind: ", f"unknown source kind {kind!r}: "))
+    try:
+        resolve_scheduler(scheduler)
+    except PlanError as exc:
+        fail(str(exc))
+    store = _store(root, writable=True)
+    progress = _RichProgress()
+    try:
+        s = ingest_source(store, cfg, scheduler, force, progress, workers, log=lambda m: typer.echo(m, err=True))
+    except (IngestError, PlanError) as exc:
+        progress.close()
+        fail(str(exc))
+    progress.close()
+    for f in s.failed[:10]:
+        typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
+    reasons = ", ".join(f"{n} {r}" for r, n in s.quarantined.most_common())
+    typer.echo(f"{cfg.kind} {cfg.root}: {s.items} items, {s.ran} ingested now, {s.skipped} unchanged; "
+               f"library holds {s.ingested} assets from it, {sum(s.quarantined.values())} quarantined"
+               + (f" ({reasons})" if reasons else "") + (f"; {s.pruned} vanished items pruned" if s.pruned else ""))
+    if s.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+def status(
+    voxel_size: VoxelSizeOpt = "0.2",
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="list every stale partition")] = False,
+) -> None:
+    """List what is stale and why (runs nothing, writes nothing)."""
+    from carlaocc.pipeline.runner import status as plan_status
+
+    cfg = load_config(config)
+    voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
+    store = _store(root, writable=False)
+    for plan in plan_status(store, cfg, voxel_sizes):
+        name = plan.stage.name
+        if plan.blocked:
+            typer.echo(f"{name:<9} waiting: {plan.blocked}")
+            continue
+        stale = plan.to_run
+        total = len(plan.partitions)
+        if not stale:
+            typer.echo(f"{name:<9} up to date ({total} partitions)")
+            continue
+        reasons: dict[str, int] = {}
+        for pp in stale:
+            reasons[pp.reason] = reasons.get(pp.reason, 0) + 1
+        summary = "; ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+        typer.echo(f"{name:<9} stale {len(stale)}/{total}: {summary}")
+        if verbose:
+            for pp in stale:
+                typer.echo(f"    {pp.partition.key}: {pp.reason}")
+
+
+@app.command("stages")
+def list_stages() -> None:
+    """List the registered stages, what they read and write."""
+    from carlaocc.pipeline.registry import STAGES
+
+    for s in STAGES.values():
+        typer.echo(f"{s.name}: {s.description}")
+        typer.echo(f"    after: {', '.join(s.upstream) or '-'}")
+        typer.echo(f"    writes: {', '.join(s.writes)}")
+
+
+@app.command("config")
+def show_config(config: ConfigOpt = None) -> None:
+    """Print the effective dataset config as YAML (a starting point for --config files)."""
+    import yaml
+
+    typer.echo(yaml.safe_dump(load_config(config).model_dump(mode="json"), sort_keys=False))

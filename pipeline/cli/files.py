@@ -1,0 +1,143 @@
+"""Commands on mesh and grid files outside the pipeline's stages: ``voxelize`` (any mesh files
+to a grid), ``export`` (to the layouts models train on), ``compare-resolutions``."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from carlaocc.catalog.store import StoreError
+from carlaocc.pipeline.cli.app import app
+from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, _floats, _store, _write_bytes,
+                                         fail, load_config)
+
+
+@app.command("voxelize")
+def voxelize_files(
+    meshes: Annotated[list[str], typer.Argument(help="mesh files (OBJ, PLY, STL, OFF, GLB...) or ADMesh asset ids")],
+    voxel_size: Annotated[float, typer.Option("--voxel-size", help="voxel edge, metres (0.02 to 1.0 is the tested range)")],
+    out: Annotated[Path, typer.Option("--out", help="OUT.npz (semantic, instance, voxel_size, voxel_origin, shape) or OUT.zarr")],
+    class_name: Annotated[Optional[list[str]], typer.Option("--class", help="class of the mesh files: once for all, or once per file in order (e.g. Car)")] = None,
+    fill: Annotated[str, typer.Option("--fill", help="auto: fill closed thing meshes; surface: fill nothing; solid: fill every closed mesh")] = "auto",
+    origin: Annotated[Optional[str], typer.Option("--origin", help="grid minimum corner x,y,z in metres (with --shape)")] = None,
+    shape: Annotated[Optional[str], typer.Option("--shape", help="grid size nx,ny,nz in voxels (with --origin)")] = None,
+    root: Annotated[Optional[str], typer.Option("--root", help="dataset root holding the ADMesh library, for asset ids")] = None,
+) -> None:
+    """Voxelize mesh files or ADMesh assets exactly (triangle-box overlap, closed meshes filled),
+    without a dataset. Things get instance ids 1, 2, ... in argument order. The grid defaults to
+    the meshes' bounding box snapped to multiples of the voxel size."""
+    from carlaocc.pipeline.standalone import InputError, grid_for, load_inputs, save_result, voxelize_inputs
+    from carlaocc.stages.voxelize.compose import FILL_MODES
+
+    if fill not in FILL_MODES:
+        fail(f"--fill must be one of {', '.join(FILL_MODES)}, got {fill!r}")
+    if out.suffix.lower() not in (".npz", ".zarr"):
+        fail(f"--out must end in .npz or .zarr, got {out}")
+    store = _store(root, writable=False) if root else None
+    try:
+        scene = load_inputs(meshes, class_name or [], store)
+        grid = grid_for(scene, voxel_size, _floats(origin, "--origin"), _floats(shape, "--shape", int))
+        t0 = time.perf_counter()
+        result = voxelize_inputs(scene, grid, fill)
+        seconds = time.perf_counter() - t0
+        save_result(result, out)
+    except (InputError, ValueError) as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"--out {out}: cannot write: {exc.strerror or exc}")
+    occupied = int((result.semantic > 0).sum())
+    X, Y, Z = grid.shape
+    typer.echo(f"wrote {out}: {X}x{Y}x{Z} grid at {voxel_size:g} m from origin "
+               f"({', '.join(f'{c:g}' for c in grid.origin)}), {occupied:,} occupied voxels, "
+               f"{sum(len(m.faces) for m in scene):,} triangles in {seconds:.2f} s")
+
+
+@app.command("export")
+def export_cmd(
+    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz")],
+    res: Annotated[float, typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling)")],
+    out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+    sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to export (default: all voxelized)")] = None,
+) -> None:
+    """Export the occupancy in the layouts models train on: occ3d (gts/<seq>/<frame>/labels.npz,
+    200x200x16 at 0.4 m, ego frame, free 17, masks), semantickitti (sequences/<seq>/voxels/
+    <frame>.bin/.label/.invalid/.occluded, 256x256x32 at 0.2 m, forward), surroundocc
+    (<seq>/<frame>.npy sparse rows, 200x200x16 at 0.5 m), carlaocc-npz (<seq>/<frame>.npz on our
+    grid, sem << 11 | inst; refuses ids beyond 5/11 bits instead of wrapping)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from carlaocc.catalog.formats import FormatError
+    from carlaocc.pipeline.export import FORMATS, export, frame_count
+
+    if fmt not in FORMATS:
+        fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
+    cfg = load_config(config)
+    store = _store(root, writable=False)
+    try:
+        total = frame_count(store, cfg, res, sequence)
+        with Progress(TextColumn(f"export {fmt}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
+                      TimeElapsedColumn(), transient=True) as bar:
+            task = bar.add_task(fmt, total=total)
+            summary = export(store, cfg, fmt, res, out, sequence, progress=lambda n: bar.advance(task, n))
+    except (StoreError, FormatError, ValueError) as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"--out {out}: cannot write: {exc.strerror or exc}")
+    typer.echo(f"wrote {summary.files:,} files for {summary.frames} frames of {summary.sequences} sequence(s) "
+               f"in {fmt} layout under {out}")
+
+
+@app.command("compare-resolutions")
+def compare_resolutions(
+    fine: Annotated[float, typer.Option("--fine", help="the finer built resolution, e.g. 0.05")],
+    coarse: Annotated[float, typer.Option("--coarse", help="a coarser built resolution, an integer multiple, e.g. 0.2")],
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+    sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) (default: all)")] = None,
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="also write the per-frame figures as JSON")] = None,
+) -> None:
+    """Pool the fine grid onto the coarse one by class priority and count where the pooled grid
+    and the coarse grid voxelized directly from the meshes disagree (occupancy and label)."""
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.pipeline.export import voxelized_sequences
+    from carlaocc.stages.voxelize.resample import pool_to_grid, pooling_disagreement
+
+    from carlaocc.schemas.grid import resolution_key
+
+    load_config(config)  # a bad --config is refused like everywhere else
+    store = _store(root, writable=False)
+    if not (fine > 0 and coarse > fine):
+        fail(f"--coarse ({coarse}) must be larger than --fine ({fine}), both positive")
+    occ = OccupancyStore(store)
+    rows = []
+    try:
+        for seq, gf, n in voxelized_sequences(store, fine, sequence):
+            gc = occ.stored_grid(seq, coarse)
+            if gc is None:
+                continue
+            for t in range(n):
+                pooled = pool_to_grid(occ.read_frame(seq, gf, t, ("semantic",))["semantic"], gf, gc)
+                d = pooling_disagreement(occ.read_frame(seq, gc, t, ("semantic",))["semantic"], pooled)
+                rows.append({"sequence": seq, "frame": t, **d})
+    except (StoreError, ValueError) as exc:
+        fail(str(exc))
+    if not rows:
+        fail(f"no sequence has both {resolution_key(fine)} m and {resolution_key(coarse)} m occupancy in {store.url}")
+    typer.echo(f"{'sequence':<28} {'frames':>6} {'occ. IoU':>9} {'occ. mismatch':>14} {'label mismatch':>15} {'mismatch rate':>14}")
+    for seq in sorted({r["sequence"] for r in rows}):
+        rs = [r for r in rows if r["sequence"] == seq]
+        # occupancy_mismatch = union - intersection, union = direct + pooled - intersection
+        occ_mis = sum(r["occupancy_mismatch"] for r in rs)
+        inter = sum(r["occupied_direct"] + r["occupied_pooled"] - r["occupancy_mismatch"] for r in rs) // 2
+        union = inter + occ_mis
+        lab_mis = sum(r["label_mismatch"] for r in rs)
+        typer.echo(f"{seq:<28} {len(rs):>6} {inter / max(union, 1):>9.4f} {occ_mis:>14,} {lab_mis:>15,} "
+                   f"{(occ_mis + lab_mis) / max(union, 1):>14.4f}")
+    if json_out:
+        _write_bytes(json_out, json.dumps(rows, indent=1).encode())

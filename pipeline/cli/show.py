@@ -1,0 +1,180 @@
+"""Looking at the data, headless, to PNG: ``admesh show|sheet`` (library assets) and
+``show occupancy|sensors`` (a frame's grids at one or more voxel sizes; its camera maps)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.cli.app import admesh_app, show_app
+from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, parse_voxel_sizes, _store, _write_png, fail,
+                                         load_config)
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import DatasetConfig
+
+
+def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int, size: int = 512):
+    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view,
+    each part in its semantic class's palette colour, glass translucent."""
+    from carlaocc.catalog.admesh import dedupe_parts
+    from carlaocc.catalog.meshes import MeshStore
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.catalog.sql import QueryError, query
+    from carlaocc.schemas.records import PartRecord
+    from carlaocc.schemas.meshes import MeshPart
+    from carlaocc.stages.render.assets import render_asset
+
+    if asset_id is not None:
+        sql = f"SELECT asset_id, category, subclass, mesh_path FROM assets WHERE asset_id = '{asset_id.replace(chr(39), '')}'"
+    else:
+        sql = f"SELECT asset_id, category, subclass, mesh_path FROM assets WHERE {where} ORDER BY category, subclass, asset_id LIMIT {int(limit)}"
+    try:
+        _, rows = query(store, sql)
+    except QueryError as exc:
+        message = str(exc).splitlines()[0]
+        if "convert string" in message and "category" in message:
+            message += " (category holds class names: use category = 'Car', or category_id = 14)"
+        fail(f"--where: {message}" if asset_id is None else message)
+    if not rows:
+        fail(f"no asset {asset_id!r} in {store.url}" if asset_id else f"no asset matches --where {where!r}")
+    parts = {}
+    for p in dedupe_parts(ParquetTable(store, PartRecord).load()):
+        parts.setdefault(p.asset_id, []).append(p)
+    meshes, labels, images = MeshStore(store), [], []
+    for aid, category, subclass, mesh_path in rows:
+        recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
+        try:
+            arrays = meshes.load(mesh_path)
+        except StoreError as exc:
+            fail(f"asset {aid}: {exc}")
+        mesh_parts = [MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent,
+                               color=(*taxonomy.by_id(r.semantic_id).color, 110 if r.transparent else 255))
+                      for r, (v, f) in zip(recs, arrays)]
+        images.append(render_asset(mesh_parts, size=size))
+        labels.append(f"{category}/{subclass} {aid[:8]}")
+    return labels, images
+
+
+@admesh_app.command("show")
+def admesh_show(
+    asset_id: Annotated[str, typer.Argument(help="the asset id (see: carlaocc catalog query 'SELECT asset_id FROM assets')")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("asset.png"),
+    root: RootOpt = "data",
+) -> None:
+    """Render one asset to a PNG (semantic colours, glass translucent), headless."""
+    labels, images = _render_assets(Store(root), None, asset_id, 1)
+    _write_png(out, images[0])
+    typer.echo(f"{labels[0]} -> {out}")
+
+
+@admesh_app.command("sheet")
+def admesh_sheet(
+    where: Annotated[str, typer.Option("--where", help="SQL condition over the assets view, e.g. \"category = 'Car'\" or \"category_id = 14\"")] = "true",
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("assets.png"),
+    limit: Annotated[int, typer.Option("--limit", min=1, max=400, help="at most this many assets")] = 48,
+    columns: Annotated[int, typer.Option("--columns", min=1, max=20)] = 6,
+    size: Annotated[int, typer.Option("--size", min=64, max=1024, help="thumbnail edge, pixels")] = 256,
+    root: RootOpt = "data",
+) -> None:
+    """A contact sheet of the assets a query selects (semantic colours), headless."""
+    from carlaocc.stages.render.sheets import contact_sheet
+
+    labels, images = _render_assets(Store(root), where, None, limit, size)
+    _write_png(out, contact_sheet(images, labels, columns=columns))
+    typer.echo(f"{len(images)} assets -> {out}")
+
+
+def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, res: float):
+    from carlaocc.catalog.occupancy import OccupancyStore
+
+    from carlaocc.schemas.grid import resolution_key
+
+    occ = OccupancyStore(store)
+    grid = occ.stored_grid(sequence, res)  # the grid it was built on, whatever the config says now
+    if grid is None:
+        key = resolution_key(res)
+        fail(f"{sequence} has no occupancy at {key} m in {store.url}: run `carlaocc run --res {key}`")
+    n = occ.open(sequence, grid, "semantic").shape[0]
+    if not 0 <= frame < n:
+        fail(f"{sequence} has frames 0..{n - 1}, not {frame}")
+    data = occ.read_frame(sequence, grid, frame)
+    return data["semantic"], data["instance"], grid
+
+
+@show_app.command("occupancy")
+def show_occupancy(
+    seq: Annotated[str, typer.Option("--seq", help="sequence id (see: carlaocc catalog query 'select * from sequences')")],
+    frame: Annotated[int, typer.Option("--frame", min=0, help="frame index")],
+    res: Annotated[str, typer.Option("--voxel-size", "--res", help="voxel size (m), or several comma-separated for the multi-resolution figure (e.g. 0.05,0.1,0.2,0.5)")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("occupancy.png"),
+    mode: Annotated[str, typer.Option("--mode", help="instance (things per instance, stuff in the palette) | semantic | height")] = "instance",
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+) -> None:
+    """Render one frame's occupancy: a bird's-eye height map and a 3D view (one resolution), or
+    the multi-resolution figure (3D views and a zoomed bird's-eye crop per resolution)."""
+    from carlaocc.stages.render.figures import multi_resolution_figure, occupancy_figure
+
+    if mode not in ("instance", "semantic", "height"):
+        fail(f"--mode must be instance, semantic or height, got {mode!r}")
+    cfg = load_config(config)
+    voxel_sizes = parse_voxel_sizes(res, cfg)
+    store = _store(root, writable=False)
+    if len(voxel_sizes) == 1:
+        sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, voxel_sizes[0])
+        image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", mode=mode)
+    else:
+        frames = []
+        for r in voxel_sizes:
+            sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, r)
+            frames.append((f"{grid.key} m", sem, inst, grid))
+        image = multi_resolution_figure(frames, mode=mode, title=f"{seq} frame {frame}")
+    _write_png(out, image)
+    typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
+
+
+@show_app.command("sensors")
+def show_sensors(
+    seq: Annotated[str, typer.Option("--seq", help="sequence id (see: carlaocc catalog query 'select * from sequences')")],
+    frame: Annotated[int, typer.Option("--frame", min=0, help="frame index")],
+    out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("sensors.png"),
+    camera: Annotated[Optional[list[str]], typer.Option("--camera", help="camera(s) to show (default: every camera stored)")] = None,
+    step: Annotated[int, typer.Option("--step", min=1, max=16, help="draw every n-th pixel row and column (2 halves 1408x376 images)")] = 2,
+    root: RootOpt = "data",
+    config: ConfigOpt = None,
+) -> None:
+    """Contact sheet of one frame's camera maps (no RGB: depth, normals, semantics, instances per
+    camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
+    transparency region tinted red and of the omission region blue (epsilon from the config)."""
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.render.sensors import CameraView, sensor_sheet
+
+    cfg = load_config(config)
+    store = _store(root, writable=False)
+    sensors = SensorStore(store)
+    stored = sensors.cameras(seq)
+    if not stored:
+        fail(f"{seq} has no camera maps in {store.url}: run `carlaocc run --stages ingest,scenes,sensors`")
+    missing = [c for c in (camera or []) if c not in stored]
+    if missing:
+        fail(f"--camera {', '.join(missing)}: {seq} has maps of {', '.join(stored)} only")
+    views = []
+    for cam in camera or stored:
+        names = set(sensors.names(seq, cam))
+        n = sensors.open(seq, cam, "depth").shape[0] if "depth" in names else 0
+        if not 0 <= frame < n:
+            fail(f"{seq}/{cam} has frames 0..{n - 1}, not {frame}")
+
+        def read(name: str):
+            return sensors.read_image(seq, cam, frame, name) if name in names else None
+
+        if read("normal") is None:
+            fail(f"{seq}/{cam} has no normal map: run the sensors stage")
+        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
+                                read("depth_raw"), read("semantic_raw")))
+    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
+    _write_png(out, image)
+    typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")

@@ -1,0 +1,173 @@
+"""Scene tools behind ``carlaocc scenes``: the unified town mesh, a frame's panoptic mesh, and
+parametric editing (``swap``: new sequences whose actors of one class use other assets).
+
+Like the task bodies, these read through the catalog and call the pure compute of ``stages``.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+
+from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.panoptic import panoptic_glb_bytes
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.tasks.frame import frame_scene, load_geometry
+from carlaocc.pipeline.tasks.scenes import is_edited
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.records import (
+    ActorStateRecord,
+    AssetRecord,
+    FrameRecord,
+    PlacementRecord,
+    RunRecord,
+    SensorPoseRecord,
+    SequenceRecord,
+)
+
+SWAP_STAGE = "scenes-swap"
+LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relative footprint/height difference
+
+
+def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
+    """The whole town's static mesh (world frame) as GLB with per-face semantic and instance ids;
+    returns (bytes, triangles, placements)."""
+    from carlaocc.stages.scenes.assembly import town_mesh
+
+    t_place = ParquetTable(store, PlacementRecord)
+    if not t_place.exists(f"town={town}"):
+        towns = sorted(p.split("town=")[-1][: -len(".parquet")] for p in t_place.paths())
+        raise StoreError(f"town {town!r} is not in {store.url} (towns: {', '.join(towns) or 'none; run the scenes stage'})")
+    placements = t_place.load([f"town={town}"])
+    geometry = load_geometry(store, {p.asset_id for p in placements}, placements)
+    mesh = town_mesh(placements, geometry)
+    return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces), len(placements)
+
+
+def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> tuple[bytes, int]:
+    """One frame's panoptic scene (LiDAR frame) cut to ``region`` as GLB; returns (bytes, triangles)."""
+    from carlaocc.stages.scenes.assembly import flatten
+
+    mesh = flatten(frame_scene(store, sequence_id, frame_index, region))
+    return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces)
+
+
+@dataclass(frozen=True)
+class SwapResult:
+    """One edited sequence: its id, the parent, and how many actor instances got a new asset
+    (and how many kept theirs for want of a compatible one)."""
+
+    sequence_id: str
+    parent: str
+    swapped: int
+    kept: int
+
+
+def compatible(original: AssetRecord, candidates: Sequence[AssetRecord]) -> list[AssetRecord]:
+    """Assets of the same class, other than ``original``, whose length, width and height differ
+    by at most :data:`LENGTH_TOLERANCE`, :data:`WIDTH_TOLERANCE`, :data:`HEIGHT_TOLERANCE`
+    (relative): a replacement keeps the footprint the trajectory was simulated with."""
+    l0, w0, h0 = original.extent
+    out = []
+    for a in candidates:
+        if a.asset_id == original.asset_id or a.category_id != original.category_id:
+            continue
+        l, w, h = a.extent
+        if abs(l - l0) <= LENGTH_TOLERANCE * l0 and abs(w - w0) <= WIDTH_TOLERANCE * w0 and abs(h - h0) <= HEIGHT_TOLERANCE * h0:
+            out.append(a)
+    return sorted(out, key=lambda a: a.asset_id)
+
+
+def swap_id(sequence_id: str, category: str, seed: int) -> str:
+    return f"{sequence_id}~swap-{category.lower()}-s{seed}"
+
+
+def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] | None = None,
+               asset_sources: Sequence[str] | None = None) -> list[SwapResult]:  # fmt: skip
+    """For every original sequence (or the given ones), write a new sequence in which every
+    actor of ``category`` uses another asset of a compatible footprint, drawn per instance from
+    ``seed``; trajectories, rig poses and timing are copied unchanged, boxes take the new
+    extent. The new sequence's ``parent_sequence_id`` names the original and a lineage record
+    (stage ``scenes-swap``) lists the files read and written."""
+    try:
+        cls = taxonomy.by_name(category)
+    except (KeyError, ValueError):
+        raise StoreError(f"unknown class {category!r}; classes: {', '.join(c.name for c in taxonomy.CLASSES)}") from None
+    if cls.id not in taxonomy.thing_ids():
+        raise StoreError(f"class {category} is stuff; only thing classes have actors to swap")
+    t_seq = ParquetTable(store, SequenceRecord)
+    all_seqs = {s.sequence_id: s for s in t_seq.load()}
+    if sequences:
+        missing = [s for s in sequences if s not in all_seqs]
+        if missing:
+            raise StoreError(f"sequence(s) {', '.join(missing)} not in {store.url}")
+        targets = [all_seqs[s] for s in sequences]
+    else:
+        targets = [s for sid, s in sorted(all_seqs.items()) if not is_edited(sid)]
+    if not targets:
+        raise StoreError(f"no sequences in {store.url}: run the scenes stage first")
+    assets = dedupe_assets(ParquetTable(store, AssetRecord).load())
+    if asset_sources:
+        assets = [a for a in assets if a.source in asset_sources]
+    by_id = {a.asset_id: a for a in assets}
+    pool = [a for a in assets if a.category_id == cls.id]
+    tables = {
+        "frames": ParquetTable(store, FrameRecord),
+        "sensor_poses": ParquetTable(store, SensorPoseRecord),
+        "actors": ParquetTable(store, ActorStateRecord),
+    }
+    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    results, runs = [], []
+    for parent in targets:
+        started = datetime.now(timezone.utc)
+        new_id = swap_id(parent.sequence_id, cls.name, seed)
+        actors = tables["actors"].load([parent.sequence_id])
+        asset_of = {a.instance_id: a.asset_id for a in actors if a.semantic_id == cls.id}
+        choice: dict[int, AssetRecord] = {}
+        kept = 0
+        for inst in sorted(asset_of):
+            original = by_id.get(asset_of[inst])
+            options = compatible(original, pool) if original is not None else []
+            if not options:
+                kept += 1
+                continue
+            rng = np.random.default_rng(np.random.SeedSequence([seed, inst]))
+            choice[inst] = options[int(rng.integers(len(options)))]
+        new_actors = []
+        for a in actors:
+            new = choice.get(a.instance_id)
+            if new is None:
+                new_actors.append(a.model_copy(update={"sequence_id": new_id}))
+                continue
+            l, w, h = (float(e) for e in new.extent)
+            z = a.box_center[2] - a.box_size[2] / 2  # the ground under the box
+            new_actors.append(a.model_copy(update={
+                "sequence_id": new_id, "asset_id": new.asset_id, "semantic_id": new.category_id,
+                "box_size": [l, w, h], "box_center": [a.box_center[0], a.box_center[1], z + h / 2],
+            }))  # fmt: skip
+        record = parent.model_copy(update={
+            "sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}",
+        })  # fmt: skip
+        inputs = {t.path(parent.sequence_id): store.fingerprint(t.path(parent.sequence_id))
+                  for t in (t_seq, *tables.values())}  # fmt: skip
+        outputs = {t_seq.path(new_id): t_seq.save(new_id, [record])}
+        for name, table in tables.items():
+            rows = new_actors if name == "actors" else [
+                r.model_copy(update={"sequence_id": new_id}) for r in table.load([parent.sequence_id])]
+            outputs[table.path(new_id)] = table.save(new_id, rows)
+        results.append(SwapResult(new_id, parent.sequence_id, len(choice), kept))
+        runs.append(RunRecord(
+            run_id=run_id, stage=SWAP_STAGE, partition=new_id, code_version="", config_hash=f"{cls.name}:{seed}",
+            cache_key="", input_fingerprints=json.dumps(inputs, sort_keys=True),
+            output_fingerprints=json.dumps(outputs, sort_keys=True), status="completed", started_at=started,
+            ended_at=datetime.now(timezone.utc), host=socket.gethostname(),
+        ))  # fmt: skip
+    LineageLog(store).append(SWAP_STAGE, run_id, runs)
+    return results

@@ -1,0 +1,160 @@
+"""What every per-frame task reads: a sequence's frames, a frame's panoptic scene, the asset
+geometry behind it (cached per worker by content), and the sequences partitioning iterates.
+
+Shared by the voxelize and sensors wiring (``frame_inputs``), the scene tools and the benchmarks;
+like every wiring module, it reads through the catalog and calls the pure compute of
+``carlaocc.stages``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from collections import OrderedDict
+
+from carlaocc.catalog.meshes import load_glb_arrays
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, PartRecord, PlacementRecord, SequenceRecord
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
+from carlaocc.stages.geometry import is_watertight
+
+# per-worker caches: asset geometry by file content, pedestrian rigs, each town's placement index
+_GEOMETRY_CACHE: OrderedDict[tuple, AssetGeometry] = OrderedDict()
+_RIG_CACHE: OrderedDict[tuple[str, str], object] = OrderedDict()
+_INDEX_CACHE: OrderedDict[tuple[str, str, str | None], object] = OrderedDict()
+
+
+def _cached(cache: OrderedDict, key, make, size: int):
+    """``cache[key]``, made by ``make()`` on a miss; least recently used entries beyond ``size``
+    are dropped."""
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = cache[key] = make()
+    if len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def _mesh_geometry(store: Store, rel: str, key: tuple, build) -> AssetGeometry:
+    """``build(arrays)`` of the GLB ``rel``, cached per worker by the file's content and ``key``
+    (what else the geometry is made of): the same object comes back while nothing changed, so
+    callers may cache work on it by identity."""
+    data = store.read_bytes(rel)
+    return _cached(_GEOMETRY_CACHE, (rel, hashlib.sha256(data).hexdigest(), key),
+                   lambda: build(load_glb_arrays(data)), 1024)
+
+
+def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementRecord]) -> dict[str, AssetGeometry]:
+    """AssetGeometry of every id in ``asset_ids``: ADMesh assets (the parts table gives each part's
+    class and closedness) or, for ids not in the library, the town stuff mesh of the placement that
+    references it (one class per stuff placement; closedness measured)."""
+    assets = {a.asset_id: a for a in ParquetTable(store, AssetRecord).load()}
+    parts: dict[str, list[PartRecord]] = {}
+    for p in ParquetTable(store, PartRecord).load():
+        parts.setdefault(p.asset_id, []).append(p)
+    stuff = {pl.asset_id: pl for pl in placements if pl.asset_id not in assets}
+    out: dict[str, AssetGeometry] = {}
+    for aid in sorted(asset_ids):
+        if aid in assets:
+            recs = tuple(sorted(parts.get(aid, []), key=lambda r: r.part_index))
+
+            def asset_geometry(arrays, aid=aid, recs=recs) -> AssetGeometry:
+                if len(arrays) != len(recs):
+                    raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
+                return AssetGeometry(
+                    asset_id=aid,
+                    parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
+                                for r, (v, f) in zip(recs, arrays)),
+                    part_closed=tuple(r.watertight for r in recs),
+                )
+
+            out[aid] = _mesh_geometry(store, assets[aid].mesh_path, (aid, recs), asset_geometry)
+        elif aid in stuff:
+            pl = stuff[aid]
+
+            def stuff_geometry(arrays, aid=aid, pl=pl) -> AssetGeometry:
+                return AssetGeometry(
+                    asset_id=aid,
+                    parts=tuple(MeshPart(f"{pl.name}_{i}", v, f, pl.semantic_id) for i, (v, f) in enumerate(arrays)),
+                    part_closed=tuple(is_watertight(f) for _, f in arrays),
+                )
+
+            out[aid] = _mesh_geometry(store, pl.mesh_path, (aid, pl.name, pl.semantic_id), stuff_geometry)
+        else:
+            raise StoreError(f"asset {aid} is referenced by the scene but is neither in admesh/assets "
+                             f"nor a town mesh")
+    return out
+
+
+def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
+    """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
+    (rigs cached per worker by asset id and geometry content)."""
+    from carlaocc.stages.geometry import geometry_hash
+    from carlaocc.stages.scenes.pedestrians import rig_pedestrian
+
+    keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key, hashed once per frame
+
+    def posed(asset_id: str, phase_index: int) -> AssetGeometry:
+        geom = geometry[asset_id]
+        if asset_id not in keys:
+            keys[asset_id] = (asset_id, geometry_hash([(p.vertices, p.faces) for p in geom.parts]))
+        rig = _cached(_RIG_CACHE, keys[asset_id], lambda: rig_pedestrian(geom), 256)
+        return rig.posed(phase_index)
+
+    return posed
+
+
+def _frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
+    """The rows of one frame of a per-sequence table (filtered in Arrow before validation)."""
+    import pyarrow.compute as pc
+
+    from carlaocc.catalog.parquet import from_table
+
+    table = ParquetTable(store, model).load_arrow([seq_id])
+    return from_table(model, table.filter(pc.equal(table["frame_index"], frame_index)))
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameInputs:
+    """What one frame's tasks read: its sequence, frame and actor rows and the panoptic scene."""
+
+    sequence: SequenceRecord
+    frame: FrameRecord
+    actors: list[ActorStateRecord]
+    scene: list  # SceneMesh, LiDAR frame, cut to the requested region
+
+
+def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameInputs:
+    """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame."""
+    from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
+
+    t_seq = ParquetTable(store, SequenceRecord)
+    sequences = t_seq.load([seq_id]) if t_seq.exists(seq_id) else []
+    if not sequences:
+        raise StoreError(f"sequence {seq_id!r} is not in {store.url}: run the scenes stage first")
+    (sequence,) = sequences
+    frames = _frame_rows(store, FrameRecord, seq_id, frame_index)
+    if not frames:
+        raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
+    actors = _frame_rows(store, ActorStateRecord, seq_id, frame_index)
+    # the town's placement index, kept per worker while the placements file is unchanged (its
+    # per-asset preparation of big stuff meshes is then reused across frames)
+    t_place = ParquetTable(store, PlacementRecord)
+    key = f"town={sequence.town}"
+    index = _cached(_INDEX_CACHE, (store.url, key, store.fingerprint(t_place.path(key))),
+                    lambda: PlacementIndex(t_place.load([key])), 8)
+    # geometry of the placements whose world AABB meets the frame's region, and of the actors
+    selected = index.select(*frame_region(frames[0], *region))
+    needed = {index.placements[i].asset_id for i in selected} | {a.asset_id for a in actors}
+    geometry = load_geometry(store, needed, index.placements)
+    scene = assemble_frame(frames[0], actors, index, geometry, region,
+                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
+    return FrameInputs(sequence, frames[0], actors, scene)
+
+
+def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
+    """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
+    (lo, hi) in the LiDAR frame."""
+    return frame_inputs(store, seq_id, frame_index, region).scene

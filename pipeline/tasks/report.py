@@ -1,0 +1,230 @@
+"""The report stage: dataset statistics (Parquet), their plots (PNG) and ``metrics/report.html``.
+
+One task over the whole dataset (the requested voxel sizes): it streams every occupancy frame
+once (voxels per class, distinct instances per class), counts the ADMesh library, reads the
+quality scores and the lineage, renders one frame (and its cameras when the sensors stage ran),
+and writes
+
+* ``metrics/statistics_classes/dataset.parquet`` (:class:`ClassStatisticsRecord`),
+* ``metrics/statistics_assets/dataset.parquet`` (:class:`AssetStatisticsRecord`),
+* ``metrics/plots/*.png`` (class voxels, instances, static/dynamic share per voxel size; assets;
+  quality; the rendered frame and camera sheet),
+* ``metrics/report.html`` (:mod:`carlaocc.pipeline.tasks.report_page`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.usage import store_usage
+from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.tasks.partitions import sequences
+from carlaocc.pipeline.tasks.quality import quality_partitions
+from carlaocc.pipeline.tasks.report_page import PLOTS_DIR, REPORT_HTML, SENSOR_STEP, render_html, stage_lineage
+from carlaocc.pipeline.tasks.scenes import scenes_partitions
+from carlaocc.pipeline.tasks.sensors import sensors_partitions
+from carlaocc.schemas.configs import DatasetConfig, QualityConfig
+from carlaocc.schemas.grid import GridSpec
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord,
+                                      QualityRecord, SequenceRecord)
+
+TABLE_KEY = "dataset"
+FRAME_HEIGHT = 380  # pixels of the rendered occupancy frame's panels
+RENDER_INSTANCE_VOXELS = 1 << 26  # larger frames are rendered by class (no instance grid in memory)
+TILE_VOXELS = 1 << 24  # occupancy is read in x-slabs of whole chunks of at most ~16 M voxels
+
+
+def _tiles(occ: OccupancyStore, seq: str, grid: GridSpec, instance: bool, voxels: int = TILE_VOXELS):
+    """(frame, semantic tile, instance tile or None, last tile of the frame) over every frame in
+    x-slabs of whole chunks of at most ~``voxels`` voxels (a 0.05 m frame is never whole in
+    memory), each read while the previous one is counted (the decoder and the counting kernel
+    release the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    arr = occ.open(seq, grid, "semantic")
+    n, X = arr.shape[0], arr.shape[1]
+    cx = arr.chunks[1]
+    slab = cx * max(1, voxels // max(1, cx * int(np.prod(arr.shape[2:]))))
+    reads = [(t, x0, min(slab, X - x0)) for t in range(n) for x0 in range(0, X, slab)]
+
+    def read(t: int, x0: int, nx: int):
+        return (occ.read_tile(seq, grid, t, "semantic", x0, nx),
+                occ.read_tile(seq, grid, t, "instance", x0, nx) if instance else None)
+
+    with ThreadPoolExecutor(1) as pool:
+        nxt = pool.submit(read, *reads[0]) if reads else None
+        for k, (t, x0, nx) in enumerate(reads):
+            sem, inst = nxt.result()
+            if k + 1 < len(reads):
+                nxt = pool.submit(read, *reads[k + 1])
+            yield t, sem, inst, x0 + nx == X
+
+
+def sequence_statistics(store: Store, seq: SequenceRecord, grid: GridSpec) -> list[ClassStatisticsRecord]:
+    """Class statistics of one sequence at one resolution: every frame streamed once, in tiles."""
+    from carlaocc.stages.report.statistics import SequenceStatistics
+
+    occ = OccupancyStore(store)
+    if not occ.exists(seq.sequence_id, grid, "semantic"):
+        raise StoreError(f"{seq.sequence_id} has no occupancy at {grid.key} m in {store.url}: run the voxelize stage")
+    tiles = _tiles(occ, seq.sequence_id, grid, occ.exists(seq.sequence_id, grid, "instance"))
+    stats = SequenceStatistics()
+    for _, sem, inst, last in tiles:
+        stats.add(sem, inst, last_tile=last)
+    # instances that are dynamic actors of the sequence (they have actor states)
+    actors = ParquetTable(store, ActorStateRecord)
+    actor_ids = (np.unique(actors.load_arrow([seq.sequence_id]).column("instance_id").to_numpy())
+                 if actors.exists(seq.sequence_id) else np.zeros(0, np.int64))
+    inst, moving = stats.instances(), stats.instances(actor_ids.tolist())
+    return [ClassStatisticsRecord(sequence_id=seq.sequence_id, resolution=float(grid.voxel_size), semantic_id=c,
+                                  frames=stats.frames, voxels=int(stats.voxels[c]), instances=int(inst[c]),
+                                  moving_instances=int(moving[c]))
+            for c in range(len(stats.voxels)) if stats.voxels[c] or inst[c]]
+
+
+def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
+    """The occupancy figure of one frame (BEV, 3D view, legend); instances coloured per object
+    unless the grid is larger than :data:`RENDER_INSTANCE_VOXELS` (a 0.05 m instance frame is
+    1.6 GB: such frames are drawn by class from the semantic grid alone)."""
+    from carlaocc.catalog.images import png_bytes
+    from carlaocc.stages.render.figures import occupancy_figure
+
+    occ = OccupancyStore(store)
+    small = int(np.prod(grid.shape)) <= RENDER_INSTANCE_VOXELS and occ.exists(seq, grid, "instance")
+    data = occ.read_frame(seq, grid, frame, ("semantic", "instance") if small else ("semantic",))
+    sem, inst = data["semantic"], data.get("instance")
+    image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", height=FRAME_HEIGHT,
+                             mode="instance" if small else "semantic")
+    return png_bytes(image)
+
+
+def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
+    """The camera contact sheet of one frame (rectified maps only), or None without cameras."""
+    from carlaocc.catalog.images import png_bytes
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.render.sensors import CameraView, sensor_sheet
+
+    sensors = SensorStore(store)
+    views = []
+    for cam in sensors.cameras(seq):
+        names = set(sensors.names(seq, cam))
+        if not {"depth", "semantic", "normal"} <= names or not sensors.exists(seq, cam, "depth", frame):
+            continue
+
+        def read(name: str):
+            return sensors.read_image(seq, cam, frame, name) if name in names else None
+
+        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal")))
+    if not views:
+        return None
+    return png_bytes(sensor_sheet(views, step=SENSOR_STEP))
+
+
+def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
+    """Statistics tables, plots and ``metrics/report.html`` of the requested resolutions."""
+    from carlaocc.stages.report import plots
+    from carlaocc.stages.report.statistics import asset_distribution, motion_share, resolution_totals
+
+    grids = [GridSpec.model_validate(g) for g in part.params["grids"]]
+    seq_ids = list(part.params["sequences"])
+    t_seq = ParquetTable(store, SequenceRecord)
+    sequences = sorted((s for s in t_seq.load() if s.sequence_id in set(seq_ids)), key=lambda s: s.sequence_id)
+    if [s.sequence_id for s in sequences] != sorted(seq_ids):
+        raise StoreError(f"sequences {sorted(set(seq_ids) - {s.sequence_id for s in sequences})} are not in "
+                         f"{store.url}: run the scenes stage")
+    outputs: dict[str, str] = {}
+    # 1. class statistics: every frame of every sequence at every resolution, streamed
+    class_rows = [row for grid in grids for seq in sequences for row in sequence_statistics(store, seq, grid)]
+    t_cls = ParquetTable(store, ClassStatisticsRecord)
+    outputs[t_cls.path(TABLE_KEY)] = t_cls.save(TABLE_KEY, class_rows)
+    # 2. the ADMesh library per class and source (duplicates once, as the catalog views list it)
+    asset_rows = asset_distribution(dedupe_assets(ParquetTable(store, AssetRecord).load()))
+    t_ast = ParquetTable(store, AssetStatisticsRecord)
+    outputs[t_ast.path(TABLE_KEY)] = t_ast.save(TABLE_KEY, asset_rows)
+    # 3. quality scores of these sequences and resolutions
+    wanted = {(s.sequence_id, g.voxel_size) for s in sequences for g in grids}
+    quality = [q for q in ParquetTable(store, QualityRecord).load() if (q.sequence_id, q.resolution) in wanted]
+    # 4. plots
+    png: dict[str, bytes] = {}
+    totals = resolution_totals(class_rows)
+    for grid in grids:
+        s = totals.get(float(grid.voxel_size))
+        if s is None:
+            continue
+        k = grid.key
+        png[f"class_voxels_{k}"] = plots.class_voxel_plot(s.voxels, f"Occupied voxels per class, {k} m, "
+                                                                    f"{s.frames} frames")
+        png[f"instances_{k}"] = plots.instances_plot(s.instances, s.moving, f"Instances per class, {k} m "
+                                                                            f"(per sequence, summed)")
+        png[f"motion_{k}"] = plots.motion_plot(motion_share(s.voxels, s.instances, s.moving),
+                                               f"Static vs dynamic, {k} m")
+    png["assets"] = plots.asset_plot(asset_rows)
+    png["quality"] = plots.quality_plot(quality)
+    if sequences and grids:
+        seq = sequences[0]
+        finest = min(grids, key=lambda g: g.voxel_size)
+        frame = seq.frame_count // 2
+        png["frame"] = _frame_png(store, seq.sequence_id, finest, frame)
+        cams = _sensors_png(store, seq.sequence_id, frame)
+        if cams is not None:
+            png["sensors"] = cams
+    for name, data in png.items():
+        rel = f"{PLOTS_DIR}/{name}.png"
+        outputs[rel] = store.write_bytes(rel, data)
+    # the report owns its plot directory: pictures of resolutions no longer reported go
+    for rel in store.glob(PLOTS_DIR, ".png"):
+        if rel not in outputs:
+            store.remove(rel)
+    # 5. the page
+    usage = store_usage(store, exclude=(REPORT_HTML, PLOTS_DIR))
+    page = render_html(
+        root=store.url, sequences=sequences, grids=grids, totals=totals, asset_rows=asset_rows,
+        quality=quality, usage=[(u.part, u.files, u.bytes) for u in usage],
+        lineage=stage_lineage(LineageLog(store).load()), images=png,
+    )
+    outputs[REPORT_HTML] = store.write_bytes(REPORT_HTML, page.encode())
+    return outputs
+
+
+def report_config(config: DatasetConfig) -> QualityConfig:
+    """The report stage's config: the metrics section (the report is the metrics' presentation)."""
+    return config.quality
+
+
+def _report_partitions(ctx: Context) -> list[Partition]:
+    """One partition over the whole dataset at the requested resolutions: it reads every metrics
+    partition and what they read (every occupancy frame), the scenes and ingest partitions, and
+    every sensors partition once the sensors stage has run (the report shows cameras then)."""
+    from carlaocc.catalog.lineage import LineageLog
+
+    needs: set[tuple[str, str]] = set()
+    for p in scenes_partitions(ctx):
+        needs |= {("scenes", p.key), *p.needs}
+    for p in quality_partitions(ctx):
+        needs |= {("quality", p.key), *p.needs}
+    lineage = LineageLog(ctx.store)
+    # the ADMesh plot counts the whole library: every ingested item, whichever source
+    needs |= {("ingest", k) for k, r in lineage.latest("ingest").items() if r.status == "completed"}
+    if lineage.latest("sensors"):
+        needs |= {("sensors", p.key) for p in sensors_partitions(ctx)}
+    grids = [ctx.config.voxelize.grid(res) for res in ctx.voxel_sizes]
+    return [Partition("dataset", {"grids": [g.model_dump(mode="json") for g in grids],
+                                  "sequences": [s.sequence_id for s in sequences(ctx)]},
+                      needs=tuple(sorted(needs)))]
+
+
+SPEC = StageSpec(
+    name="report",
+    description="statistics (voxels, instances, assets per class), plots and metrics/report.html",
+    upstream=("ingest", "scenes", "voxelize", "sensors", "quality"),
+    reads=("admesh/assets/", "scenes/", "occupancy.zarr/", "sensors.zarr/", "metrics/quality/", "catalog/runs/"),
+    writes=("metrics/statistics_classes/", "metrics/statistics_assets/", "metrics/plots/", "metrics/report.html"),
+    partitions=_report_partitions,
+    task=report_task,
+    config_of=report_config,
+)

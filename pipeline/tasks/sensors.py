@@ -1,0 +1,159 @@
+"""The sensors stage: one task per (sequence, frame) ray-casts the rig's cameras (clean and raw
+depth/semantic/instance maps, simulator artifacts) and LiDAR through the frame's scene — or reads
+a recorder's raw maps — rectifies transparent and unlabelled regions guided by instances, adds
+D2NT normals, and writes sensors.zarr, lidar/ and a rectification record per camera.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.tasks.frame import frame_inputs
+from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
+from carlaocc.schemas.configs import DatasetConfig, SensorsConfig
+
+if TYPE_CHECKING:
+    from carlaocc.stages.sensors import CameraMaps
+
+
+def sensors_config(config: DatasetConfig) -> SensorsConfig:
+    """The sensors stage's config: ``sensors`` with the rig of ``scenes``."""
+    return config.sensors.model_copy(update={"rig": config.scenes.rig})
+
+
+def sensors_partitions(ctx: Context) -> list[Partition]:
+    return [Partition(f"{seq.sequence_id}/{t:04d}", {"sequence_id": seq.sequence_id, "frame_index": t},
+                      needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town)))
+            for seq in sequences(ctx) for t in range(seq.frame_count)]
+
+
+def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
+    """Create the camera arrays of every sequence about to be written (intrinsics and extrinsics
+    in their attributes); a replaced array invalidates every frame of its sequence. The recorded
+    path creates only the arrays it writes and leaves the recorder's ``*_raw`` arrays alone."""
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.stages.sensors import camera_poses
+
+    cfg = sensors_config(ctx.config)
+    rig = cfg.rig
+    frames = {s.sequence_id: s.frame_count for s in sequences(ctx)}
+    sensors = SensorStore(ctx.store)
+    to_lidar = camera_poses(rig)
+    invalid: set[str] = set()
+    for seq in sorted({p.params["sequence_id"] for p in to_run}):
+        replaced = False
+        for cam in cfg.selected_cameras(rig):
+            attrs = {"intrinsics": [list(r) for r in cam.intrinsics],
+                     "camera_to_ego": [list(r) for r in cam.camera_to_ego()],
+                     "camera_to_lidar": to_lidar[cam.name].tolist(),
+                     "camera_frame": "opencv: x right, y down, z forward", "source": cfg.source}
+            replaced |= sensors.create(seq, cam.name, cam.width, cam.height, frames[seq], sensor_arrays(cfg),
+                                       extra_attrs=attrs, keep_others=cfg.source == "recorded")
+        if replaced:
+            invalid |= {p.key for p in partitions if p.params["sequence_id"] == seq}
+    return invalid
+
+
+def sensor_region(cfg: SensorsConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The LiDAR-frame box whose scene the sensors see: ``scene_range`` around the LiDAR
+    horizontally, 20 m below to ``scene_range / 2`` above it."""
+    r = float(cfg.scene_range)
+    return np.array([-r, -r, -20.0]), np.array([r, r, max(r / 2.0, 20.0)])
+
+
+def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
+    """The camera arrays the sensors stage writes under ``cfg`` (the recorded path reads the raw
+    ones, written by the recorder, and never writes them)."""
+    from carlaocc.catalog.sensors import CAMERA_MAPS
+
+    raw = ("depth_raw", "semantic_raw", "instance_raw") if cfg.source == "raycast" else ()
+    return CAMERA_MAPS + raw
+
+
+def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
+    """The raw maps a recorder wrote for one camera and frame (depth_raw and semantic_raw are
+    required, instance_raw optional), with a clear error naming what is missing."""
+    from carlaocc.stages.sensors import CameraMaps
+
+    def read(name: str, required: bool):
+        # a stored chunk is the recorder's image (an all-zero image has no chunk: for depth and
+        # semantics of a road camera that is a frame the recorder did not write)
+        if sensors.exists(seq_id, cam.name, name, frame_index):
+            return sensors.read_image(seq_id, cam.name, frame_index, name)
+        if required:
+            raise StoreError(f"sensors.source is 'recorded' but sensors.zarr/{sensors.array_path(seq_id, cam.name, name)} "
+                             f"has no frame {frame_index}: a recorder must write depth_raw and semantic_raw "
+                             f"(see README, 'Recorded sensor input')")
+        return None
+
+    return CameraMaps(read("depth_raw", True).astype(np.float32, copy=False),
+                      read("semantic_raw", True).astype(np.uint8, copy=False), read("instance_raw", False))
+
+
+def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str, str]:
+    """Camera maps and LiDAR of one frame into sensors.zarr and lidar/: the raycast path renders
+    clean maps, simulates the raw ones and rectifies them; the recorded path rectifies the raw
+    maps already in sensors.zarr. Both write the rectified depth/semantic/instance, the D2NT
+    normals and a rectification record per camera."""
+    from carlaocc.catalog.sensors import LidarStore, SensorStore
+    from carlaocc.schemas.records import RectificationRecord
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.sensors import recorded_stats, rectify_cameras, simulate_frame
+    from carlaocc.stages.threads import kernel_threads
+
+    seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
+    rig = cfg.rig or RigConfig()
+    inputs = frame_inputs(store, seq_id, frame_index, sensor_region(cfg))
+    sensors = SensorStore(store)
+    cams = cfg.selected_cameras(rig)
+    outputs: dict[str, str] = {}
+    if cfg.source == "raycast":
+        frame = simulate_frame(inputs.scene, rig, cfg, nthreads=kernel_threads())
+        per_camera = {name: (cf.rectification, cf.normal, cf.raw, cf.stats) for name, cf in frame.cameras.items()}
+    else:
+        raw = {cam.name: _recorded_raw(sensors, seq_id, frame_index, cam) for cam in cams}
+        rect = rectify_cameras(inputs.scene, rig, cfg, raw, nthreads=kernel_threads())
+        per_camera = {name: (r, n, raw[name], recorded_stats(name, r, raw[name])) for name, (r, n) in rect.items()}
+        frame = None
+    records = []
+    for cam in cams:
+        rect, normal, raw, stats = per_camera[cam.name]
+        images = {"depth": rect.maps.depth, "semantic": rect.maps.semantic, "normal": normal.astype(np.float16)}
+        if rect.maps.instance is not None:
+            images["instance"] = rect.maps.instance
+        if cfg.source == "raycast":
+            images.update(depth_raw=raw.depth, semantic_raw=raw.semantic, instance_raw=raw.instance)
+        for name, data in images.items():
+            sensors.write_image(seq_id, cam.name, frame_index, name, data)
+        outputs.update(sensors.fingerprints(seq_id, cam.name, frame_index, tuple(images)))
+        records.append(RectificationRecord(sequence_id=seq_id, frame_index=frame_index, source=cfg.source,
+                                           **dataclasses.asdict(stats)))
+    if frame is not None and frame.lidar is not None:
+        lidar = LidarStore(store)
+        meta = {"lidar_to_world": inputs.frame.lidar_pose, "timestamp": inputs.frame.timestamp,
+                "channels": rig.lidar.channels, "range_m": rig.lidar.range_m}
+        outputs[lidar.path(seq_id, frame_index)] = lidar.save(seq_id, frame_index, frame.lidar, meta)
+    table = ParquetTable(store, RectificationRecord)
+    key = f"{seq_id}/{frame_index:04d}"
+    outputs[table.path(key)] = table.save(key, records)
+    return outputs
+
+
+SPEC = StageSpec(
+    name="sensors",
+    description="ray-cast camera maps and LiDAR, simulator artifacts, instance-guided rectification, normals",
+    upstream=("ingest", "scenes"),
+    reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)"),
+    writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "lidar/<seq>/",
+            "metrics/rectification/"),
+    partitions=sensors_partitions,
+    task=sensors_task,
+    prepare=_sensors_prepare,
+    config_of=sensors_config,
+)

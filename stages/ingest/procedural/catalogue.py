@@ -1,0 +1,229 @@
+"""The procedural catalogue and its driver: which builder makes each (category, sub-class), and
+:func:`ingest_procedural`, which runs every builder with its own seeded generator, moves the parts
+into the asset frame (origin at the bottom centre of the bounding box), derives content ids and
+describes the assets as records.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from carlaocc.schemas.configs import IngestConfig
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
+from carlaocc.schemas.records import AssetRecord, PartRecord
+from carlaocc.stages.geometry import geometry_hash, is_watertight, signed_volume, surface_area
+from carlaocc.stages.ingest.procedural.buildings import (
+    _apartment, _commercial, _garage, _gas_station, _house, _industrial, _office, _public, _religious,
+    _residential, _tower, _warehouse,
+)
+from carlaocc.stages.ingest.procedural.furniture import (
+    _barrier, _bench, _billboard, _bin, _bollard, _boxes, _bus_stop, _hydrant, _kiosk, _luggage, _mailbox,
+    _movable_bin, _phone_booth, _planter, _traffic_cone, _vending_machine,
+)
+from carlaocc.stages.ingest.procedural.people import _pedestrian, _rider
+from carlaocc.stages.ingest.procedural.poles import (
+    _flagpole, _overhead_signal, _pedestrian_signal, _sign, _street_light, _utility_pole, _vehicle_signal,
+)
+from carlaocc.stages.ingest.procedural.primitives import _ID, Builder
+from carlaocc.stages.ingest.procedural.two_wheelers import _parked
+from carlaocc.stages.ingest.procedural.vegetation import _bush, _conifer, _hedge, _palm, _tree
+from carlaocc.stages.ingest.procedural.vehicles import (
+    _bus, _car, _convertible, _double_decker, _locomotive, _metro, _pickup, _school_bus, _tram, _truck,
+)
+
+
+SOURCE = "procedural"
+LICENCE = "CC0-1.0 (generated)"
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """What the procedural source produces: one record per asset and per part, and the geometry
+    keyed by asset id (parts in the asset frame). ``AssetRecord.mesh_path`` is left empty: the
+    pipeline fills in the store path when it writes the mesh."""
+
+    assets: list[AssetRecord]
+    parts: list[PartRecord]
+    geometry: dict[str, AssetGeometry]
+
+
+# (category, sub-class, builder) of every procedural sub-class, in output order
+CATALOGUE: tuple[tuple[str, str, Builder], ...] = (
+    ("Building", "house", _house),
+    ("Building", "residential", _residential),
+    ("Building", "apartment", _apartment),
+    ("Building", "office", _office),
+    ("Building", "tower", _tower),
+    ("Building", "commercial", _commercial),
+    ("Building", "industrial", _industrial),
+    ("Building", "warehouse", _warehouse),
+    ("Building", "garage", _garage),
+    ("Building", "gas_station", _gas_station),
+    ("Building", "religious", _religious),
+    ("Building", "public", _public),
+    ("Pole", "street_light", _street_light),
+    ("Pole", "utility_pole", _utility_pole),
+    ("Pole", "flagpole", _flagpole),
+    ("TrafficLight", "vehicle_signal", _vehicle_signal),
+    ("TrafficLight", "pedestrian_signal", _pedestrian_signal),
+    ("TrafficLight", "overhead_signal", _overhead_signal),
+    ("TrafficSign", "stop", _sign("stop")),
+    ("TrafficSign", "speed_limit", _sign("speed_limit")),
+    ("TrafficSign", "yield", _sign("yield")),
+    ("TrafficSign", "warning", _sign("warning")),
+    ("TrafficSign", "direction", _sign("direction")),
+    ("TrafficSign", "no_entry", _sign("no_entry")),
+    ("TrafficSign", "one_way", _sign("one_way")),
+    ("TrafficSign", "pedestrian_crossing", _sign("pedestrian_crossing")),
+    ("TrafficSign", "parking", _sign("parking")),
+    ("Vegetation", "tree", _tree),
+    ("Vegetation", "conifer", _conifer),
+    ("Vegetation", "bush", _bush),
+    ("Vegetation", "palm", _palm),
+    ("Vegetation", "hedge", _hedge),
+    ("Pedestrian", "adult", _pedestrian("adult")),
+    ("Pedestrian", "child", _pedestrian("child")),
+    ("Rider", "cyclist", _rider("bicycle")),
+    ("Rider", "motorcyclist", _rider("motorcycle")),
+    ("Car", "sedan", _car("sedan")),
+    ("Car", "hatchback", _car("hatchback")),
+    ("Car", "suv", _car("suv")),
+    ("Car", "van", _car("van")),
+    ("Car", "coupe", _car("coupe")),
+    ("Car", "wagon", _car("wagon")),
+    ("Car", "minivan", _car("minivan")),
+    ("Car", "taxi", _car("taxi")),
+    ("Car", "police", _car("police")),
+    ("Car", "convertible", _convertible),
+    ("Car", "pickup", _pickup),
+    ("Truck", "box_truck", _truck("box_truck")),
+    ("Truck", "tanker", _truck("tanker")),
+    ("Truck", "fire_truck", _truck("fire_truck")),
+    ("Truck", "semi_truck", _truck("semi_truck")),
+    ("Truck", "garbage_truck", _truck("garbage_truck")),
+    ("Truck", "tow_truck", _truck("tow_truck")),
+    ("Truck", "cement_mixer", _truck("cement_mixer")),
+    ("Truck", "dump_truck", _truck("dump_truck")),
+    ("Bus", "city_bus", _bus("city_bus")),
+    ("Bus", "minibus", _bus("minibus")),
+    ("Bus", "coach", _bus("coach")),
+    ("Bus", "school_bus", _school_bus),
+    ("Bus", "double_decker", _double_decker),
+    ("Train", "tram", _tram),
+    ("Train", "metro", _metro),
+    ("Train", "train", _locomotive),
+    ("Motorcycle", "sport", _parked("sport")),
+    ("Motorcycle", "cruiser", _parked("cruiser")),
+    ("Motorcycle", "scooter", _parked("scooter")),
+    ("Motorcycle", "moped", _parked("moped")),
+    ("Bicycle", "city_bike", _parked("city_bike")),
+    ("Bicycle", "road_bike", _parked("road_bike")),
+    ("Bicycle", "mountain_bike", _parked("mountain_bike")),
+    ("Bicycle", "cargo_bike", _parked("cargo_bike")),
+    ("Static", "bench", _bench),
+    ("Static", "bin", _bin),
+    ("Static", "hydrant", _hydrant),
+    ("Static", "bus_stop", _bus_stop),
+    ("Static", "mailbox", _mailbox),
+    ("Static", "kiosk", _kiosk),
+    ("Static", "bollard", _bollard),
+    ("Static", "planter", _planter),
+    ("Static", "barrier", _barrier),
+    ("Static", "traffic_cone", _traffic_cone),
+    ("Static", "billboard", _billboard),
+    ("Static", "vending_machine", _vending_machine),
+    ("Static", "phone_booth", _phone_booth),
+    ("Dynamic", "movable_bin", _movable_bin),
+    ("Dynamic", "box", _boxes),
+    ("Dynamic", "luggage", _luggage),
+)
+
+
+# --------------------------------------------------------------------------------------------
+# standardization, identity, records
+# --------------------------------------------------------------------------------------------
+
+
+def _recentre(parts: list[MeshPart]) -> tuple[list[MeshPart], np.ndarray]:
+    """Move all parts so the asset's bounding box has its bottom centre at the origin; returns
+    the moved parts and the extent (x, y, z) in metres."""
+    allv = np.concatenate([p.vertices for p in parts])
+    lo, hi = allv.min(axis=0), allv.max(axis=0)
+    shift = np.array([-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]])
+    # round to 0.1 um so float noise of the primitives never leaks into ids or files
+    moved = [replace(p, vertices=np.round(p.vertices + shift, 7) + 0.0) for p in parts]
+    return moved, hi - lo
+
+
+def asset_id_for(category: str, subclass: str, parts: list[MeshPart]) -> str:
+    """Content-derived asset id: the first 16 hex digits of a SHA-256 over the category, the
+    sub-class and, per part, its name, class, material, transparency and its vertices (rounded
+    to 0.1 mm, little-endian float64) and faces (little-endian int64). Same geometry, same id."""
+    h = hashlib.sha256()
+    h.update(f"{category}\x00{subclass}\x00".encode())
+    for p in parts:
+        h.update(f"{p.name}\x00{p.semantic_id}\x00{p.material}\x00{int(p.transparent)}\x00".encode())
+        h.update((np.round(p.vertices, 4) + 0.0).astype("<f8").tobytes())
+        h.update(np.asarray(p.faces).astype("<i8").tobytes())
+    return h.hexdigest()[:16]
+
+
+def _variant_rng(seed: int, category: str, subclass: str, variant: int) -> np.random.Generator:
+    """Independent generator per (seed, category, sub-class, variant): adding a sub-class never
+    changes the others' draws."""
+    key = int.from_bytes(hashlib.sha256(f"{category}/{subclass}".encode()).digest()[:8], "little")
+    return np.random.default_rng(np.random.SeedSequence([seed & 0xFFFFFFFFFFFFFFFF, key, variant]))
+
+
+def _records(
+    category: str, subclass: str, variant: int, parts: list[MeshPart]
+) -> tuple[AssetRecord, list[PartRecord], AssetGeometry]:
+    """Standardize one asset's parts and describe them as records."""
+    parts, extent = _recentre(parts)
+    aid = asset_id_for(category, subclass, parts)
+    closed = tuple(is_watertight(p.faces) for p in parts)
+    asset = AssetRecord(
+        asset_id=aid, source=SOURCE, source_path=f"procedural://{category}/{subclass}/{variant}",
+        licence=LICENCE, category_id=_ID[category], category=category, subclass=subclass,
+        extent=[float(e) for e in extent],
+        vertex_count=int(sum(len(p.vertices) for p in parts)), face_count=int(sum(len(p.faces) for p in parts)),
+        part_count=len(parts), transparent_part_count=sum(p.transparent for p in parts),
+        surface_area=sum(surface_area(p.vertices, p.faces) for p in parts),
+        volume=sum(signed_volume(p.vertices, p.faces) for p in parts) if all(closed) else None,
+        watertight=all(closed), scale_applied=1.0, scale_rule="metric by construction",
+        geometry_hash=geometry_hash([(p.vertices, p.faces) for p in parts]), mesh_path="",
+    )  # fmt: skip
+    part_records = [
+        PartRecord(
+            asset_id=aid, part_index=k, name=p.name, material=p.material, transparent=p.transparent,
+            semantic_id=p.semantic_id, face_count=int(len(p.faces)), watertight=c,
+        )  # fmt: skip
+        for k, (p, c) in enumerate(zip(parts, closed))
+    ]
+    return asset, part_records, AssetGeometry(asset_id=aid, parts=tuple(parts), part_closed=closed)
+
+
+def ingest_procedural(config: IngestConfig) -> IngestResult:
+    """Generate the procedural asset library: ``config.variants_per_subclass`` seeded variants of
+    every sub-class of :data:`CATALOGUE`, standardized to the asset frame (metres, +X forward,
+    Z up, origin at the bottom centre). Deterministic: the same ``config.seed`` gives identical
+    records and vertex arrays. Records come in catalogue order, then variant order."""
+    if config.variants_per_subclass < 1:
+        raise ValueError(f"variants_per_subclass must be >= 1, got {config.variants_per_subclass}")
+    assets: list[AssetRecord] = []
+    parts: list[PartRecord] = []
+    geometry: dict[str, AssetGeometry] = {}
+    for category, subclass, build in CATALOGUE:
+        for variant in range(config.variants_per_subclass):
+            # draw this variant's sizes, build its parts, standardize and describe them
+            rng = _variant_rng(config.seed, category, subclass, variant)
+            asset, part_records, geom = _records(category, subclass, variant, build(rng))
+            if asset.asset_id in geometry:  # identical draws cannot happen with continuous ranges
+                raise ValueError(f"procedural asset {category}/{subclass}/{variant} duplicates {asset.asset_id}")
+            assets.append(asset)
+            parts.extend(part_records)
+            geometry[asset.asset_id] = geom
+    return IngestResult(assets=assets, parts=parts, geometry=geometry)

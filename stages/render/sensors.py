@@ -1,0 +1,126 @@
+"""Headless pictures of camera maps: depth, normals, semantics, instances, and the paper's
+rectification figure (raw vs rectified, repaired pixels highlighted).
+
+Inputs are the maps of :mod:`stages.sensors` ((H, W) depth float32 metres with 0 = no surface,
+semantic uint8, instance uint32, normal (H, W, 3) in the OpenCV camera frame); outputs are
+(H, W, 3) uint8 RGB images, deterministic (write them with ``catalog.images.save_png``).
+
+Colours: depth by inverse depth on a dark-to-bright ramp (near = bright, no surface = black);
+normals as ``(1 - n) / 2`` per channel (a surface facing the camera, n = (0, 0, -1), is light
+blue-violet; zero normals are black); semantics by the taxonomy palette; instances by
+:func:`stages.render.colours.instance_colors` with stuff in its class colour darkened to 40 %.
+In the rectification rows, pixels of the transparency region are tinted red and those of the
+omission region blue (the paper's figure).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.render.colours import instance_colors
+from carlaocc.stages.render.sheets import contact_sheet
+
+_DEPTH_T = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
+_DEPTH_RGB = np.array([[20, 12, 50], [95, 30, 120], [200, 60, 90], [250, 150, 50], [252, 250, 190]], dtype=np.float64)
+TRANSPARENCY_TINT = (230, 30, 30)
+OMISSION_TINT = (30, 90, 240)
+
+
+def depth_image(depth: np.ndarray, near: float = 1.0) -> np.ndarray:
+    """RGB of a depth map: ``t = near / depth`` (1 at ``near`` metres or closer) on the ramp;
+    no surface (0) black."""
+    d = np.asarray(depth, dtype=np.float64)
+    t = np.where(d > 0, np.clip(near / np.maximum(d, 1e-6), 0.0, 1.0), 0.0)
+    # a square root spreads the far range, where most pixels of a street are
+    t = np.sqrt(t)
+    rgb = np.stack([np.interp(t, _DEPTH_T, _DEPTH_RGB[:, c]) for c in range(3)], axis=-1)
+    rgb[d <= 0] = 0
+    return np.round(rgb).astype(np.uint8)
+
+
+def normal_image(normal: np.ndarray) -> np.ndarray:
+    """RGB of a normal map, ``(1 - n) / 2 * 255`` per channel; zero normals black."""
+    n = np.asarray(normal, dtype=np.float32)
+    rgb = np.round((1.0 - n) * 127.5).clip(0, 255).astype(np.uint8)
+    rgb[~np.any(n != 0, axis=-1)] = 0
+    return rgb
+
+
+def semantic_image(semantic: np.ndarray) -> np.ndarray:
+    """RGB of a semantic map by the taxonomy palette."""
+    pal = np.asarray(taxonomy.palette(), dtype=np.uint8)
+    return pal[np.asarray(semantic, dtype=np.intp).clip(0, len(pal) - 1)]
+
+
+def instance_image(semantic: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """RGB of an instance map: things by a colour hashed from the id, stuff by its darkened class
+    colour."""
+    rgb = (semantic_image(semantic).astype(np.float32) * 0.4).astype(np.uint8)
+    inst = np.asarray(instance)
+    things = inst > 0
+    rgb[things] = instance_colors(inst[things])
+    return rgb
+
+
+def highlight(image: np.ndarray, transparency: np.ndarray, omission: np.ndarray, strength: float = 0.6) -> np.ndarray:
+    """``image`` with the transparency region tinted red and the omission region blue."""
+    out = image.astype(np.float32)
+    for mask, tint in ((omission, OMISSION_TINT), (transparency, TRANSPARENCY_TINT)):
+        out[mask] = (1 - strength) * out[mask] + strength * np.asarray(tint, dtype=np.float32)
+    return np.round(out).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """One camera's maps to draw (raw maps None when there are none)."""
+
+    camera: str
+    depth: np.ndarray
+    semantic: np.ndarray
+    instance: np.ndarray | None
+    normal: np.ndarray
+    depth_raw: np.ndarray | None = None
+    semantic_raw: np.ndarray | None = None
+
+
+def repair_regions(view: CameraView, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+    """(transparency, omission) regions recomputed from stored maps: raw depth at least
+    ``epsilon`` behind the rectified depth (no raw surface counts as infinitely far), and the
+    empty raw label."""
+    d = np.where(view.depth > 0, view.depth, np.inf)
+    d_raw = np.where(view.depth_raw > 0, view.depth_raw, np.inf)
+    with np.errstate(invalid="ignore"):
+        transparency = (d_raw - d) >= epsilon
+    return transparency, view.semantic_raw == 0
+
+
+def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int = 2) -> np.ndarray:
+    """The contact sheet of a frame: a column per camera, rows depth, normals, semantics,
+    instances and, where raw maps exist, raw depth / rectified depth / raw semantics / rectified
+    semantics with the repaired pixels highlighted. Images are subsampled by ``step``."""
+    if not views:
+        raise ValueError("no camera maps to draw")
+    s = slice(None, None, max(int(step), 1))
+    rows: list[tuple[str, list[np.ndarray]]] = [
+        ("depth", [depth_image(v.depth[s, s]) for v in views]),
+        ("normal", [normal_image(v.normal[s, s]) for v in views]),
+        ("semantic", [semantic_image(v.semantic[s, s]) for v in views]),
+    ]
+    if all(v.instance is not None for v in views):
+        rows.append(("instance", [instance_image(v.semantic[s, s], v.instance[s, s]) for v in views]))
+    if all(v.depth_raw is not None and v.semantic_raw is not None for v in views):
+        regions = [repair_regions(v, epsilon) for v in views]
+        rows += [
+            ("raw depth", [highlight(depth_image(v.depth_raw[s, s]), t[s, s], o[s, s]) for v, (t, o) in zip(views, regions)]),
+            ("rectified depth", [depth_image(v.depth[s, s]) for v in views]),
+            ("raw semantic", [highlight(semantic_image(v.semantic_raw[s, s]), t[s, s], o[s, s])
+                              for v, (t, o) in zip(views, regions)]),
+            ("rectified semantic", [semantic_image(v.semantic[s, s]) for v in views]),
+        ]
+    images = [im for _, ims in rows for im in ims]
+    labels = [f"{v.camera} {name}" for name, _ in rows for v in views]
+    return contact_sheet(images, labels, columns=len(views))
