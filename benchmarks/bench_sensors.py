@@ -8,7 +8,7 @@ OpenCV inside D2NT):
 * **rays/s**: the six rig cameras (6 x 1408 x 376 = 3.18 M rays) cast through a default-town
   frame's panoptic scene (everything within ``sensors.scene_range``), by open3d's
   ``RaycastingScene.cast_rays`` alone on the same triangles and rays (no labels: the ceiling),
-  by our :func:`~stages.sensors.raycast.render_camera` for the clean maps (cast + planar depth +
+  by our :func:`~carlaocc.stages.sensors.raycast.render_camera` for the clean maps (cast + planar depth +
   semantic/instance lookups) and for clean + raw maps (rays continued through glass);
 * **s/frame**: one whole ``sensors_task`` (frame assembly from the store, BVH build, six cameras
   clean and raw, the compact mesh and the rectification, D2NT normals, the 32-beam LiDAR, every

@@ -10,14 +10,14 @@ A synthetic street scene in the LiDAR frame (ground at z = -1.73 m, ~40 building
 trees; several hundred thousand triangles, made with ``trimesh.creation``) is voxelized over the
 default region (x [-25.6, 51.2], y [-25.6, 25.6], z [-3, 10] m):
 
-* surface at 0.2 m and 0.05 m: ``stages.voxelize.surface_voxels`` against
+* surface at 0.2 m and 0.05 m: ``carlaocc.stages.voxelize.surface_voxels`` against
   ``open3d.geometry.VoxelGrid.create_from_triangle_mesh_within_bounds`` plus the index extraction
   through ``get_voxels()``; both get the same mesh, pre-culled to the region. Reported: seconds,
   speed ratio and the IoU of the two voxel sets (open3d's out-of-bounds voxels dropped).
-* solid fill of one building at 0.1 m: ``stages.voxelize.fill_interior`` against
+* solid fill of one building at 0.1 m: ``carlaocc.stages.voxelize.fill_interior`` against
   ``open3d.t.geometry.RaycastingScene.compute_occupancy`` on the voxel centres.
 * the whole frame composed tile by tile, and its visibility masks for the default rig (every
-  camera pixel, every LiDAR beam): fans (``stages.voxelize.visibility``, algorithm 2) against the
+  camera pixel, every LiDAR beam): fans (``carlaocc.stages.voxelize.visibility``, algorithm 2) against the
   same rays traced one by one by the 3D DDA (algorithm 1), with the voxels on which they differ.
 * the whole frame composed (``voxelize_scene``: fusion, elevation order, fills) for reference.
 

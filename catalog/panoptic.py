@@ -21,7 +21,7 @@ Layout (glTF 2.0 binary, written here without a glTF library so that every byte 
   alpha :data:`TRANSPARENT_ALPHA` with ``alphaMode: BLEND`` for transparent parts; double-sided
   (stuff is open surfaces).
 * Axes: our frames are Z-up, glTF is Y-up: positions are stored as ``(x, z, -y)`` exactly as
-  :mod:`catalog.meshes` does and converted back on load. Positions are float32 (glTF has no
+  :mod:`carlaocc.catalog.meshes` does and converted back on load. Positions are float32 (glTF has no
   float64), so a round trip changes a vertex by float32 rounding only; ids are exact.
 * Scene ``extras``: ``{"format": "carlaocc-panoptic", "version": 1, "taxonomy_version", "faces"}``.
 """

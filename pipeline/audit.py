@@ -1,12 +1,12 @@
 """``carlaocc audit FORMAT PATH... [--poses FILE] [--calib FILE]``: the paper's quality scores
 (section 4.2, Table 4) of other occupancy datasets.
 
-The wiring: the format's layout (:data:`catalog.formats.FORMATS`, its table of files, grids,
-label conventions and sequences in :mod:`catalog.formats.layout`) collects the files under each
-PATH and groups them into sequences; :mod:`catalog.formats.poses` reads ``--poses`` (keyed by frame
+The wiring: the format's layout (:data:`carlaocc.catalog.formats.FORMATS`, its table of files, grids,
+label conventions and sequences in :mod:`carlaocc.catalog.formats.layout`) collects the files under each
+PATH and groups them into sequences; :mod:`carlaocc.catalog.formats.poses` reads ``--poses`` (keyed by frame
 or one per listed frame; with ``--calib``, KITTI camera-0 poses are turned into LiDAR poses
 ``inv(Tr) @ P @ Tr``) and gives each frame its pose; :func:`audit` then reads the frames one at a
-time and scores them with :mod:`stages.quality`: ``s_sc`` per frame and over all frames (the
+time and scores them with :mod:`carlaocc.stages.quality`: ``s_sc`` per frame and over all frames (the
 labels as published), ``s_tc`` per pair of consecutive posed frames **within** one sequence (its
 counts summed over the sequences), the format's dynamic classes excluded, its visibility mask
 applied where both frames have one. :func:`format_table` prints the paper's columns; ``--json``

@@ -21,7 +21,7 @@ Layouts written under ``OUT``:
   modulo 1000, or a class id above 31 is refused (clear error) rather than wrapped.
 
 The grids of the other datasets are filled from ours by class-priority binning
-(:func:`stages.voxelize.resample.resample`); export from the finest resolution you built.
+(:func:`carlaocc.stages.voxelize.resample.resample`); export from the finest resolution you built.
 """
 
 from __future__ import annotations

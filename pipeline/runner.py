@@ -54,7 +54,7 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
     """Run one partition of a stage; never raises (a failure is a result with its error).
 
     ``kernel_threads`` caps the kernels' threads in this process (numba, open3d, OpenCV: see
-    :mod:`stages.threads`): a LocalCluster already runs one worker process per core, so its
+    :mod:`carlaocc.stages.threads`): a LocalCluster already runs one worker process per core, so its
     kernels run single-threaded instead of oversubscribing.
     """
     if kernel_threads:

@@ -5,7 +5,7 @@ Two sides of the ingest stage:
 * **Source side** (what a catalog source adapter reads, before standardization):
   :class:`SourceAsset` made of :class:`SourcePart` s, in the SOURCE's own frame and units, with
   what the source declares about them (:data:`Axis` up and forward, :data:`Units`).
-  ``catalog.sources`` adapters return it; ``stages.ingest.standardize`` accepts it.
+  ``carlaocc.catalog.sources`` adapters return it; ``carlaocc.stages.ingest.standardize`` accepts it.
 * **Standardized side** (what every later stage consumes): :class:`MeshPart` s in the asset frame
   (metres, +X forward, +Y left, Z up, origin at the bottom centre of the asset's bounding box),
   grouped per asset as :class:`AssetGeometry`, and placed into one frame's panoptic scene as

@@ -1,7 +1,7 @@
 """Persisted records: one pydantic model per Parquet table of the store.
 
 Field types are kept to what maps one-to-one onto Arrow (str, int, float, bool, list[float],
-list[int], optional scalars, datetime) so that ``catalog.parquet`` converts every model generically
+list[int], optional scalars, datetime) so that ``carlaocc.catalog.parquet`` converts every model generically
 and every model round-trips. Poses are 4x4 float64 matrices flattened row-major into 16 floats
 ("sensor-to-world" or "object-to-world"); lengths in metres, times in seconds, angles in radians.
 """

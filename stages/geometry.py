@@ -2,7 +2,7 @@
 
 Small pure numpy functions in the trimesh style over ``(N, 3)`` float64 vertices and ``(M, 3)``
 int64 faces (the mesh types themselves, :class:`~carlaocc.schemas.meshes.MeshPart` and friends,
-live in ``schemas.meshes``). Units are metres; poses are 4x4 float64 homogeneous matrices mapping
+live in ``carlaocc.schemas.meshes``). Units are metres; poses are 4x4 float64 homogeneous matrices mapping
 a source frame into a target frame (``p_target = T @ p_source``).
 """
 

@@ -1,20 +1,20 @@
 """Readers and writers of the external occupancy formats that models train on.
 
 One module per format, each with ``save_*`` / ``load_*`` (one place per format), a
-``load_*_grid`` reading a frame as a :class:`~catalog.formats.layout.LabelGrid` for the quality
+``load_*_grid`` reading a frame as a :class:`~carlaocc.catalog.formats.layout.LabelGrid` for the quality
 scores, and its ``*_FORMAT`` layout (file ending, sequences, class names; :data:`FORMATS` by name):
 
-* :mod:`catalog.formats.occ3d` -- Occ3D-nuScenes ``labels.npz`` (dense uint8, ego frame).
-* :mod:`catalog.formats.semantickitti` -- SemanticKITTI SSC voxels (``.bin/.invalid/.occluded``
+* :mod:`carlaocc.catalog.formats.occ3d` -- Occ3D-nuScenes ``labels.npz`` (dense uint8, ego frame).
+* :mod:`carlaocc.catalog.formats.semantickitti` -- SemanticKITTI SSC voxels (``.bin/.invalid/.occluded``
   bit-packed grids, ``.label`` uint16), LiDAR frame.
-* :mod:`catalog.formats.surroundocc` -- SurroundOcc sparse ``(N, 4)`` voxel rows, LiDAR frame.
-* :mod:`catalog.formats.carlaocc_npz` -- the published CarlaOcc ``.npz`` (``sem << 11 | inst``).
+* :mod:`carlaocc.catalog.formats.surroundocc` -- SurroundOcc sparse ``(N, 4)`` voxel rows, LiDAR frame.
+* :mod:`carlaocc.catalog.formats.carlaocc_npz` -- the published CarlaOcc ``.npz`` (``sem << 11 | inst``).
 
 Shared by the audit of these datasets:
 
-* :mod:`catalog.formats.layout` -- :class:`DatasetFormat` (how a format lies on disk),
+* :mod:`carlaocc.catalog.formats.layout` -- :class:`DatasetFormat` (how a format lies on disk),
   :class:`LabelGrid`, collecting a dataset's files, grouping them into sequences, reading a frame.
-* :mod:`catalog.formats.poses` -- pose files (``.npy``, ``.json`` keyed by frame, KITTI
+* :mod:`carlaocc.catalog.formats.poses` -- pose files (``.npy``, ``.json`` keyed by frame, KITTI
   ``poses.txt`` and ``calib.txt``) and the sequences their frames form with them.
 
 Conventions shared by every module:

@@ -225,4 +225,4 @@ def load_carlaocc_grid(path: Path) -> LabelGrid:
 CARLAOCC_NPZ_FORMAT = DatasetFormat(
     "carlaocc-npz", "CarlaOcc", ".npz", load_carlaocc_grid, tuple(c.name for c in taxonomy.CLASSES),
     lambda i: i, taxonomy.dynamic_ids(), "none")
-"""The published CarlaOcc ``.npz`` layout (:mod:`catalog.formats.layout`)."""
+"""The published CarlaOcc ``.npz`` layout (:mod:`carlaocc.catalog.formats.layout`)."""

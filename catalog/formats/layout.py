@@ -2,7 +2,7 @@
 into sequences, and how one frame reads into a label grid for the quality scores.
 
 Each format module describes its layout with a :class:`DatasetFormat` (the registry is
-:data:`catalog.formats.FORMATS`):
+:data:`carlaocc.catalog.formats.FORMATS`):
 
 ==============  =========================  ======================================  =====================
 format          files collected            grid (origin m, voxel m), frame          visibility mask

@@ -6,7 +6,7 @@ the CVPR2023-3D-Occupancy-Prediction repository):
 * a **compressed** npz (zip members deflated, as written by ``np.savez_compressed``) holding,
   in this order, ``semantics``, ``mask_lidar``, ``mask_camera``;
 * each array ``uint8``, shape ``(200, 200, 16)``, C order, indexed ``[x, y, z]``;
-* ``semantics``: Occ3D class ids 0-17 (:data:`schemas.taxonomy.OCC3D_NUSCENES_NAMES`), 17 = free;
+* ``semantics``: Occ3D class ids 0-17 (:data:`carlaocc.schemas.taxonomy.OCC3D_NUSCENES_NAMES`), 17 = free;
 * ``mask_lidar`` / ``mask_camera``: 1 where the voxel is observed by the LiDAR / the cameras,
   else 0.
 
@@ -130,4 +130,4 @@ OCC3D_FORMAT = DatasetFormat(
     tuple(_NAMES.index(n) + 1 for n in NUSCENES_DYNAMIC), "mask_camera",
     # gts/<scene>/<sample_token>/labels.npz: the scene is the sequence, the token names the frame
     sequence=lambda p: p.parent.parent, numbered=False, token=lambda p: p.parent.name)
-"""The Occ3D-nuScenes layout (:mod:`catalog.formats.layout`)."""
+"""The Occ3D-nuScenes layout (:mod:`carlaocc.catalog.formats.layout`)."""

@@ -8,7 +8,7 @@
   directory holding ``labels.npz``; other formats: the file name without its ending, e.g.
   ``000005``), or the file's path relative to the path argument it was found under
   (``scene-0001/0b22/labels.npz``), or the path as listed.
-* **One pose per frame in the order the files are listed** (:func:`catalog.formats.layout.group_sequences`):
+* **One pose per frame in the order the files are listed** (:func:`carlaocc.catalog.formats.layout.group_sequences`):
   ``.npy`` of shape (N, 4, 4), (N, 3, 4), (N, 16) or (N, 12); ``.json`` a list of such matrices
   or ``{"poses": [...]}``; any other file is text with one pose per line, 12 (3x4, KITTI
   ``poses.txt``) or 16 (4x4) numbers row-major (blank and ``#`` lines skipped).

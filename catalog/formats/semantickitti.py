@@ -190,4 +190,4 @@ SEMANTICKITTI_FORMAT = DatasetFormat(
     lambda i: i, tuple(range(1, 9)), "not .invalid",
     # voxel scans only: the point-cloud labels/*.label of a sequence have no .invalid beside them
     accept=lambda p: p.with_suffix(".invalid").is_file())
-"""The SemanticKITTI voxel layout (:mod:`catalog.formats.layout`)."""
+"""The SemanticKITTI voxel layout (:mod:`carlaocc.catalog.formats.layout`)."""

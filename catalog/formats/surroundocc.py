@@ -163,4 +163,4 @@ SURROUNDOCC_NAMES: tuple[str, ...] = ("noise",) + taxonomy.OCC3D_NUSCENES_NAMES[
 SURROUNDOCC_FORMAT = DatasetFormat(
     "surroundocc", "SurroundOcc", ".npy", load_surroundocc_grid, SURROUNDOCC_NAMES, lambda i: i - 1,
     tuple(SURROUNDOCC_NAMES.index(n) + 1 for n in NUSCENES_DYNAMIC), "none")
-"""The SurroundOcc layout (:mod:`catalog.formats.layout`)."""
+"""The SurroundOcc layout (:mod:`carlaocc.catalog.formats.layout`)."""

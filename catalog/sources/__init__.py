@@ -1,8 +1,8 @@
-"""External mesh sources: one adapter per layout, all behind :class:`catalog.sources.base.SourceAdapter`.
+"""External mesh sources: one adapter per layout, all behind :class:`carlaocc.catalog.sources.base.SourceAdapter`.
 
 Each adapter lists a source root as items and reads one item into a
 :class:`~carlaocc.schemas.meshes.SourceAsset` (parts in the source's own frame and units);
-``stages.ingest.standardize`` makes it an ADMesh asset.
+``carlaocc.stages.ingest.standardize`` makes it an ADMesh asset.
 
 * ``base``        — the adapter interface: ``SourceItem``, ``SourceError``, ``SourceAdapter``.
 * ``registry``    — adapter kinds by name (``adapter("folder", category_map=...)``).

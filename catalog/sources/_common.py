@@ -5,7 +5,7 @@ Mesh files (:func:`load_parts`)
     ``.glb``/``.gltf``/``.obj``/``.ply``/``.stl``/``.off`` load with trimesh
     (``force="scene"``); every geometry node of the scene graph becomes one part with the node's
     world transform applied (a mirroring transform also reverses the triangle winding, so outward
-    normals stay outward). ``.dae`` loads with :mod:`catalog.sources._collada` (trimesh needs the
+    normals stay outward). ``.dae`` loads with :mod:`carlaocc.catalog.sources._collada` (trimesh needs the
     optional pycollada for it). Non-indexed triangles (every corner its own vertex) are indexed by
     welding bit-identical positions; indexed meshes are kept as they are.
 
@@ -15,7 +15,7 @@ Materials
     uses ``KHR_materials_transmission`` with a factor > 0 (glass authored physically).
     ``MASK`` (cut-outs) is not transparent. Trimesh materials are matched to the glTF materials by
     name, ties broken by colour factor and alpha mode.
-    OBJ: the MTL is parsed here (:func:`catalog.sources._obj.parse_mtl`): ``d < 1`` or ``Tr > 0``.
+    OBJ: the MTL is parsed here (:func:`carlaocc.catalog.sources._obj.parse_mtl`): ``d < 1`` or ``Tr > 0``.
 
 Texture references (``SourcePart.texture``)
     Kept by reference, never decoded: the image path relative to the mesh file's directory

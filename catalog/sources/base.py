@@ -2,10 +2,10 @@
 
 An adapter lists a source root as :class:`SourceItem` s (one per source object: a file, a model
 folder, a CSV row, a scene object...) and reads one item into a
-:class:`~carlaocc.schemas.meshes.SourceAsset` (the contract ``stages.ingest.standardize`` accepts):
+:class:`~carlaocc.schemas.meshes.SourceAsset` (the contract ``carlaocc.stages.ingest.standardize`` accepts):
 triangle parts in the SOURCE's own frame and units, with what the source declares about them (up and
 forward axes, units, category, licence). Standardization (frame, units, cleaning, validation)
-happens later, in ``stages.ingest.standardize``; adapters only read and describe.
+happens later, in ``carlaocc.stages.ingest.standardize``; adapters only read and describe.
 
 A problem with one item raises :class:`SourceError` (reason + hint): the batch quarantines that
 item and goes on.

@@ -62,7 +62,7 @@ Conversion (here, once)
 Labels
     ``semantic_tag`` is a CARLA ``CityObjectLabel``: a name (``"TrafficLight"``, the Python enum
     spellings ``"Poles"``... too, any case) or an id of CARLA UE5 0.10, whose ids are our
-    taxonomy's (``schemas.taxonomy``). CARLA 0.9.x numbered its labels differently: write names
+    taxonomy's (``carlaocc.schemas.taxonomy``). CARLA 0.9.x numbered its labels differently: write names
     for exports from it.
 
 Reading

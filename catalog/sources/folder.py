@@ -29,7 +29,7 @@ Declarations
     units ``"unknown"`` unless the map says otherwise, for every format, glTF included: the glTF
     spec says metres, but game kits (Kenney's are ~1 unit per road tile) use arbitrary units, so
     sizes are inferred from the sub-class size range downstream. Axes default by format
-    (:func:`catalog.sources._common.default_axes`): glTF +y up / +z forward (the spec), COLLADA
+    (:func:`carlaocc.catalog.sources._common.default_axes`): glTF +y up / +z forward (the spec), COLLADA
     from its ``<up_axis>``, others +z / +x.
 
 Licence

@@ -1,7 +1,7 @@
 """``carlaocc eval ssc|panoptic|depth|det``: score a model's predictions against ground truth.
 
 Reads prediction and ground-truth files, feeds them frame by frame to the accumulators of
-:mod:`stages.evaluation`, prints a table and optionally writes the full result as JSON.
+:mod:`carlaocc.stages.evaluation`, prints a table and optionally writes the full result as JSON.
 
 Inputs (``--pred`` and ``--gt`` are both files, or both directories):
 

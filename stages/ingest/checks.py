@@ -1,7 +1,7 @@
 """What makes a source asset unusable before any geometry work, and how that is said.
 
 :class:`Rejection` (a reason for the quarantine table and a hint to fix it) is what every step
-of ``stages.ingest.standardize`` returns for bad data; bad data never raises. The checks here are
+of ``carlaocc.stages.ingest.standardize`` returns for bad data; bad data never raises. The checks here are
 the first two steps: the asset's class (:func:`check_category`) and each part's arrays
 (:func:`check_arrays`).
 """

@@ -39,7 +39,7 @@ Steps, in order:
    to 0.1 um so float noise never reaches hashes or files.
 7. **Plausibility.** The measured dimension outside ``[min / 3, max * 3]`` -> ``"absurd size"``
    (the hint names the size, the range and the scale rule).
-8. **Watertightness, per part** with :func:`stages.geometry.is_watertight`. A part that is closed
+8. **Watertightness, per part** with :func:`carlaocc.stages.geometry.is_watertight`. A part that is closed
    (every undirected edge shared by exactly two faces) but inconsistently wound is re-wound by a
    breadth-first walk over its faces; closed bodies whose signed volume is negative (inside out)
    are flipped unless they lie inside another body of the part (an inner shell of a hollow solid

@@ -1,5 +1,5 @@
 """Headless asset previews: RGB images of mesh parts, drawn with the shared rasterizer of
-:mod:`stages.render.raster` (no GUI, no OpenGL, no imaging library).
+:mod:`carlaocc.stages.render.raster` (no GUI, no OpenGL, no imaging library).
 
 Camera and shading (:func:`render_asset`):
 

@@ -5,7 +5,7 @@ Colouring ``mode`` (:data:`MODES`):
 * ``"instance"`` (the default, panoptic): stuff by its class colour, every voxel with a nonzero
   instance id (things) by a colour hashed from the id (:func:`instance_colors`: saturated,
   deterministic, independent of the frame, so one object keeps its colour over a sequence);
-* ``"semantic"``: every voxel by its class colour (:func:`schemas.taxonomy.palette`);
+* ``"semantic"``: every voxel by its class colour (:func:`carlaocc.schemas.taxonomy.palette`);
 * ``"height"``: a blue-to-red ramp over the height of the voxel centre.
 """
 

@@ -1,10 +1,10 @@
-"""Figures of occupancy frames, composed of the views of :mod:`stages.render.occupancy`.
+"""Figures of occupancy frames, composed of the views of :mod:`carlaocc.stages.render.occupancy`.
 
 :func:`occupancy_figure`: one frame at a glance, a title strip over the BEV, the 3D view and a
 legend of the classes present. :func:`multi_resolution_figure`: one column per resolution, the
 3D view and the BEV of the same metric window around the ego, the BEV nearest-neighbour sampled
 to a common pixel size so coarse voxels show as bigger blocks. Inputs as in
-:mod:`stages.render.occupancy` (``[x, y, z]`` grids, LiDAR frame, metres); outputs ``(H, W, 3)``
+:mod:`carlaocc.stages.render.occupancy` (``[x, y, z]`` grids, LiDAR frame, metres); outputs ``(H, W, 3)``
 uint8 RGB, deterministic.
 """
 

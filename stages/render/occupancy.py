@@ -3,8 +3,8 @@
 Inputs are the dense grid arrays indexed ``[x, y, z]`` in the LiDAR frame (x forward, y left,
 z up, metres): ``semantic`` (uint8; 0 = free, class ids 1..29) and ``instance`` (uint32; 0 = stuff
 or free, ``None`` for none), on a :class:`GridSpec`. Outputs are ``(H, W, 3)`` uint8 RGB images
-(write them with ``catalog.images.save_png``), coloured by ``mode`` as in
-:mod:`stages.render.colours`. Everything is numpy + numba (no plotting library) and
+(write them with ``carlaocc.catalog.images.save_png``), coloured by ``mode`` as in
+:mod:`carlaocc.stages.render.colours`. Everything is numpy + numba (no plotting library) and
 deterministic: the same inputs give identical bytes.
 
 Bird's-eye view (:func:`bev_height_map`): one pixel per (x, y) column, image up = +x (forward),
@@ -22,7 +22,7 @@ voxel of every block of columns.
 above the ego, framing the occupied voxels (or ``bounds``). Only surface voxels are drawn (occupied
 with a free 6-neighbour; outside the grid counts as free), and of them only the exposed faces
 turned towards the camera, as two triangles each through the shared rasterizer
-(:func:`stages.render.raster.fill_triangle`), flat Lambert shaded per face direction with the key
+(:func:`carlaocc.stages.render.raster.fill_triangle`), flat Lambert shaded per face direction with the key
 light and the ambient/diffuse split of the asset previews. With ``outline`` a face of at least a
 few pixels gets a thin darker border, so voxel size stays visible on flat areas. **Pooling:** when
 the grid (after cropping to ``bounds``) has more than ``max_voxels`` voxels it is pooled by the
@@ -31,7 +31,7 @@ when any of its voxels is and takes the class and instance of its top-most occup
 (:func:`pool_occupancy`). The default budget (64 M) pools a 0.05 m default-size frame (409 M
 voxels) by 2, to 0.1 m voxels (about a pixel at 960 px wide).
 
-The figures built from these views are in :mod:`stages.render.figures`.
+The figures built from these views are in :mod:`carlaocc.stages.render.figures`.
 """
 
 from __future__ import annotations
@@ -566,7 +566,7 @@ def perspective_view(
     outline: bool = True,
 ) -> np.ndarray:
     """3D view of the occupied voxels as shaded cubes: ``size`` = ``(height, width)`` (as
-    for every picture of :mod:`stages.render`) uint8 RGB.
+    for every picture of :mod:`carlaocc.stages.render`) uint8 RGB.
 
     The camera looks from ``azimuth_deg`` (about +z, from +x towards +y; 180 = from behind the ego)
     and ``elevation_deg`` (above the horizon) with a vertical field of view ``fov_deg`` (0 for an

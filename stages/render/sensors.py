@@ -1,14 +1,14 @@
 """Headless pictures of camera maps: depth, normals, semantics, instances, and the paper's
 rectification figure (raw vs rectified, repaired pixels highlighted).
 
-Inputs are the maps of :mod:`stages.sensors` ((H, W) depth float32 metres with 0 = no surface,
+Inputs are the maps of :mod:`carlaocc.stages.sensors` ((H, W) depth float32 metres with 0 = no surface,
 semantic uint8, instance uint32, normal (H, W, 3) in the OpenCV camera frame); outputs are
-(H, W, 3) uint8 RGB images, deterministic (write them with ``catalog.images.save_png``).
+(H, W, 3) uint8 RGB images, deterministic (write them with ``carlaocc.catalog.images.save_png``).
 
 Colours: depth by inverse depth on a dark-to-bright ramp (near = bright, no surface = black);
 normals as ``(1 - n) / 2`` per channel (a surface facing the camera, n = (0, 0, -1), is light
 blue-violet; zero normals are black); semantics by the taxonomy palette; instances by
-:func:`stages.render.colours.instance_colors` with stuff in its class colour darkened to 40 %.
+:func:`carlaocc.stages.render.colours.instance_colors` with stuff in its class colour darkened to 40 %.
 In the rectification rows, pixels of the transparency region are tinted red and those of the
 omission region blue (the paper's figure).
 """

@@ -1,6 +1,6 @@
 """Plots of the dataset statistics and quality scores, as PNG bytes (matplotlib, headless).
 
-Every function takes counts or records (see :mod:`stages.report.statistics`) and returns the
+Every function takes counts or records (see :mod:`carlaocc.stages.report.statistics`) and returns the
 PNG of one figure. Figures are made with :class:`matplotlib.figure.Figure` and the Agg canvas,
 never through ``pyplot``: no global state, no display, safe in worker threads. The PNGs carry no
 software/version metadata, so the same counts give the same bytes with the same matplotlib.

@@ -14,7 +14,7 @@ Implements the selection of the paper's "Mesh-Based Scene Reconstruction" for on
    the frame's ego pose (1 cm, 1e-3 rad; and, when ``ego_asset_id`` is given, using that asset)
    is dropped.
 3. **Move into the LiDAR frame** with ``inverse(lidar_pose) @ object_pose`` and emit one
-   :class:`~schemas.meshes.SceneMesh` per asset part, with the rules of the former
+   :class:`~carlaocc.schemas.meshes.SceneMesh` per asset part, with the rules of the former
    ``compose_frame_scene``:
 
    * stuff parts (taxonomy stuff classes) are surfaces (``closed=False``, instance 0), culled
@@ -397,7 +397,7 @@ class PanopticMesh:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(vertices, faces, semantic, instance, transparent)``, the arguments of
-        ``catalog.panoptic.panoptic_glb_bytes``."""
+        ``carlaocc.catalog.panoptic.panoptic_glb_bytes``."""
         return self.vertices, self.faces, self.semantic, self.instance, self.transparent
 
 

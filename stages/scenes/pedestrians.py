@@ -1,6 +1,6 @@
 """Pedestrians posed by gait-phase matching (the paper's Skeletal Motion Analyzer, applied).
 
-Pure numpy on arrays and :class:`~schemas.meshes.AssetGeometry`; nothing here opens a file.
+Pure numpy on arrays and :class:`~carlaocc.schemas.meshes.AssetGeometry`; nothing here opens a file.
 
 Two halves:
 

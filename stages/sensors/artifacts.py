@@ -1,5 +1,5 @@
 """The simulator artifact model: which meshes of a frame a UE5 CARLA semantic pass leaves
-unlabelled (see :class:`schemas.configs.SimulatorArtifacts`).
+unlabelled (see :class:`carlaocc.schemas.configs.SimulatorArtifacts`).
 
 An asset is unlabelled when its class is listed in ``unlabelled_classes`` (all its meshes, stuff
 included), or when it is a thing whose stable hash falls below ``unlabelled_fraction``: the

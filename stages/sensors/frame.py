@@ -3,7 +3,7 @@
 Two paths share :func:`rectify_cameras`:
 
 * **raycast** (:func:`simulate_frame`): cast the whole scene for clean maps, derive the raw maps
-  a simulator would deliver (:mod:`stages.sensors.artifacts`), rectify those, compute normals
+  a simulator would deliver (:mod:`carlaocc.stages.sensors.artifacts`), rectify those, compute normals
   from the rectified depth, cast the LiDAR, and measure how far the rectified maps are from the
   clean ones (:class:`CameraStats`);
 * **recorded**: the caller reads raw maps a recorder wrote and calls :func:`rectify_cameras`

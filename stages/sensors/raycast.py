@@ -1,6 +1,6 @@
 """Ray casting a frame's panoptic scene: camera depth/semantic/instance maps and LiDAR points.
 
-The scene is one :class:`~stages.scenes.assembly.PanopticMesh` (per-triangle semantic, instance
+The scene is one :class:`~carlaocc.stages.scenes.assembly.PanopticMesh` (per-triangle semantic, instance
 and transparent flags) in the LiDAR frame (metres, x forward, y left, z up), cast through
 open3d's Embree-backed :class:`open3d.t.geometry.RaycastingScene`. A hit's triangle index turns
 into labels by one vectorized lookup per map.
@@ -263,7 +263,7 @@ def _lidar_beams(lidar: LidarSpec) -> tuple[np.ndarray, np.ndarray]:
 
 def lidar_scan(scene: RayScene, lidar: LidarSpec, nthreads: int = 0) -> dict[str, np.ndarray]:
     """One sweep of the rig's LiDAR from the scene frame's origin (the scene is in the LiDAR
-    frame): the beams of :func:`~stages.voxelize.visibility.lidar_directions` (channels x
+    frame): the beams of :func:`~carlaocc.stages.voxelize.visibility.lidar_directions` (channels x
     ``points_per_frame // channels`` azimuths), first hit of any surface within ``range_m``.
 
     Returns columns x, y, z, distance (float32, m, LiDAR frame), semantic (uint8), instance

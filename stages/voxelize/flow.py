@@ -121,7 +121,7 @@ def actor_voxels(instance: np.ndarray, things: np.ndarray, instance_ids: np.ndar
     """(flat C-order indices, actor rows) of the voxels of ``instance`` (X, Y, Z) that belong to
     the actors ``instance_ids``, looked for only inside the boxes ``things`` (rows (instance, i0,
     i1, j0, j1, k0, k1), half-open voxel boxes that hold every voxel of their instance, e.g.
-    :attr:`stages.voxelize.compose.Tile.things`). Ascending indices per actor, actors in the order
+    :attr:`carlaocc.stages.voxelize.compose.Tile.things`). Ascending indices per actor, actors in the order
     of ``instance_ids``."""
     inst = np.ascontiguousarray(instance)
     ids = np.asarray(instance_ids, dtype=np.int64).reshape(-1)

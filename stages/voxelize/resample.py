@@ -2,7 +2,7 @@
 
 Frames and units
 ----------------
-Our volumes live on a :class:`~schemas.grid.GridSpec`: the LiDAR frame (x forward, y left, z up,
+Our volumes live on a :class:`~carlaocc.schemas.grid.GridSpec`: the LiDAR frame (x forward, y left, z up,
 metres, origin at the LiDAR, 1.73 m above the ground); voxel ``(i, j, k)`` covers
 ``[origin + (i, j, k) * vs, origin + (i + 1, j + 1, k + 1) * vs]``, arrays are indexed
 ``[x, y, z]`` and class 0 (``None``) is free.
@@ -324,7 +324,7 @@ class TargetGrid:
     ``shape`` (X, Y, Z) voxels of edge ``voxel_size`` metres; voxel ``(i, j, k)`` covers
     ``range_min + [i, i+1) x [j, j+1) x [k, k+1) * voxel_size`` in the target ``frame`` (arrays
     indexed ``[x, y, z]``, x forward, y left, z up). ``taxonomy`` is a key of
-    :data:`schemas.taxonomy.TARGETS`; ``free_label`` marks empty voxels.
+    :data:`carlaocc.schemas.taxonomy.TARGETS`; ``free_label`` marks empty voxels.
     """
 
     name: str

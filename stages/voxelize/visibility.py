@@ -45,7 +45,7 @@ ending exactly on a face does not mark the voxel behind it.
 
 Algorithm 2: vertical fans (the rig's cameras and LiDAR)
 --------------------------------------------------------
-The cameras of the rig are level (yaw only, ``schemas.rig``), so the rays of one image column
+The cameras of the rig are level (yaw only, ``carlaocc.schemas.rig``), so the rays of one image column
 lie in one vertical plane through the camera centre: they share the origin and the horizontal
 direction ``h`` and differ only in their slope ``m`` (rise per unit of horizontal distance ``r``).
 The LiDAR's channels at one azimuth form the same kind of fan. All rays of a fan cross the same
@@ -831,7 +831,7 @@ class _Volume:
     and fans into column-bit masks.
 
     With ``reuse`` its bits and masks live in per-thread scratch buffers that stay mapped
-    between frames (:mod:`stages.scratch`): the next reusing volume of the thread overwrites
+    between frames (:mod:`carlaocc.stages.scratch`): the next reusing volume of the thread overwrites
     them, as does the next mask of the same name. Without it, they are arrays of its own."""
 
     def __init__(self, grid: GridSpec, occupied: np.ndarray | None = None, reuse: bool = False):

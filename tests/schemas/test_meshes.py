@@ -1,4 +1,4 @@
-"""The in-memory mesh contracts: one home (``schemas.meshes``), frozen, fields as the layers use
+"""The in-memory mesh contracts: one home (``carlaocc.schemas.meshes``), frozen, fields as the layers use
 them; catalog source adapters return them and standardization accepts them as they are."""
 
 import ast

@@ -63,7 +63,7 @@ def test_kenney_glb_declared_y_up_unknown_units_with_licence(adapter, items):
 
 
 def test_reads_the_schema_contract_that_standardize_accepts(adapter, items):
-    """Adapters return ``schemas.meshes.SourceAsset`` itself; standardization takes it as is."""
+    """Adapters return ``carlaocc.schemas.meshes.SourceAsset`` itself; standardization takes it as is."""
     a = adapter.read(MESHES, items["kenney-suburban/building-type-a.glb"])
     assert type(a) is SourceAsset and all(type(p) is SourcePart for p in a.parts)
     assert isinstance(standardize(a), StandardizedAsset)
