@@ -16,19 +16,10 @@ help: ## list the targets
 	@echo "carlaocc make targets (variables: RES=<m>[,<m>...] ROOT=<dir> STAGE=<name> Q=\"<sql>\" SCHEDULER=<addr|synchronous>)"
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  make %-10s %s\n", $$1, $$2}'
 
-syslibs:
-	@missing=""; \
-	for pair in libusb-1.0.so.0:libusb-1.0-0 libGL.so.1:libgl1 libgthread-2.0.so.0:libglib2.0-0 libxcb.so.1:libxcb1; do \
-	  ldconfig -p 2>/dev/null | grep -q "$${pair%%:*}" || missing="$$missing $${pair##*:}"; \
-	done; \
-	if [ -n "$$missing" ]; then \
-	  echo "open3d (libusb) and opencv-python for the d2nt normals (libGL, glib, xcb) need system"; \
-	  echo "libraries that are missing:$$missing. Install them with:"; \
-	  echo "    sudo apt-get update && sudo apt-get install -y$$missing"; \
-	  exit 1; \
-	fi
+syslibs: ## install the system packages .venv needs (Debian/Ubuntu: apt-get as root, else sudo -n)
+	@sh tools/setup_system.sh "$(PYTHON)"
 
-$(BIN)/.installed: pyproject.toml
+$(BIN)/.installed: pyproject.toml | syslibs
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'

@@ -1,12 +1,21 @@
-"""Lineage records: one Parquet file per (stage, run) under ``catalog/runs/stage=<stage>/``."""
+"""Lineage records: one Parquet file per (stage, run) under ``catalog/runs/stage=<stage>/``.
+
+A lineage file that cannot be read (truncated, garbage bytes) never stops a run or ``status``:
+it is left out of what is loaded and listed in :attr:`LineageLog.damaged` (its path and why), so
+the partitions it recorded look never run and are rebuilt; a run sets it aside
+(:meth:`LineageLog.set_aside`: renamed ``<file>.damaged``, never deleted) before writing the
+stage's new records.
+"""
 
 from __future__ import annotations
 
 import typing
 
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.catalog.store import Store
+from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.records import RunRecord
+
+DAMAGED_SUFFIX = ".damaged"
 
 
 class LineageLog:
@@ -14,6 +23,8 @@ class LineageLog:
 
     def __init__(self, store: Store):
         self.table = ParquetTable(store, RunRecord)
+        # store-relative path -> why it cannot be read, for the files met by load()
+        self.damaged: dict[str, str] = {}
 
     def append(self, stage: str, run_id: str, records: typing.Sequence[RunRecord]) -> str | None:
         """Write a run's records of one stage (nothing when there are none)."""
@@ -21,14 +32,41 @@ class LineageLog:
             return None
         return self.table.save(f"stage={stage}/{run_id}", records)
 
+    def _stage_dir(self, stage: str) -> str:
+        return f"{self.table.dir}/stage={stage}/"
+
     def load(self, stage: str | None = None) -> list[RunRecord]:
-        prefix = None if stage is None else f"{self.table.dir}/stage={stage}/"
-        keys = [
-            p[len(self.table.dir) + 1 : -len(".parquet")]
-            for p in self.table.paths()
-            if prefix is None or p.startswith(prefix)
-        ]
-        return self.table.load(keys)
+        """Every readable record (of one stage); files that cannot be read are skipped and
+        noted in :attr:`damaged`."""
+        prefix = None if stage is None else self._stage_dir(stage)
+        out: list[RunRecord] = []
+        for path in self.table.paths():
+            if prefix is not None and not path.startswith(prefix):
+                continue
+            key = path[len(self.table.dir) + 1 : -len(".parquet")]
+            try:
+                out.extend(self.table.load([key]))
+            except StoreError:  # truncated, garbage bytes, another schema
+                self.damaged[path] = "unreadable"
+            except ValueError:  # rows that are not valid records
+                self.damaged[path] = "holds no valid lineage records"
+        return out
+
+    def damaged_files(self, stage: str) -> list[str]:
+        """The unreadable lineage files of a stage met so far (store-relative paths, sorted)."""
+        return sorted(p for p in self.damaged if p.startswith(self._stage_dir(stage)))
+
+    def set_aside(self, stage: str) -> list[str]:
+        """Rename the unreadable lineage files of a stage met so far to ``<file>.damaged`` (kept
+        for inspection, no longer read); returns their new store-relative paths."""
+        moved = []
+        for path in self.damaged_files(stage):
+            target = path + DAMAGED_SUFFIX
+            if self.table.store.exists(path):
+                self.table.store.fs.mv(self.table.store.path(path), self.table.store.path(target))
+                moved.append(target)
+            del self.damaged[path]
+        return moved
 
     def latest(self, stage: str) -> dict[str, RunRecord]:
         """The most recent record of every partition of a stage (completed or failed), ordered by

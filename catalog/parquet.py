@@ -1,7 +1,9 @@
 """Parquet tables of pydantic records: Arrow schemas derived from the models, atomic writes.
 
 A table is a directory of Parquet files, one per producing partition (``<dir>/<key>.parquet``), so
-no two tasks write the same file and a re-run of one partition replaces exactly its file.
+no two tasks write the same file and a re-run of one partition replaces exactly its file. A file
+that cannot be read as the table's (truncated, garbage bytes, another schema) is a
+:class:`StoreError` naming it (:func:`read_parquet`), never an Arrow traceback.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import Generic, Literal, TypeVar, get_args, get_origin
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from carlaocc.catalog.store import Store
+from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.records import Record
 
 R = TypeVar("R", bound=Record)
@@ -78,6 +80,39 @@ def table_bytes(table: pa.Table) -> bytes:
     return buf.getvalue()
 
 
+def read_parquet(store: Store, rel: str, schema: pa.Schema | None = None) -> pa.Table:
+    """A stored Parquet file (store-relative path) as an Arrow table, cast to ``schema`` when
+    given; StoreError naming the file when it is missing or cannot be read as such."""
+    data = store.read_bytes(rel)
+    try:
+        table = pq.read_table(io.BytesIO(data))
+    except (pa.ArrowException, OSError, ValueError):  # truncated, garbage bytes
+        raise StoreError(f"damaged in the store {store.url}: {rel} is not a readable Parquet file "
+                         f"(truncated or overwritten)") from None
+    if schema is None:
+        return table
+    try:
+        return table.cast(schema)
+    except (pa.ArrowException, ValueError, KeyError):  # other columns or types
+        raise StoreError(f"damaged in the store {store.url}: {rel} does not have its table's columns") from None
+
+
+def parquet_problem(store: Store, rel: str) -> str | None:
+    """``"missing"``, ``"unreadable"`` (not a whole Parquet file: its footer and every column
+    chunk are read) or None for a stored file."""
+    try:
+        data = store.fs.cat_file(store.path(rel))
+    except FileNotFoundError:
+        return "missing"
+    except OSError:
+        return "unreadable"
+    try:
+        pq.read_table(io.BytesIO(data))
+    except (pa.ArrowException, OSError, ValueError):
+        return "unreadable"
+    return None
+
+
 class ParquetTable(Generic[R]):
     """One store table of one record model: save a partition's file, load all, check existence."""
 
@@ -101,12 +136,11 @@ class ParquetTable(Generic[R]):
         return self.store.glob(self.dir, ".parquet")
 
     def load_arrow(self, keys: typing.Iterable[str] | None = None) -> pa.Table:
-        """All partitions (or the given ones) as one Arrow table with the model's schema."""
+        """All partitions (or the given ones) as one Arrow table with the model's schema;
+        StoreError naming a file that is missing (a given key) or cannot be read."""
         schema = arrow_schema(self.model)
         paths = self.paths() if keys is None else [self.path(k) for k in keys]
-        tables = [
-            pq.read_table(io.BytesIO(self.store.read_bytes(p))).cast(schema) for p in paths
-        ]
+        tables = [read_parquet(self.store, p, schema) for p in paths]
         return pa.concat_tables(tables) if tables else schema.empty_table()
 
     def load(self, keys: typing.Iterable[str] | None = None) -> list[R]:

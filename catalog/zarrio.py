@@ -7,11 +7,18 @@ zarr-python. A frame of an array is named in lineage by its frame key
 ``<root>.zarr/<array path>[<frame>]`` and fingerprinted by its stored chunks
 (:func:`frame_fingerprint`). The arrays that use this codec, their creation, tile writes and
 reads, are :class:`carlaocc.catalog.zarrstore.FrameArrayStore`.
+
+Damage (a truncated or overwritten ``zarr.json`` of an array or of a group above it, a chunk that
+is not a whole zstd frame of the chunk's size) is never an exception here: :func:`metadata_problem`
+says what is wrong with a node's metadata and :func:`frame_fingerprint` gives a frame with an
+unreadable part the fingerprint ``damaged: <path> unreadable`` (:func:`is_damaged`), which matches
+no recorded fingerprint, so the frame is stale and a re-run rebuilds it.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import tempfile
 
@@ -98,22 +105,168 @@ def parse_frame_key(key: str) -> tuple[str, str, int] | None:
     return root, path, int(frame)
 
 
-def frame_fingerprint(store: Store, zarr_root: str, array_path: str, frame: int) -> str | None:
+DAMAGED = "damaged: "  # the prefix of the fingerprint of a frame with an unreadable part
+
+
+def is_damaged(fingerprint: str | None) -> bool:
+    """The fingerprint says the frame could not be read (see :func:`frame_fingerprint`)."""
+    return fingerprint is not None and fingerprint.startswith(DAMAGED)
+
+
+def damaged(where: str, problem: str = "unreadable") -> str:
+    """The fingerprint of a frame whose ``where`` (a store-relative path) cannot be read."""
+    return f"{DAMAGED}{where} {problem}"
+
+
+def parse_metadata(raw: bytes, node_type: str | None = None) -> dict | None:
+    """Zarr v3 metadata from the bytes of a ``zarr.json``, or None when they are not (truncated
+    or garbage bytes, another format, not a ``node_type`` node when given)."""
+    try:
+        meta = json.loads(raw)
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(meta, dict) or meta.get("zarr_format") != 3 or meta.get("node_type") not in ("array", "group"):
+        return None
+    if node_type is not None and meta["node_type"] != node_type:
+        return None
+    if meta["node_type"] == "array":
+        try:
+            chunks = meta["chunk_grid"]["configuration"]["chunk_shape"]
+            ok = (isinstance(meta["shape"], list) and isinstance(chunks, list) and len(chunks) == len(meta["shape"])
+                  and all(isinstance(v, int) and v >= 0 for v in meta["shape"] + chunks)
+                  and isinstance(meta["data_type"], str) and isinstance(meta["codecs"], list))
+        except (KeyError, TypeError):
+            ok = False
+        if not ok:
+            return None
+    return meta
+
+
+def metadata_problem(store: Store, node: str, node_type: str | None = None) -> str | None:
+    """What is wrong with the metadata of the Zarr node at store-relative path ``node`` (e.g.
+    ``occupancy.zarr`` or ``occupancy.zarr/<seq>/<res>/semantic``): ``"missing"`` (no
+    ``zarr.json``), ``"unreadable"`` (not Zarr v3 metadata of a ``node_type`` node), or None."""
+    try:
+        raw = store.fs.cat_file(store.path(f"{node}/zarr.json"))
+    except FileNotFoundError:
+        return "missing"
+    except OSError:  # a directory named zarr.json, no permission...
+        return "unreadable"
+    return None if parse_metadata(raw, node_type) is not None else "unreadable"
+
+
+def ancestor_groups(zarr_root: str, array_path: str) -> list[str]:
+    """Store-relative paths of the groups above an array, from the hierarchy's root down."""
+    parts = array_path.split("/")[:-1]
+    return [zarr_root] + [f"{zarr_root}/{'/'.join(parts[:i + 1])}" for i in range(len(parts))]
+
+
+def zstd_frame_ok(payload: bytes, content_size: int | None = None) -> bool:
+    """``payload`` is whole zstd frames (RFC 8878): magic numbers, frame headers and every block
+    header within the bytes, nothing after the last frame; when the header gives the content size
+    it equals ``content_size`` (if given). Walks the block headers without decompressing, so a
+    truncated chunk or garbage bytes are found cheaply (a bit flipped inside a compressed block
+    is not: that changes the frame's fingerprint all the same)."""
+    data = memoryview(payload)
+    n, pos, frames = len(data), 0, 0
+    while pos < n:
+        if n - pos < 4:
+            return False
+        magic = int.from_bytes(data[pos:pos + 4], "little")
+        if 0x184D2A50 <= magic <= 0x184D2A5F:  # a skippable frame
+            if n - pos < 8:
+                return False
+            pos += 8 + int.from_bytes(data[pos + 4:pos + 8], "little")
+            if pos > n:
+                return False
+            continue
+        if magic != 0xFD2FB528 or n - pos < 5:
+            return False
+        fhd = data[pos + 4]
+        fcs_flag, single, checksum, dict_flag = fhd >> 6, (fhd >> 5) & 1, (fhd >> 2) & 1, fhd & 3
+        if fhd & 0x08:  # the reserved bit
+            return False
+        fcs_len = (1 if single else 0) if fcs_flag == 0 else (2, 4, 8)[fcs_flag - 1]
+        pos += 5 + (0 if single else 1) + (0, 1, 2, 4)[dict_flag]
+        if pos + fcs_len > n:
+            return False
+        if fcs_len and content_size is not None:
+            fcs = int.from_bytes(data[pos:pos + fcs_len], "little") + (256 if fcs_len == 2 else 0)
+            if fcs != content_size:
+                return False
+        pos += fcs_len
+        while True:
+            if pos + 3 > n:
+                return False
+            header = int.from_bytes(data[pos:pos + 3], "little")
+            last, kind, size = header & 1, (header >> 1) & 3, header >> 3
+            if kind == 3:  # reserved block type
+                return False
+            pos += 3 + (1 if kind == 1 else size)
+            if pos > n:
+                return False
+            if last:
+                break
+        pos += 4 if checksum else 0
+        if pos > n:
+            return False
+        frames += 1
+    return frames > 0
+
+
+def _is_zstd_array(meta: dict) -> bool:
+    """The array's chunks are stored as :func:`encode_chunk` writes them (bytes, then zstd)."""
+    names = [c.get("name") if isinstance(c, dict) else None for c in meta["codecs"]]
+    return names == ["bytes", "zstd"]
+
+
+def _chunk_nbytes(meta: dict) -> int | None:
+    try:
+        itemsize = np.dtype(meta["data_type"]).itemsize
+    except TypeError:
+        return None
+    return int(np.prod(meta["chunk_grid"]["configuration"]["chunk_shape"])) * itemsize
+
+
+def frame_fingerprint(store: Store, zarr_root: str, array_path: str, frame: int,
+                      checked: dict[str, str | None] | None = None) -> str | None:
     """Fingerprint of one frame of an array as stored: the array metadata (``zarr.json``), then
     the names and encoded bytes of its chunk files under ``<array>/c/<frame>`` (all-empty chunks
     are not stored; dot-prefixed temporary files are skipped). Cheap (compressed bytes) and
-    sensitive to a deleted, truncated or rewritten chunk; None when the array does not exist."""
+    sensitive to a deleted, truncated or rewritten chunk; None when the array does not exist.
+
+    A frame that cannot be read gets ``damaged: <path> unreadable`` (see :func:`is_damaged`): its
+    array's metadata or that of a group above it is unreadable or (a group's) missing, or one of
+    its chunks is not a whole zstd frame of the chunk's size. ``checked`` caches the groups'
+    verdicts between calls (node path -> problem or None)."""
     fs, base = store.fs, store.path(f"{zarr_root}/{array_path}")
+    where = f"{zarr_root}/{array_path}"
     try:
         meta = fs.cat_file(f"{base}/zarr.json")
     except FileNotFoundError:
         return None
+    except OSError:  # a directory named zarr.json, no permission...
+        return damaged(f"{where}/zarr.json")
+    parsed = parse_metadata(meta, "array")
+    if parsed is None:
+        return damaged(f"{where}/zarr.json")
+    checked = {} if checked is None else checked
+    for group in ancestor_groups(zarr_root, array_path):
+        if group not in checked:
+            checked[group] = metadata_problem(store, group, "group")
+        if checked[group] is not None:
+            return damaged(f"{group}/zarr.json", checked[group])
+    check = _is_zstd_array(parsed)
+    nbytes = _chunk_nbytes(parsed) if check else None
     h = hashlib.sha256(meta)
     prefix = f"{base}/c/{frame}"
     files = sorted(fs.find(prefix)) if fs.exists(prefix) else []
     for f in files:
         if f.rsplit("/", 1)[-1].startswith("."):
             continue  # a temporary chunk left by a crashed write is not part of the frame
+        payload = fs.cat_file(f)
+        if check and not zstd_frame_ok(payload, nbytes):
+            return damaged(f"{where}/c/{frame}{f[len(prefix):]}")
         h.update(f[len(prefix):].encode())
-        h.update(fs.cat_file(f))
+        h.update(payload)
     return "sha256:" + h.hexdigest()[:24]

@@ -10,6 +10,11 @@ differing one replaced), opening them, ``exists``, writing and reading a frame's
 and decoded by :mod:`carlaocc.catalog.zarrio`, all-zero chunks not stored) and the lineage keys
 and fingerprints of a frame. A subclass says what is its own: the root, the array table, the
 group key (:meth:`FrameArrayStore.array_path`) and the attributes.
+
+Damaged metadata is repaired by creation (:meth:`FrameArrayStore._repair_metadata`): an unreadable
+``zarr.json`` of a group is written again (its arrays kept), an array whose ``zarr.json`` is
+unreadable is created anew (its frames must be written again), so a stage's ``prepare`` rebuilds
+what a damaged store lost. Reading a damaged node is a :class:`StoreError` naming it.
 """
 
 from __future__ import annotations
@@ -23,8 +28,8 @@ from numba import njit
 from zarr.codecs import ZstdCodec
 
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.catalog.zarrio import (ZSTD_LEVEL, decode_chunk, encode_chunk, frame_fingerprint, get_object, put_object,
-                                     remove_object, zarr_store)
+from carlaocc.catalog.zarrio import (ZSTD_LEVEL, ancestor_groups, decode_chunk, encode_chunk, frame_fingerprint,
+                                     get_object, metadata_problem, put_object, remove_object, zarr_store)
 
 # zarr's errors for a node that is not there (the node itself, or the whole hierarchy)
 _MISSING = (KeyError, FileNotFoundError, zarr.errors.GroupNotFoundError)
@@ -144,9 +149,11 @@ class FrameArrayStore:
         unknown = set(names) - set(self.arrays)
         if unknown:
             raise ValueError(f"unknown {self.kind} {sorted(unknown)}; known: {', '.join(self.arrays)}")
-        replaced = False
         self._layouts.clear()  # arrays may be recreated with another layout
+        replaced, broken_groups = self._repair_metadata(sequence_id, group, names, drop_others)
         root = self._root("a")
+        for path in broken_groups:  # written again (the root group was, by opening it)
+            root.require_group(path)
         if drop_others:
             for path in self._stale_arrays(root, sequence_id, group, names):
                 del root[path]
@@ -167,6 +174,42 @@ class FrameArrayStore:
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
                               compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
         return replaced
+
+    def _repair_metadata(self, sequence_id: str, group, names: tuple[str, ...],
+                         drop_others: bool) -> tuple[bool, list[str]]:
+        """Make the metadata above and at the arrays ``names`` of one group readable before they are
+        created: the unreadable ``zarr.json`` of a group above them (the root, the sequence, the
+        group) is removed, its arrays kept; an array of ``names`` whose ``zarr.json`` is unreadable is
+        deleted with its chunks (created anew: every frame of it must be written again), and with
+        ``drop_others`` so is any other node of the group with unreadable metadata (it would be
+        deleted as stale anyway; without, e.g. a recorder's ``*_raw`` input, it is left alone).
+
+        Returns (whether an array was deleted, the hierarchy paths of the groups to write again:
+        those removed or missing below the root)."""
+        parent = self.array_path(sequence_id, group, "_").rsplit("/", 1)[0]
+        groups = ancestor_groups(self.zarr_root, f"{parent}/_")
+        if not self.store.exists(self.zarr_root):
+            return False, []  # a new hierarchy: nothing to repair
+        broken: list[str] = []
+        for node in groups:
+            problem = metadata_problem(self.store, node, "group")
+            if problem == "unreadable":
+                self.store.remove(f"{node}/zarr.json")  # a file, or whatever took its name
+            if problem is not None and node != self.zarr_root:
+                broken.append(node[len(self.zarr_root) + 1:])
+        deleted = False
+        candidates = set(names)
+        if drop_others:
+            base = self.store.path(f"{self.zarr_root}/{parent}")
+            fs = self.store.fs
+            if fs.isdir(base):
+                candidates |= {p.rstrip("/").rsplit("/", 1)[-1] for p in fs.ls(base, detail=False) if fs.isdir(p)}
+        for name in sorted(candidates):
+            node = f"{self.zarr_root}/{parent}/{name}"
+            if metadata_problem(self.store, node) == "unreadable":  # a readable group is zarr's to replace
+                self.store.remove(node)
+                deleted = deleted or name in names
+        return deleted, broken
 
     def _stale_arrays(self, root: zarr.Group, sequence_id: str, group, names: tuple[str, ...]) -> list[str]:
         """Paths of the group's arrays that :meth:`_create_arrays` deletes because they are not in

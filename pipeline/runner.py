@@ -20,9 +20,10 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
 
-from carlaocc.catalog.lineage import LineageLog
-from carlaocc.catalog.store import Store
-from carlaocc.catalog.zarrio import frame_fingerprint, parse_frame_key
+from carlaocc.catalog.lineage import DAMAGED_SUFFIX, LineageLog
+from carlaocc.catalog.parquet import parquet_problem
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.zarrio import frame_fingerprint, is_damaged, parse_frame_key
 from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
 from carlaocc.pipeline.spec import Context, Partition, StageSpec, UpstreamMissing, cache_key
 from carlaocc.schemas.configs import DatasetConfig, StageConfig
@@ -104,15 +105,76 @@ class DaskExecutor(Executor):
         # own LocalCluster of single-threaded worker processes: one kernel thread each
         self.kernel_threads = 1 if (address is None and processes) else None
 
+    # schemes whose address is host:port (probed with a plain TCP connect before the Client)
+    HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+    PROBE_SECONDS = 3.0  # the TCP connect probe: a refused or silent port fails in seconds
+    CONNECT_SECONDS = "10s"  # the Client's handshake once the port answers
+    # distributed's loggers silenced while our own LocalCluster shuts down (its workers' heartbeats
+    # race the closing connection pool and log CommClosedError tracebacks otherwise)
+    QUIET_LOGGERS = ("distributed", "distributed.worker", "distributed.core", "distributed.nanny",
+                     "distributed.comm", "distributed.batched", "distributed.scheduler",
+                     "distributed.client", "distributed.deploy", "distributed.process")
+
+    @staticmethod
+    def host_port(address: str) -> tuple[str, int] | None:
+        """``(host, port)`` of a host:port scheduler address (None for other schemes such as
+        inproc://); ValueError naming what is wrong when the host or port is missing or the port
+        is not in 1..65535."""
+        from distributed.comm.addressing import parse_address, parse_host_port
+
+        scheme, loc = parse_address(address, strict=True)
+        if scheme not in DaskExecutor.HOST_PORT_SCHEMES:
+            return None
+        if loc.startswith("[") and "]" in loc:
+            host, _, port = loc[1:].partition("]")
+            port = port.removeprefix(":") if port.startswith(":") else None
+        else:
+            host, sep, port = loc.rpartition(":")
+            if not sep:
+                host, port = loc, None
+        if not port:
+            raise ValueError("no port (e.g. tcp://127.0.0.1:8786)")
+        if not host:
+            raise ValueError("no host (e.g. tcp://127.0.0.1:8786)")
+        if not port.isdigit():
+            raise ValueError(f"port {port!r} is not a number")
+        if not 1 <= int(port) <= 65535:
+            raise ValueError(f"port {int(port)} is not in 1..65535")
+        parse_host_port(loc)  # what distributed itself will parse
+        return host, int(port)
+
+    @staticmethod
+    def probe(address: str, timeout: float | None = None) -> None:
+        """A quick TCP connect to a host:port scheduler address; OSError (refused, unknown host,
+        timed out) when nothing listens there."""
+        hp = DaskExecutor.host_port(address)
+        if hp is None:
+            return
+        with socket.create_connection(hp, timeout=DaskExecutor.PROBE_SECONDS if timeout is None else timeout):
+            pass
+
+    @staticmethod
+    def quiet_logs() -> None:
+        """Silence distributed's loggers in this process (run on our workers before teardown)."""
+        for name in DaskExecutor.QUIET_LOGGERS:
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
     def _get_client(self):
         if self._client is None:
             from distributed import Client, LocalCluster
 
             if self.address:
                 try:
-                    self._client = Client(self.address, timeout="30s")
-                except (OSError, TimeoutError) as exc:
-                    raise PlanError(f"cannot reach the Dask scheduler at {self.address}: {exc}") from None
+                    self.probe(self.address)
+                except (OSError, ValueError) as exc:
+                    raise PlanError(f"cannot reach the Dask scheduler at {self.address}: "
+                                    f"{exc.strerror or exc if isinstance(exc, OSError) else exc} "
+                                    f"(is a `dask scheduler` running there?)") from None
+                try:
+                    self._client = Client(self.address, timeout=self.CONNECT_SECONDS)
+                except (OSError, TimeoutError, ValueError) as exc:
+                    raise PlanError(f"cannot reach the Dask scheduler at {self.address}: "
+                                    f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
             else:
                 import dask
 
@@ -126,7 +188,10 @@ class DaskExecutor(Executor):
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
                     self._cluster = LocalCluster(
                         n_workers=n, threads_per_worker=1, processes=self.processes,
-                        dashboard_address=None, scheduler_kwargs={"dashboard": False},
+                        # the scheduler's HTTP server (health, metrics) on a free port: the
+                        # default 8787 taken by another cluster warns on stderr
+                        dashboard_address=None,
+                        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
                         silence_logs=logging.ERROR,
                     )
                 self._client = Client(self._cluster)
@@ -153,15 +218,38 @@ class DaskExecutor(Executor):
             on_done(result)
 
     def close(self):
-        if self._client is not None:
-            self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
+        """Close the client, then our own LocalCluster, with distributed's logs silenced in our
+        workers and here while they shut down, so a finished run ends quietly."""
+        import contextlib
+
+        client, cluster = self._client, self._cluster
+        self._client = self._cluster = None
+        if cluster is None:  # someone else's scheduler: only our client goes
+            if client is not None:
+                with contextlib.suppress(Exception):
+                    client.close()
+            return
+        saved = {name: logging.getLogger(name).level for name in self.QUIET_LOGGERS}
+        try:
+            if client is not None:
+                with contextlib.suppress(Exception):
+                    # in each worker process; a dead or hung worker neither raises nor waits long
+                    client.run(DaskExecutor.quiet_logs, on_error="ignore", callback_timeout=5)
+            self.quiet_logs()
+            if client is not None:
+                with contextlib.suppress(Exception):
+                    client.close()
+            with contextlib.suppress(Exception):
+                cluster.close()
+        finally:
+            for name, level in saved.items():
+                logging.getLogger(name).setLevel(level)
 
 
-def resolve_scheduler(scheduler: str | None) -> str | None:
+def resolve_scheduler(scheduler: str | None, probe: bool = False) -> str | None:
     """``--scheduler``, else ``$DASK_SCHEDULER_ADDRESS``, validated: 'synchronous', a Dask
-    address (tcp://host:port, ...) or None for a LocalCluster. Raises PlanError when malformed."""
+    address (tcp://host:port with a port in 1..65535, ...) or None for a LocalCluster. Raises
+    PlanError when malformed, or (``probe``) when a quick TCP connect finds nothing listening."""
     from_env = not scheduler
     scheduler = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
     if scheduler is None or scheduler == SYNCHRONOUS:
@@ -182,6 +270,18 @@ def resolve_scheduler(scheduler: str | None) -> str | None:
         get_backend(scheme)
     except ValueError:
         raise PlanError(f"{source} {scheduler!r}: unknown protocol {scheme!r} (e.g. tcp://)") from None
+    try:
+        DaskExecutor.host_port(scheduler)
+    except ValueError as exc:
+        raise PlanError(f"{source} {scheduler!r} is a malformed scheduler address: {exc}") from None
+    if probe:
+        try:
+            DaskExecutor.probe(scheduler)
+        except OSError as exc:
+            why = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc) or type(exc).__name__)
+            raise PlanError(f"{source} {scheduler}: cannot reach a Dask scheduler there ({why}); start one "
+                            f"(`dask scheduler`), fix the address, or leave {source} out for a local "
+                            f"cluster") from None
     return scheduler
 
 
@@ -233,29 +333,66 @@ def file_fingerprint(path: str) -> str:
         return f"unreadable: {exc.strerror or exc}"
 
 
-def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
-    """Every recorded output still has its recorded fingerprint (files by their bytes, Zarr
-    frames by their encoded chunks)."""
+def outputs_problem(store: Store, outputs: dict[str, str],
+                    checked: dict[str, str | None] | None = None) -> str | None:
+    """Why recorded outputs are not intact, or None when every one still has its recorded
+    fingerprint (files by their bytes, Zarr frames by their encoded chunks): ``outputs damaged:
+    <path> unreadable`` for a Zarr frame whose metadata (its array's, a group's above it) or a
+    chunk cannot be read, or a Parquet file that cannot; else ``outputs missing or modified``.
+    ``checked`` caches the Zarr groups' verdicts between calls."""
+    modified = False
     for key, fp in outputs.items():
         frame = parse_frame_key(key)  # a frame of an array of occupancy.zarr, sensors.zarr...
-        current = store.fingerprint(key) if frame is None else frame_fingerprint(store, *frame)
-        if current != fp:
-            return False
-    return True
+        try:
+            current = store.fingerprint(key) if frame is None else frame_fingerprint(store, *frame, checked=checked)
+        except OSError:  # a directory where a file was, no permission...
+            return f"outputs damaged: {key} unreadable"
+        if current == fp:
+            continue
+        if is_damaged(current):
+            return "outputs " + current  # "outputs damaged: <path> unreadable"
+        if current is not None and key.endswith(".parquet") and parquet_problem(store, key) == "unreadable":
+            return f"outputs damaged: {key} unreadable"
+        modified = True
+    return "outputs missing or modified" if modified else None
+
+
+def outputs_intact(store: Store, outputs: dict[str, str]) -> bool:
+    """Every recorded output still has its recorded fingerprint (see :func:`outputs_problem`)."""
+    return outputs_problem(store, outputs) is None
+
+
+def _lineage_note(lineage: LineageLog, stage: str) -> str | None:
+    """``lineage unreadable: <path>`` (and how many more) when a lineage file of the stage could
+    not be read: the partitions it recorded look never run."""
+    bad = lineage.damaged_files(stage)
+    if not bad:
+        return None
+    return f"lineage unreadable: {bad[0]}" + (f" (+{len(bad) - 1} more)" if len(bad) > 1 else "")
 
 
 def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
                stale_upstream: dict[str, set[str]]) -> StagePlan:
-    """Cache keys and staleness reasons of every partition of a stage."""
+    """Cache keys and staleness reasons of every partition of a stage.
+
+    Damage is staleness, never an exception: outputs that cannot be read make their partition
+    stale (``outputs damaged: <path> unreadable``), an unreadable lineage file of the stage makes
+    the partitions with no readable record stale (``lineage unreadable: <path>``), and an
+    upstream table that cannot be read while partitioning blocks the stage with its path."""
     plan = StagePlan(spec)
     try:
         partitions = spec.partitions(ctx)
     except UpstreamMissing as exc:
         plan.blocked = str(exc)
         return plan
+    except StoreError as exc:  # an upstream output it partitions by is damaged: the upstream re-runs
+        plan.blocked = str(exc)
+        return plan
     code, chash = spec.code_version(), spec.config_hash(ctx.config)
     latest = lineage.latest(spec.name)
     upstream_latest = {s: lineage.latest(s) for s in spec.upstream}
+    never_run = _lineage_note(lineage, spec.name) or "never run"
+    checked: dict[str, str | None] = {}
     for p in partitions:
         inputs, waiting = {}, None
         for up_stage, up_key in p.needs:
@@ -276,11 +413,11 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
         elif force:
             reason = "forced"
         elif rec is None:
-            reason = "never run"
+            reason = never_run
         elif rec.status != "completed":
             reason = f"last run failed: {rec.error}"
         elif rec.cache_key == key:
-            reason = None if outputs_intact(ctx.store, json.loads(rec.output_fingerprints)) else "outputs missing or modified"
+            reason = outputs_problem(ctx.store, json.loads(rec.output_fingerprints), checked)
         elif rec.code_version != code:
             reason = "code changed"
         elif rec.config_hash != chash:
@@ -370,6 +507,9 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
             todo = plan.to_run
             outcome = StageOutcome(spec.name, len(plan.partitions), skipped=len(plan.partitions) - len(todo))
             outcomes.append(outcome)
+            for moved in lineage.set_aside(spec.name):  # its partitions were planned as never run
+                log(f"{spec.name}: lineage file {moved.removesuffix(DAMAGED_SUFFIX)} cannot be read: set aside "
+                    f"as {moved}; the partitions it recorded are rebuilt")
             if not todo:
                 log(f"{spec.name}: {outcome.total} up to date, nothing to do")
                 continue

@@ -5,7 +5,10 @@ file is concatenated) labelled by ``--class``, or the id of an ADMesh asset in `
 parts keep their own classes. Thing inputs get instance ids 1, 2, ... in argument order; stuff
 gets 0. Closed (watertight) inputs are filled according to ``--fill``. The grid is the inputs'
 bounding box snapped to the voxel lattice of the origin (0, 0, 0), unless ``--origin`` and
-``--shape`` give it. Meshes are used as they are (metres, their own frame).
+``--shape`` give it. Meshes are used as they are (metres, their own frame). A file whose faces
+all have zero area (the ingest stage's degenerate-face rule: twice the area below 1e-12 of the
+squared bounding-box diagonal, or a repeated vertex) is an input error naming it: it would write
+an empty or line-thin grid without a word.
 """
 
 from __future__ import annotations
@@ -53,7 +56,23 @@ def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise InputError(f"{path}: {int((~np.isfinite(V)).any(axis=1).sum())} vertices are NaN or infinite")
     # weld coincident vertices (STL and many exporters repeat them per face) so closedness is seen
     uniq, inverse = np.unique(V, axis=0, return_inverse=True)
-    return uniq, inverse.reshape(-1)[F]
+    F = inverse.reshape(-1)[F]
+    if not _has_area(uniq, F):
+        raise InputError(f"{path}: all {len(F)} faces have zero area (no triangle with an area): nothing "
+                         "to voxelize; check or re-export the mesh")
+    return uniq, F
+
+
+def _has_area(V: np.ndarray, F: np.ndarray) -> bool:
+    """Whether any face is non-degenerate, by the ingest stage's rule (``DEGENERATE_REL``)."""
+    from carlaocc.stages.ingest.repair import DEGENERATE_REL
+
+    used = V[np.unique(F)]
+    diag2 = float(np.sum((used.max(axis=0) - used.min(axis=0)) ** 2))
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    twice_area2 = np.einsum("ij,ij->i", cross, cross)
+    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    return bool(np.any(~repeated & (twice_area2 > (DEGENERATE_REL * diag2) ** 2)))
 
 
 def _classes(classes: list[str], n: int) -> list[taxonomy.SemanticClass]:
@@ -127,12 +146,23 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
         origin, shape = tuple(float(c) for c in lo), tuple(int(c) for c in n)
     if len(origin) != 3 or len(shape) != 3 or min(shape) < 1:
         raise InputError(f"--origin needs x,y,z and --shape nx,ny,nz (positive), got {origin} and {shape}")
+    if not all(math.isfinite(c) for c in origin):
+        raise InputError(f"--origin {','.join(f'{c:g}' for c in origin)}: every coordinate must be a finite "
+                         f"number of metres")
     total = math.prod(int(s) for s in shape)
     if total > MAX_VOXELS:
         raise InputError(f"the grid would have {total:,} voxels ({shape[0]}x{shape[1]}x{shape[2]} at {voxel_size} m): "
                          f"are the meshes in millimetres? give a larger --voxel-size or --origin/--shape")
     hi = tuple(o + n * voxel_size for o, n in zip(origin, shape))
-    return GridSpec(region_min=tuple(origin), region_max=hi, voxel_size=voxel_size)
+    from pydantic import ValidationError
+
+    try:
+        return GridSpec(region_min=tuple(origin), region_max=hi, voxel_size=voxel_size)
+    except ValidationError as exc:  # one line naming the option the user typed
+        err = exc.errors()[0]
+        option = {"region_min": "--origin", "region_max": "--origin/--shape", "voxel_size": "--voxel-size"}.get(
+            str(err["loc"][0]) if err["loc"] else "", "--origin/--shape")
+        raise InputError(f"{option}: {str(err['msg']).removeprefix('Value error, ')}") from None
 
 
 def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:

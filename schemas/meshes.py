@@ -63,6 +63,9 @@ class SourceAsset:
     normalized: bool = False  # the source normalized its size (ShapeNet, MeshFleet): rescale
     target_length: float | None = None  # metres, when known (category map length_m, MeshFleet)
     licence_required: bool = False
+    # what the source lacks but the geometry does not need (a missing material library or
+    # texture file): standardization keeps the asset and records these in AssetRecord.notes
+    notes: tuple[str, ...] = ()
 
 
 # --------------------------------------------------------------------------------------------

@@ -23,6 +23,13 @@ Texture references (``SourcePart.texture``)
     buffer is ``"<file name>#images/<index>"``; ``""`` when the material has no base colour
     texture.
 
+Missing side files (:func:`missing_file_notes`)
+    An OBJ's ``mtllib`` that does not exist, or a texture a part references by a path that does
+    not exist (relative to the mesh file's directory), does not stop the read: the geometry is
+    whole. Each becomes a note on the :class:`~carlaocc.schemas.meshes.SourceAsset` (and so on the
+    asset record's ``notes``), e.g. ``"car.obj: material library 'car.mtl' not found (materials
+    default: no transparency or texture)"``, queryable in SQL.
+
 Every read problem becomes :class:`SourceError`: a missing file ``"missing mesh"``, anything
 unparsable or truncated ``"unreadable file"``.
 """
@@ -40,7 +47,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from carlaocc.catalog.sources._collada import ColladaError, read_dae
-from carlaocc.catalog.sources._obj import mtl_files, obj_materials
+from carlaocc.catalog.sources._obj import missing_mtl_libraries, mtl_files, obj_materials
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.schemas.meshes import Axis, SourcePart
 from carlaocc.schemas.taxonomy import SemanticClass, by_id, by_name
@@ -98,6 +105,29 @@ def default_axes(path: str) -> tuple[Axis, Axis]:
     if ext == ".dae":
         return _DAE_AXES[dae_up_axis(path)]
     return "+z", "+x"
+
+
+# -- excluded sub-trees ------------------------------------------------------------------------
+
+
+def is_excluded(path: str, exclude) -> bool:
+    """Whether ``path`` is one of the directories ``exclude`` or lies inside one (real paths
+    compared, links resolved; a dataset root inside a source folder is excluded this way)."""
+    if not exclude:
+        return False
+    p = os.path.realpath(path)
+    for ex in exclude:
+        e = os.path.realpath(ex)
+        if p == e or p.startswith(e.rstrip(os.sep) + os.sep):
+            return True
+    return False
+
+
+def drop_excluded(items: list, exclude) -> list:
+    """The items whose primary file (``files[0]``) is not inside an excluded directory."""
+    if not exclude:
+        return items
+    return [it for it in items if not (it.files and is_excluded(it.files[0], exclude))]
 
 
 # -- licences --------------------------------------------------------------------------------
@@ -519,6 +549,29 @@ def _check_stl(path: str) -> None:
         raise _unreadable(path, f"{size} bytes: too short for a binary STL (truncated?)")
     raise _unreadable(path, f"binary STL of {n} triangles needs {84 + 50 * n} bytes, "
                             f"file has {size} (truncated?)")  # fmt: skip
+
+
+def missing_file_notes(path: str, parts, mtllibs: list[str] | None = None) -> list[str]:
+    """Notes for the side files a mesh file references but that do not exist: an OBJ's material
+    libraries (``mtllibs`` as written, else read from the OBJ's header) and the texture files
+    ``parts`` reference by path (relative to the mesh file's directory; images embedded in the
+    file, ``data:`` and other URIs are not files and are not checked)."""
+    name = os.path.basename(path)
+    base = os.path.dirname(os.path.abspath(path))
+    notes = []
+    if ext_of(path) == ".obj":
+        for lib in missing_mtl_libraries(path, mtllibs):
+            notes.append(f"{name}: material library {lib!r} not found (materials default: no "
+                         "transparency or texture)")
+    seen: set[str] = set()
+    for part in parts:
+        tex = part.texture
+        if not tex or tex in seen or "#" in tex or re.match(r"^[a-zA-Z][a-zA-Z0-9+.-]*:", tex):
+            continue  # none, embedded (file#images/k), or a URI (data:, http:, C: drive too)
+        seen.add(tex)
+        if not os.path.isfile(os.path.join(base, tex)):
+            notes.append(f"{name}: texture {tex!r} not found (kept by reference)")
+    return notes
 
 
 def load_parts(path: str) -> list[SourcePart]:

@@ -229,6 +229,22 @@ def obj_materials(obj_path: str, mtllibs: list[str] | None = None) -> dict[str, 
     return out
 
 
+def missing_mtl_libraries(obj_path: str, mtllibs: list[str] | None = None) -> list[str]:
+    """The ``mtllib`` names of an OBJ (as written, in order) whose files do not exist next to it.
+    An OBJ that names no library misses none (its ``<stem>.mtl`` is optional)."""
+    base = os.path.dirname(obj_path)
+    if mtllibs is None:
+        try:
+            mtllibs = mtllib_names(obj_path)
+        except OSError:
+            return []
+    out: list[str] = []
+    for lib in mtllibs:
+        if not os.path.isfile(os.path.join(base, lib.replace("\\", "/"))) and lib not in out:
+            out.append(lib)
+    return out
+
+
 def mtl_files(obj_path: str) -> list[str]:
     """Absolute paths of the existing MTL libraries of an OBJ (for fingerprints)."""
     base = os.path.dirname(obj_path)

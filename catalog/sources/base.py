@@ -44,9 +44,11 @@ class SourceAdapter(Protocol):
 
     kind: str
 
-    def list_items(self, root: str) -> list[SourceItem]:
-        """Every item under ``root``, sorted by key. Raises SourceError when the root itself is
-        unusable (missing, not the expected layout)."""
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
+        """Every item under ``root``, sorted by key, except those inside a directory of
+        ``exclude`` (absolute paths: a dataset root placed inside the source must not be read as
+        source meshes). Raises SourceError when the root itself is unusable (missing, not the
+        expected layout)."""
         ...
 
     def read(self, root: str, item: SourceItem) -> SourceAsset:

@@ -57,8 +57,9 @@ from __future__ import annotations
 import os
 import re
 
-from carlaocc.catalog.sources._common import (check_subclass, compact, make_part, read_json_object, semantic_class,
-                                      sidecar_files)
+from carlaocc.catalog.sources._common import (check_subclass, compact, is_excluded, make_part,
+                                              missing_file_notes, read_json_object, semantic_class,
+                                              sidecar_files)
 from carlaocc.catalog.sources._obj import ObjError, obj_materials, read_obj
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
@@ -150,13 +151,17 @@ class BuildingNetAdapter:
             candidates.append(os.path.join(root, self.labels_dir, stem))
         return next((c for c in candidates if os.path.isfile(c)), None)
 
-    def list_items(self, root: str) -> list[SourceItem]:
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
         root = os.path.abspath(root)
         if not os.path.isdir(root):
             raise SourceError("missing mesh", f"{root} is not a directory")
         items = []
         for d, dirs, files in os.walk(root):
-            dirs[:] = sorted(x for x in dirs if not x.startswith("."))
+            dirs[:] = sorted(x for x in dirs if not x.startswith(".")
+                             and not is_excluded(os.path.join(d, x), exclude))
+            if exclude and is_excluded(d, exclude):  # the root itself is excluded
+                dirs[:] = []
+                continue
             for name in sorted(files):
                 if not name.lower().endswith(".obj") or name.startswith("."):
                     continue
@@ -259,5 +264,6 @@ class BuildingNetAdapter:
             normalized=False,
             target_length=None,
             licence_required=False,
+            notes=tuple(missing_file_notes(obj, parts, data.mtllibs)),
         )
 

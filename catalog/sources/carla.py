@@ -89,7 +89,9 @@ from carlaocc.catalog.sources._common import (
     check_subclass,
     compact,
     default_subclass,
+    drop_excluded,
     make_part,
+    missing_file_notes,
     read_json_object,
     semantic_class,
 )
@@ -201,7 +203,7 @@ class CarlaAdapter:
 
     kind = "carla"
 
-    def list_items(self, root: str) -> list[SourceItem]:
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
         root = os.path.abspath(root)
         odir = os.path.join(root, "objects")
         if not os.path.isdir(odir):
@@ -225,7 +227,7 @@ class CarlaAdapter:
                     files += [m for m in mtl_files(mesh) if m not in files]
             items.append(SourceItem(key=os.path.splitext(name)[0], files=tuple(files), meta={}))
         items.sort(key=lambda it: it.key)
-        return items
+        return drop_excluded(items, exclude)
 
     def read(self, root: str, item: SourceItem) -> SourceAsset:
         root = os.path.abspath(root)
@@ -245,7 +247,7 @@ class CarlaAdapter:
         world = world_matrices(doc, path)
 
         meshes: dict[str, tuple] = {}
-        parts = []
+        parts, notes = [], []
         for comp in doc["components"]:
             name = comp["name"]
             semantic_id = None
@@ -263,6 +265,8 @@ class CarlaAdapter:
                 except (OSError, ObjError) as e:
                     raise SourceError("unreadable file", f"{mesh_path}: {e}") from None
                 meshes[mesh_path] = (data, obj_materials(mesh_path, data.mtllibs))
+                used = [meshes[mesh_path][1][g.material] for g in data.groups if g.material in meshes[mesh_path][1]]
+                notes += [n for n in missing_file_notes(mesh_path, used, data.mtllibs) if n not in notes]
             data, mtl = meshes[mesh_path]
             by_mat: dict[str, list] = {}
             for g in data.groups:
@@ -291,6 +295,7 @@ class CarlaAdapter:
             normalized=False,
             target_length=None,
             licence_required=False,
+            notes=tuple(notes),
         )
 
 

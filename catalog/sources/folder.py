@@ -52,9 +52,11 @@ from carlaocc.catalog.sources._common import (
     default_axes,
     default_subclass,
     find_licence_file,
+    is_excluded,
     is_mesh_file,
     licence_text,
     load_parts,
+    missing_file_notes,
     semantic_class,
     sidecar_files,
 )
@@ -162,7 +164,7 @@ class FolderAdapter:
         path = self._map_path(root)
         return read_category_map(path) if path else []
 
-    def list_items(self, root: str) -> list[SourceItem]:
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
         root = os.path.abspath(root)
         if not os.path.isdir(root):
             raise SourceError("missing mesh", f"{root} is not a directory")
@@ -170,7 +172,11 @@ class FolderAdapter:
         map_path = self._map_path(root)
         items = []
         for d, dirs, files in os.walk(root):
-            dirs[:] = sorted(x for x in dirs if not x.startswith("."))
+            dirs[:] = sorted(x for x in dirs if not x.startswith(".")
+                             and not is_excluded(os.path.join(d, x), exclude))
+            if exclude and is_excluded(d, exclude):  # the root itself is excluded
+                dirs[:] = []
+                continue
             for name in sorted(files):
                 path = os.path.join(d, name)
                 if name.startswith(".") or not is_mesh_file(name):
@@ -224,4 +230,5 @@ class FolderAdapter:
             normalized=False,
             target_length=row.get("length_m"),
             licence_required=False,
+            notes=tuple(missing_file_notes(path, parts)),
         )

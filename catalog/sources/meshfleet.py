@@ -57,7 +57,9 @@ from carlaocc.catalog.sources._common import (
     MESH_EXTS,
     check_axes,
     default_axes,
+    drop_excluded,
     load_parts,
+    missing_file_notes,
     semantic_class,
     sidecar_files,
 )
@@ -162,7 +164,7 @@ class MeshFleetAdapter:
             names.append(mf)
         return names
 
-    def list_items(self, root: str) -> list[SourceItem]:
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
         root = os.path.abspath(root)
         path = self._csv_path(root)
         mesh_dir = self._mesh_dir(root)
@@ -239,6 +241,7 @@ class MeshFleetAdapter:
             normalized=True,
             target_length=length if length and length > 0 else None,
             licence_required=True,
+            notes=tuple(missing_file_notes(mesh, parts)),
         )
 
 

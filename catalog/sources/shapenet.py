@@ -45,7 +45,7 @@ import json
 import os
 import re
 
-from carlaocc.catalog.sources._common import load_parts, semantic_class
+from carlaocc.catalog.sources._common import drop_excluded, load_parts, missing_file_notes, semantic_class
 from carlaocc.catalog.sources._obj import mtl_files
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
@@ -202,7 +202,7 @@ class ShapeNetAdapter:
             self._cache[root] = cached
         return cached[1], cached[2]
 
-    def list_items(self, root: str) -> list[SourceItem]:
+    def list_items(self, root: str, exclude: tuple[str, ...] = ()) -> list[SourceItem]:
         root = os.path.abspath(root)
         if not os.path.isdir(root):
             raise SourceError("bad metadata", f"{root} is not a directory")
@@ -219,7 +219,7 @@ class ShapeNetAdapter:
                 files = (obj, *mtl_files(obj)) if os.path.isfile(obj) else (obj,)
                 items.append(SourceItem(key=f"{synset}/{model}", files=files,
                                         meta={"synset": synset, "model": model}))  # fmt: skip
-        return items
+        return drop_excluded(items, exclude)
 
     def read(self, root: str, item: SourceItem) -> SourceAsset:
         root = os.path.abspath(root)
@@ -251,4 +251,5 @@ class ShapeNetAdapter:
             normalized=True,
             target_length=None,
             licence_required=False,
+            notes=tuple(missing_file_notes(path, parts)),
         )

@@ -10,13 +10,15 @@
 * ``evaluate``    — ``eval ssc|panoptic|depth|det``
 * ``audit`` (in ``carlaocc.pipeline.audit``) — quality scores of any dataset on disk
 
-Exit codes: 0 ok, 1 a task failed (named with its partition), 2 a usage or input error (one line
-naming the culprit; nothing in the dataset root is touched).
+Exit codes: 0 ok, 1 a task failed (named with its partition) or work failed, 2 a usage or input
+error (one line naming the culprit; nothing in the dataset root is touched). Every error is one
+line starting with ``error:``; ``carlaocc --debug`` (or ``CARLAOCC_DEBUG=1``) prints its traceback.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 
 from carlaocc.pipeline.audit import audit_cli
 from carlaocc.pipeline.cli import build, files, query, scene_tools, show  # noqa: F401  (register commands)
@@ -30,6 +32,22 @@ __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """Console-script entry point."""
+    """Console-script entry point: the app, and below it a last net so that even an exception
+    outside any command (or in the error path itself) is one line and exit 1."""
     os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
-    app()
+    try:
+        app()
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        sys.exit(130)
+    except BaseException as exc:  # noqa: BLE001 -- the last net: one line, never a traceback
+        from carlaocc.pipeline.cli.common import DEBUG_HINT, debug_enabled, one_line
+
+        if debug_enabled() or "--debug" in sys.argv[1:]:
+            import traceback
+
+            traceback.print_exception(type(exc), exc, exc.__traceback__)
+        print(f"error: unexpected {type(exc).__name__}: {one_line(exc)} ({DEBUG_HINT})", file=sys.stderr)
+        sys.exit(1)

@@ -1,11 +1,18 @@
 """The ``carlaocc`` Typer application and its command groups; each command module registers
-its commands on them."""
+its commands on them. The application's group runs every command inside the one error path
+(:class:`carlaocc.pipeline.cli.common.ErrorGroup`); ``carlaocc --debug`` (or ``CARLAOCC_DEBUG=1``)
+shows tracebacks."""
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import typer
 
+from carlaocc.pipeline.cli.common import DEBUG_ENV, ErrorGroup, set_debug
+
 app = typer.Typer(
+    cls=ErrorGroup,
     name="carlaocc",
     help="Build instance-centric panoptic occupancy datasets from 3D meshes.\n\n"
     "Stages (carlaocc run runs them in this order; --stages a,b runs some alone):\n\n"
@@ -16,12 +23,24 @@ app = typer.Typer(
     "quality: quality scores (spatial continuity, temporal consistency)\n\n"
     "report: statistics, plots and metrics/report.html\n\n"
     "Every stage is Dask tasks over partitions; unchanged work is skipped (lineage in "
-    "<root>/catalog/runs). `carlaocc stages` lists what each reads and writes.",
+    "<root>/catalog/runs). `carlaocc stages` lists what each reads and writes.\n\n"
+    "Errors are one line starting with 'error:'; exit code 2: bad input, refused before any work; "
+    "1: a failure during work; --debug shows the traceback.",
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
 )
+
+
+@app.callback()
+def _options(
+    debug: Annotated[bool, typer.Option("--debug", envvar=DEBUG_ENV, show_envvar=True,
+                                        help="on an error, print the full traceback before the one-line error")] = False,
+) -> None:
+    set_debug(debug)
+
+
 catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
                           rich_markup_mode=None)
 app.add_typer(catalog_app, name="catalog")

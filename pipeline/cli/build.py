@@ -35,7 +35,7 @@ def run(
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
     try:
         stage_order(names)
-        resolve_scheduler(scheduler)
+        resolve_scheduler(scheduler, probe=True)
     except PlanError as exc:
         fail(str(exc))
     store = _store(root, writable=True)
@@ -44,12 +44,16 @@ def run(
     try:
         outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
                                 log=lambda s: typer.echo(s, err=True))
-    except PlanError as exc:
+    except PlanError as exc:  # refused before any task ran
         progress.close()
         fail(str(exc))
-    except (StoreError, OSError) as exc:
+    except (StoreError, OSError) as exc:  # a failure during work
         progress.close()
-        fail(str(exc))
+        fail(f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename and exc.strerror
+             else exc, code=1)
+    except BaseException:  # the error path reports it; the bar must not stay on screen
+        progress.close()
+        raise
     progress.close()
     failed = [f for o in outcomes for f in o.failed]
     if failed:
@@ -82,13 +86,16 @@ def ingest(
     from carlaocc.pipeline.runner import PlanError, resolve_scheduler
     from carlaocc.schemas.configs import SourceIngestConfig
 
+    if category_map is not None and not category_map.is_file():
+        what = "is a directory, not a CSV file" if category_map.is_dir() else "does not exist"
+        fail(f"--category-map {category_map} {what}")
     try:
         cfg = SourceIngestConfig(kind=kind, root=str(path.resolve()),
                                  category_map=str(category_map.resolve()) if category_map else None)
     except ValidationError as exc:
         fail(_validation_message("ingest", exc).replace("ingest: kind: ", f"unknown source kind {kind!r}: "))
     try:
-        resolve_scheduler(scheduler)
+        resolve_scheduler(scheduler, probe=True)
     except PlanError as exc:
         fail(str(exc))
     store = _store(root, writable=True)
@@ -98,13 +105,17 @@ def ingest(
     except (IngestError, PlanError) as exc:
         progress.close()
         fail(str(exc))
+    except BaseException:  # the error path reports it; the bar must not stay on screen
+        progress.close()
+        raise
     progress.close()
     for f in s.failed[:10]:
         typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
     reasons = ", ".join(f"{n} {r}" for r, n in s.quarantined.most_common())
     typer.echo(f"{cfg.kind} {cfg.root}: {s.items} items, {s.ran} ingested now, {s.skipped} unchanged; "
                f"library holds {s.ingested} assets from it, {sum(s.quarantined.values())} quarantined"
-               + (f" ({reasons})" if reasons else "") + (f"; {s.pruned} vanished items pruned" if s.pruned else ""))
+               + (f" ({reasons})" if reasons else "") + (f"; {s.pruned} vanished items pruned" if s.pruned else "")
+               + "".join(f"; skipped the dataset root {d} inside the source" for d in s.excluded))
     if s.failed:
         raise typer.Exit(1)
 
@@ -120,6 +131,7 @@ def status(
     from carlaocc.pipeline.runner import status as plan_status
 
     cfg = load_config(config)
+    check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     store = _store(root, writable=False)
     for plan in plan_status(store, cfg, voxel_sizes):

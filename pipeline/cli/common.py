@@ -1,14 +1,20 @@
-"""What every command shares: the common options, one-line errors (exit 2), config loading,
-voxel-size parsing, the store, progress bars and atomic file output."""
+"""What every command shares: the common options, the one error path (one line, exit 2 for bad
+input, 1 for a failure during work, a traceback only with ``--debug``), config loading and the
+up-front checks of what it references, voxel-size parsing, the store, progress bars and atomic
+file output."""
 
 from __future__ import annotations
 
 import json
+import os
+import sys
+import traceback
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 from pydantic import ValidationError
+from typer.core import TyperGroup
 
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.configs import DatasetConfig, parse_voxel_size_list
@@ -23,10 +29,95 @@ VoxelSizeOpt = Annotated[str, typer.Option("--voxel-size", "--res", help="voxel 
 ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="YAML or JSON dataset config (see `carlaocc config`)")]
 
 
-def fail(message: str, code: int = 2) -> None:
-    """Print a one-line error and exit."""
+DEBUG_ENV = "CARLAOCC_DEBUG"
+_debug = False
+DEBUG_HINT = "re-run with --debug for the traceback"
+
+
+def set_debug(on: bool) -> None:
+    """``carlaocc --debug``: errors print their traceback before their one line."""
+    global _debug
+    _debug = bool(on)
+
+
+def debug_enabled() -> bool:
+    return _debug or os.environ.get(DEBUG_ENV, "").strip().lower() not in ("", "0", "false", "no")
+
+
+def fail(message: str | BaseException, code: int = 2) -> None:
+    """Print a one-line error and exit (with ``--debug``, the traceback of the exception being
+    handled first). ``message`` may be the exception itself (a pydantic error becomes its first
+    error's line)."""
+    if debug_enabled() and sys.exc_info()[1] is not None:
+        traceback.print_exc()
+    text = pydantic_message(message) if isinstance(message, ValidationError) else one_line(message)
+    typer.echo(f"error: {text}", err=True)
+    raise typer.Exit(code)
+
+
+def one_line(text: Any) -> str:
+    """``text`` on one line: its lines joined (a multi-line message keeps its content)."""
+    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
+    return "; ".join(lines) if lines else "(no message)"
+
+
+def pydantic_message(exc: ValidationError, names: dict[str, str] | None = None) -> str:
+    """The first error of a pydantic ValidationError in one line, its field named by ``names``
+    (field -> the option the user typed, e.g. ``region_min`` -> ``--origin``) when given."""
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    field = (names or {}).get(str(err["loc"][0]) if err["loc"] else "", loc)
+    msg = str(err["msg"]).removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    more = len(exc.errors()) - 1
+    return one_line(f"{field + ': ' if field else ''}{msg}" + (f" (and {more} more)" if more else ""))
+
+
+def _known_errors() -> tuple[type[BaseException], ...]:
+    from carlaocc.pipeline.runner import PlanError
+
+    return (PlanError, StoreError, ValidationError, ValueError, OSError, LookupError)
+
+
+def error_line(exc: BaseException) -> tuple[str, int]:
+    """The one line and exit code of an exception no command handled: bad input the plan refuses
+    (a PlanError, an invalid value) exit 2; anything else is a failure during work, exit 1;
+    an exception of no known kind also says how to see its traceback."""
+    from carlaocc.pipeline.runner import PlanError
+
+    if isinstance(exc, ValidationError):
+        return pydantic_message(exc), 2
+    if isinstance(exc, PlanError):
+        return one_line(exc), 2
+    if isinstance(exc, OSError) and exc.strerror and getattr(exc, "filename", None):
+        return f"{exc.filename}: {exc.strerror}", 1
+    if isinstance(exc, _known_errors()) and str(exc).strip():
+        return one_line(exc), 1
+    return f"{type(exc).__name__}: {one_line(exc)} ({DEBUG_HINT})", 1
+
+
+def report_exception(exc: BaseException) -> None:
+    """Print ``exc`` as the one error line (its traceback first with ``--debug``) and exit."""
+    if debug_enabled():
+        traceback.print_exception(type(exc), exc, exc.__traceback__)
+    message, code = error_line(exc)
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code)
+
+
+class ErrorGroup(TyperGroup):
+    """The ``carlaocc`` group: every command runs inside the one error path -- an exception no
+    command turned into its own error line becomes one (:func:`error_line`), never a traceback
+    unless ``--debug``. Typer's own exits and usage errors pass through."""
+
+    def invoke(self, ctx):
+        from typer.exceptions import TyperException
+
+        try:
+            return super().invoke(ctx)
+        except (TyperException, typer.Exit, typer.Abort, KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:
+            report_exception(exc)
 
 
 def _validation_message(source: str, exc: ValidationError) -> str:
@@ -42,8 +133,11 @@ def load_config(path: Path | None) -> DatasetConfig:
     if path is None:
         return DatasetConfig()
     if not path.is_file():
-        fail(f"config file {path} does not exist")
-    text = path.read_text()
+        fail(f"--config {path} " + ("is a directory, not a YAML or JSON file" if path.is_dir() else "does not exist"))
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        fail(f"--config {path}: cannot read it as text: {getattr(exc, 'strerror', None) or exc}")
     try:
         if path.suffix.lower() == ".json":
             data = json.loads(text)
@@ -67,17 +161,33 @@ MAX_FRAME_VOXELS = 1_000_000_000
 
 
 def check_towns(cfg: DatasetConfig) -> None:
-    """Every OpenDRIVE town's file exists and parses; else a one-line error naming it."""
+    """Every OpenDRIVE town is one the scenes stage can drive in, checked before any task runs:
+    its file exists and parses, has roads, and the scenes stage's own lane graph builds from it
+    (driving lanes, a drivable cycle: :func:`build_opendrive_network`); else a one-line error
+    naming the file (exit 2)."""
     from carlaocc.catalog.opendrive import read_opendrive
     from carlaocc.catalog.towns import resolve_opendrive
+    from carlaocc.stages.scenes.odr_network import build_opendrive_network
 
     for i, spec in enumerate(cfg.scenes.towns):
         if spec.opendrive is None:
             continue
+        where = f"scenes.towns[{i}].opendrive"
         try:
-            read_opendrive(resolve_opendrive(spec.opendrive))
-        except (OSError, ValueError) as exc:
-            fail(f"scenes.towns[{i}].opendrive: {exc}")
+            path = resolve_opendrive(spec.opendrive)
+            odr = read_opendrive(path)
+        except (OSError, ValueError) as exc:  # the messages name the file
+            fail(f"{where}: {one_line(exc)}")
+        try:
+            if not odr.roads:
+                raise ValueError(f"{path}: no roads")
+            build_opendrive_network(odr, cfg.scenes.curb_height, str(path))
+        except ValueError as exc:  # names the file
+            fail(f"{where}: {one_line(exc)}; the scenes stage needs driving lanes it can drive around "
+                 f"in: fix the file or drop the town")
+        except Exception as exc:  # anything else the scenes task would trip over
+            fail(f"{where}: {path}: cannot build its road network ({type(exc).__name__}: {one_line(exc)}); "
+                 f"fix the file or drop the town")
 
 
 def parse_voxel_sizes(text: str, config: DatasetConfig) -> tuple[float, ...]:
@@ -100,12 +210,29 @@ def parse_voxel_sizes(text: str, config: DatasetConfig) -> tuple[float, ...]:
 
 
 def _store(root: str, writable: bool) -> Store:
-    store = Store(root)
+    """The dataset root of ``--root``: one that can be written (``writable``; it may not exist
+    yet), or -- for commands that read -- one that exists and is a directory, else a one-line
+    error naming it (exit 2) rather than the answer of an empty dataset."""
+    try:
+        store = Store(root)
+        fs, path = store.fs, store.root
+    except (ValueError, ImportError, OSError) as exc:  # an unknown fsspec protocol...
+        fail(f"--root {root}: not a usable dataset root ({one_line(exc)})")
     if writable:
         try:
             store.check_writable()
         except StoreError as exc:
             fail(str(exc))
+        return store
+    try:
+        exists, is_dir = fs.exists(path), fs.isdir(path)
+    except OSError as exc:
+        fail(f"--root {root}: cannot read the dataset root: {exc.strerror or one_line(exc)}")
+    if not exists:
+        fail(f"--root {root}: no dataset root there ({store.url} does not exist); give the root of a "
+             f"built dataset, or build one with `carlaocc run --root {root}`")
+    if not is_dir:
+        fail(f"--root {root}: {store.url} is a file, not a dataset root directory")
     return store
 
 
@@ -137,17 +264,19 @@ class _RichProgress:
     def close(self) -> None:
         if self._tasks:
             self._progress.stop()
+            self._tasks.clear()
 
 
 def _floats(text: Optional[str], name: str, kind=float) -> Optional[tuple]:
     if text is None:
         return None
+    what = "integers" if kind is int else "numbers"
     try:
         vals = tuple(kind(v) for v in text.split(","))
     except ValueError:
-        fail(f"{name} must be three comma-separated numbers, got {text!r}")
+        fail(f"{name} must be three comma-separated {what}, got {text!r}")
     if len(vals) != 3:
-        fail(f"{name} must be three comma-separated numbers, got {text!r}")
+        fail(f"{name} must be three comma-separated {what}, got {text!r}")
     return vals
 
 

@@ -60,8 +60,9 @@ class InputError(ValueError):
 
 
 def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(2)
+    from carlaocc.pipeline.cli.common import fail
+
+    fail(message, 2)
 
 
 # --------------------------------------------------------------------------- pairing and reading

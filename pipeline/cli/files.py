@@ -46,7 +46,7 @@ def voxelize_files(
         seconds = time.perf_counter() - t0
         save_result(result, out)
     except (InputError, ValueError) as exc:
-        fail(str(exc))
+        fail(exc)
     except OSError as exc:
         fail(f"--out {out}: cannot write: {exc.strerror or exc}")
     occupied = int((result.semantic > 0).sum())
@@ -86,7 +86,7 @@ def export_cmd(
             task = bar.add_task(fmt, total=total)
             summary = export(store, cfg, fmt, res, out, sequence, progress=lambda n: bar.advance(task, n))
     except (StoreError, FormatError, ValueError) as exc:
-        fail(str(exc))
+        fail(exc)
     except OSError as exc:
         fail(f"--out {out}: cannot write: {exc.strerror or exc}")
     typer.echo(f"wrote {summary.files:,} files for {summary.frames} frames of {summary.sequences} sequence(s) "
@@ -126,7 +126,7 @@ def compare_resolutions(
                 d = pooling_disagreement(occ.read_frame(seq, gc, t, ("semantic",))["semantic"], pooled)
                 rows.append({"sequence": seq, "frame": t, **d})
     except (StoreError, ValueError) as exc:
-        fail(str(exc))
+        fail(exc)
     if not rows:
         fail(f"no sequence has both {resolution_key(fine)} m and {resolution_key(coarse)} m occupancy in {store.url}")
     typer.echo(f"{'sequence':<28} {'frames':>6} {'occ. IoU':>9} {'occ. mismatch':>14} {'label mismatch':>15} {'mismatch rate':>14}")

@@ -10,9 +10,9 @@ from typing import Annotated
 
 import typer
 
-from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import catalog_app
-from carlaocc.pipeline.cli.common import RootOpt, fail
+from carlaocc.pipeline.cli.common import RootOpt, _store, fail
 
 
 def _format_value(v) -> str:
@@ -33,7 +33,7 @@ def catalog_query(
 
     if fmt not in ("table", "csv", "json"):
         fail(f"--format {fmt!r}: choose table, csv or json")
-    store = Store(root)
+    store = _store(root, writable=False)
     try:
         cols, rows = query(store, sql)
     except QueryRefused as exc:

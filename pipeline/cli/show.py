@@ -65,7 +65,7 @@ def admesh_show(
     root: RootOpt = "data",
 ) -> None:
     """Render one asset to a PNG (semantic colours, glass translucent), headless."""
-    labels, images = _render_assets(Store(root), None, asset_id, 1)
+    labels, images = _render_assets(_store(root, writable=False), None, asset_id, 1)
     _write_png(out, images[0])
     typer.echo(f"{labels[0]} -> {out}")
 
@@ -82,7 +82,7 @@ def admesh_sheet(
     """A contact sheet of the assets a query selects (semantic colours), headless."""
     from carlaocc.stages.render.sheets import contact_sheet
 
-    labels, images = _render_assets(Store(root), where, None, limit, size)
+    labels, images = _render_assets(_store(root, writable=False), where, None, limit, size)
     _write_png(out, contact_sheet(images, labels, columns=columns))
     typer.echo(f"{len(images)} assets -> {out}")
 

@@ -4,7 +4,8 @@ source (``carlaocc ingest KIND PATH``) as one task per source item.
 Each source item's partition carries the item's files (and the category map) as external inputs,
 so a re-run re-ingests exactly the items whose bytes changed. Items that vanished from the source
 have their records pruned after the run. A bad item is quarantined with its reason; the batch
-goes on.
+goes on. A dataset root placed inside the source folder is skipped when the source is listed (its
+own meshes are not source meshes); the summary says so.
 """
 
 from __future__ import annotations
@@ -122,14 +123,26 @@ def partition_key(cfg: SourceIngestConfig, item_key: str) -> str:
     return f"{cfg.kind}:{root_digest(cfg.root)}/{item_key}"
 
 
-def source_partitions(cfg: SourceIngestConfig) -> list[Partition]:
-    """One partition per item of the source; raises IngestError when the source is unusable."""
+def dataset_roots_inside(store: Store, cfg: SourceIngestConfig) -> tuple[str, ...]:
+    """The store's own directory when it is the source root or lies inside it (a local store
+    only): the listing of the source must skip it."""
+    if not store.is_local:
+        return ()
+    mine, src = os.path.realpath(store.root), os.path.realpath(cfg.root)
+    if mine == src or mine.startswith(src.rstrip(os.sep) + os.sep):
+        return (mine,)
+    return ()
+
+
+def source_partitions(cfg: SourceIngestConfig, exclude: tuple[str, ...] = ()) -> list[Partition]:
+    """One partition per item of the source, items inside the directories ``exclude`` left out;
+    raises IngestError when the source is unusable."""
     if not os.path.isdir(cfg.root):
         raise IngestError(f"{cfg.kind} source {cfg.root} is not a directory")
     if cfg.category_map and not os.path.isfile(cfg.category_map):
         raise IngestError(f"category map {cfg.category_map} does not exist")
     try:
-        items = adapter(cfg.kind, category_map=cfg.category_map).list_items(cfg.root)
+        items = adapter(cfg.kind, category_map=cfg.category_map).list_items(cfg.root, exclude=exclude)
     except ValueError as exc:  # an option this kind does not take (e.g. a category map)
         raise IngestError(f"{cfg.kind} source: {exc}") from None
     except SourceError as exc:
@@ -150,9 +163,10 @@ def _stable_meta(meta: dict) -> dict:
     return meta
 
 
-def source_spec(cfg: SourceIngestConfig) -> StageSpec:
-    """An ingest stage over one external source, run by the ordinary runner."""
-    parts = source_partitions(cfg)
+def source_spec(cfg: SourceIngestConfig, exclude: tuple[str, ...] = ()) -> StageSpec:
+    """An ingest stage over one external source (``exclude``: directories of it not listed), run
+    by the ordinary runner."""
+    parts = source_partitions(cfg, exclude)
     return StageSpec(
         name=STAGE,
         description=f"ingest the {cfg.kind} source {cfg.root}",
@@ -174,6 +188,7 @@ class IngestSummary:
     ingested: int = 0
     quarantined: Counter = field(default_factory=Counter)
     pruned: int = 0
+    excluded: tuple[str, ...] = ()  # directories of the source skipped (the dataset root inside it)
 
 
 def prune_vanished(store: Store, cfg: SourceIngestConfig, keys: set[str]) -> int:
@@ -206,12 +221,13 @@ def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None =
     """Ingest one source into the store's ADMesh library."""
     from carlaocc.pipeline.runner import StageOutcome, run  # the engine runs this stage alone
 
-    spec = source_spec(cfg)
+    excluded = dataset_roots_inside(store, cfg)
+    spec = source_spec(cfg, excluded)
     parts = spec.partitions(None)
     outcomes: list[StageOutcome] = run(store, DatasetConfig(), (), None, scheduler, force, progress, workers,
                                        log, registry={STAGE: spec})
     (o,) = outcomes
-    summary = IngestSummary(items=len(parts), ran=o.ran, skipped=o.skipped, failed=o.failed)
+    summary = IngestSummary(items=len(parts), ran=o.ran, skipped=o.skipped, failed=o.failed, excluded=excluded)
     summary.pruned = prune_vanished(store, cfg, {p.params["item_key"] for p in parts})
     prune_orphan_meshes(store)
     # what the library now holds of this source

@@ -6,7 +6,8 @@
   and geometry in the asset frame) or a ``Rejection``; the driver of the steps below.
 * ``checks``       — ``Rejection`` and the label and array checks.
 * ``repair``       — mesh cleaning (weld, degenerate and duplicate faces) and winding repair.
-* ``sizes``        — the size table per class and sub-class, and the scale to metres.
+* ``sizes``        — the size table per class and sub-class, the scale to metres and the
+  smallest extent a class allows (things are never flat).
 """
 
 from carlaocc.stages.ingest.procedural import IngestResult, asset_id_for, ingest_procedural

@@ -6,6 +6,19 @@ Standardization measures an asset in the asset frame (after the frame step) by i
 :func:`choose_scale` picks the scale by the first rule that applies (``target_length``,
 ``normalized``, declared units, inferred units, fallback); a standardized size outside
 ``[min / ABSURD_FACTOR, max * ABSURD_FACTOR]`` is absurd (quarantined). Sizes in metres.
+
+Degenerate extents (:func:`min_extent`), per the taxonomy's kind of the class:
+
+* **Things** (kind ``"thing"``: Building and the road users) are solid objects with an instance
+  id, filled when closed: no axis of their bounding box may be zero (``"flat mesh"``, checked
+  before the scale: zero is zero in any units), and after the scale every axis must be at least
+  the (sub-)class's minimum measured size / :data:`THIN_FACTOR` (``"too thin"``): Car 3.5 m ->
+  0.175 m, Pedestrian 0.8 m -> 0.04 m, Building 2.5 m -> 0.125 m, Bicycle 1.0 m -> 0.05 m.
+* **Stuff** may be flat on an axis: ground-like surfaces (Road, RoadLine, Ground, Sidewalk,
+  Terrain, Water, RailTrack) and thin sheets (Fence, Wall, GuardRail, sign plates, billboards,
+  foliage cards) are routinely single planes, and stuff is voxelized as a surface. Only its
+  measured dimension is checked (zero height for a class measured by height is ``"absurd
+  size"``; a mesh with no area on two axes has only degenerate faces and never gets here).
 """
 
 from __future__ import annotations
@@ -180,6 +193,9 @@ INFERENCE_FACTORS: tuple[tuple[float, str], ...] = (
 ABSURD_FACTOR = 3.0
 """A measured size outside [min / 3, max * 3] of its range is absurd (quarantined)."""
 
+THIN_FACTOR = 20.0
+"""A thing's thinnest axis must be at least its range's minimum measured size / 20."""
+
 
 def _check_size_tables() -> None:
     """Fail at import if the size table misses a class or is inconsistent."""
@@ -203,6 +219,15 @@ def size_range(category: str, subclass: str) -> SizeRange:
     ``KeyError`` for a class the taxonomy does not know."""
     name = taxonomy.by_name(category).name
     return SUBCLASS_SIZE_RANGES.get((name, subclass), SIZE_RANGES[name])
+
+
+def min_extent(category: str, subclass: str) -> float:
+    """The smallest extent any axis of a standardized asset of the class may have, in metres:
+    the (sub-)class's minimum measured size / :data:`THIN_FACTOR` for a thing, 0 for stuff (which
+    may be flat). ``KeyError`` for a class the taxonomy does not know."""
+    if taxonomy.by_name(category).kind != "thing":
+        return 0.0
+    return size_range(category, subclass)[1] / THIN_FACTOR
 
 
 def range_label(category: str, subclass: str) -> str:

@@ -38,12 +38,19 @@ Steps, in order:
 6. **Origin** at the bottom centre of the bounding box (x, y centred, z from 0); vertices rounded
    to 0.1 um so float noise never reaches hashes or files.
 7. **Plausibility.** The measured dimension outside ``[min / 3, max * 3]`` -> ``"absurd size"``
-   (the hint names the size, the range and the scale rule).
+   (the hint names the size, the range and the scale rule). A thing class (``sizes.min_extent``)
+   with a zero extent on any axis -> ``"flat mesh"`` (checked before the scale), with an axis
+   below its minimum extent -> ``"too thin"``; stuff may be flat (a road, a road line, a fence
+   sheet).
 8. **Watertightness, per part** with :func:`carlaocc.stages.geometry.is_watertight`. A part that is closed
    (every undirected edge shared by exactly two faces) but inconsistently wound is re-wound by a
    breadth-first walk over its faces; closed bodies whose signed volume is negative (inside out)
    are flipped unless they lie inside another body of the part (an inner shell of a hollow solid
    is meant to face inward). Both repairs are recorded in the notes.
+
+Notes the source adapter attached (:attr:`SourceAsset.notes`: a missing material library or
+texture file) come first in the notes; all of them end up in ``AssetRecord.notes`` (``"; "``
+joined), so ``SELECT source_path, notes FROM assets WHERE notes <> ''`` finds them.
 
 Identity: ``asset_id`` = first 16 hex digits of SHA-256 over ``category|subclass|geometry_hash|
 part semantic ids``; the same standardized geometry and labels from two files give the same id.
@@ -64,7 +71,9 @@ from carlaocc.stages.ingest.checks import Rejection, check_arrays, check_categor
 from carlaocc.stages.ingest.repair import (
     DEGENERATE_REL, WELD_REL, CleanedPart, clean_part, fix_inverted, is_closed, rewind,
 )
-from carlaocc.stages.ingest.sizes import ABSURD_FACTOR, choose_scale, measured_size, range_label, size_range
+from carlaocc.stages.ingest.sizes import (
+    ABSURD_FACTOR, THIN_FACTOR, choose_scale, measured_size, min_extent, range_label, size_range,
+)
 
 __all__ = ["StandardizedAsset", "standardize", "rotation_to_asset_frame"]
 
@@ -87,8 +96,9 @@ class StandardizedAsset:
     """A standardized asset: its record (``mesh_path`` empty, no aliases), one record per part and
     the geometry in the asset frame (metres, +X forward, Z up, origin at the bottom centre).
 
-    ``notes`` says what cleaning and repair did and what was kept despite doubts (removed faces,
-    re-wound parts, a sub-class outside the taxonomy); the records have no field for it."""
+    ``notes`` says what the source lacks (missing material or texture files), what cleaning and
+    repair did and what was kept despite doubts (removed faces, re-wound parts, a sub-class
+    outside the taxonomy); the asset record carries them joined in its ``notes``."""
 
     asset: AssetRecord
     parts: list[PartRecord]
@@ -115,6 +125,16 @@ def rotation_to_asset_frame(up: str, forward: str) -> np.ndarray | None:
 # --------------------------------------------------------------------------------------------
 # standardize
 # --------------------------------------------------------------------------------------------
+
+
+def _flat_axes(extent: np.ndarray) -> list[str]:
+    """The axes (``"x"``, ``"y"``, ``"z"``) along which the extent is exactly zero."""
+    return [a for a, e in zip("xyz", extent) if not e > 0.0]
+
+
+def _fmt_extent(extent) -> str:
+    return " x ".join(f"{float(e):.4g}" for e in extent)
+
 
 
 def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
@@ -160,7 +180,7 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     allv = np.concatenate(referenced)
     diag = float(np.linalg.norm(allv.max(axis=0) - allv.min(axis=0)))
     tol2 = DEGENERATE_REL * diag * diag
-    notes: list[str] = []
+    notes: list[str] = [str(n) for n in raw.notes]
     cleaned: list[tuple[SourcePart, CleanedPart, int]] = []
     for k, (part, v, f, sid) in enumerate(checked):
         c = clean_part(v, f, tol2, quantum=WELD_REL * diag)
@@ -189,6 +209,12 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
         lo, hi = allv.min(axis=0), allv.max(axis=0)
         notes.append(f"turned a quarter about +Z: its long side lay along Y (declared forward "
                      f"{raw.forward} is sideways)")
+    flat = _flat_axes(hi - lo)
+    if flat and min_extent(category, raw.subclass) > 0.0:
+        return Rejection("flat mesh", f"{range_label(category, raw.subclass)} is a solid thing but the mesh has no "
+                         f"extent along {' and '.join(flat)} of the asset frame (z up; extent {_fmt_extent(hi - lo)} in source "
+                         f"units): a flat "
+                         f"mesh cannot be a {category}; check the category, the up axis ({raw.up}) or the file")
     chosen = choose_scale(raw, category, hi - lo)
     if isinstance(chosen, Rejection):
         return chosen
@@ -204,6 +230,14 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
                          f"after standardization is outside {rmin / ABSURD_FACTOR:.3g}-"
                          f"{rmax * ABSURD_FACTOR:.3g} m (range {rmin:g}-{rmax:g} m, scale x{scale:.6g}: "
                          f"{rule}): declare the units, fix the up axis or the category")
+    thin = min_extent(category, raw.subclass)
+    below = [a for a, e in zip("xyz", extent) if e < thin]
+    if below:
+        kind = "flat mesh" if all(extent["xyz".index(a)] <= 0.0 for a in below) else "too thin"
+        return Rejection(kind, f"{range_label(category, raw.subclass)} extent {_fmt_extent(extent)} m after "
+                         f"standardization: {' and '.join(below)} below {thin:.3g} m (1/{THIN_FACTOR:g} of the "
+                         f"smallest {dim} {rmin:g} m of the class): a {category} is not a sheet; check the "
+                         "category, the up axis or the file")
 
     if raw.subclass not in cls.subclasses and (raw.subclass or cls.subclasses):
         known = ", ".join(cls.subclasses) or "none"

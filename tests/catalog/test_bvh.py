@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from carlaocc.catalog.bvh import BvhError, parse_bvh, read_bvh
 from carlaocc.schemas.motion import MotionClip
+from shared_data import require, shared_path
 
-CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
+CLIP = shared_path("motion/cmu_131_01_walk_metres.bvh")
 
 TINY = """HIERARCHY
 ROOT Hips
@@ -38,9 +38,7 @@ Frame Time: 0.05
 
 @pytest.fixture(scope="module")
 def clip() -> MotionClip:
-    if not CLIP.exists():
-        pytest.skip("test clip not available")
-    return read_bvh(str(CLIP))
+    return read_bvh(str(require(CLIP)))
 
 
 def test_real_clip_header(clip):
@@ -84,9 +82,7 @@ def _line_of(text: str, needle: str) -> int:
 
 
 def test_truncated_motion_of_real_clip():
-    if not CLIP.exists():
-        pytest.skip("test clip not available")
-    lines = CLIP.read_text().splitlines()
+    lines = require(CLIP).read_text().splitlines()
     with pytest.raises(BvhError, match=r"line \d+: MOTION truncated: 990 of 995 frames"):
         parse_bvh("\n".join(lines[:-5]) + "\n")
 

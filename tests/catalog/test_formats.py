@@ -31,15 +31,12 @@ from carlaocc.catalog.formats.surroundocc import (
     save_surroundocc,
     surroundocc_to_dense,
 )
+from shared_data import needs, shared_path
 
-TESTDATA = Path("/work/shared/testdata/occupancy")
+TESTDATA = shared_path("occupancy")
 OCC3D_SAMPLE = TESTDATA / "occ3d-nuscenes" / "labels.npz"
 SKITTI_YAML = TESTDATA / "semantic-kitti" / "semantic-kitti.yaml"
 SURROUND_POINTS = TESTDATA / "surroundocc-own-data" / "pc_seman__pc_seman_0.npy"
-
-
-def needs(path: Path):
-    return pytest.mark.skipif(not path.exists(), reason=f"testdata missing: {path}")
 
 
 # --------------------------------------------------------------------------------------- shared

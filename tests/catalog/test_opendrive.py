@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from carlaocc.catalog.opendrive import OpenDriveError, parse_opendrive, read_opendrive
 from carlaocc.schemas.opendrive import OpenDriveNetwork
+from shared_data import needs, shared_path
 
-DATA = Path("/work/shared/testdata/opendrive")
+DATA = shared_path("opendrive")
 NAMES = ["Town01", "Town02", "Town10HD", "Issue274", "shoulders", "zero_width"]
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared OpenDRIVE test data not present")
+needs_data = needs(DATA)
 
 # counts from testdata/MANIFEST.tsv
 COUNTS = {

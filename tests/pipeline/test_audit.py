@@ -17,9 +17,10 @@ from carlaocc.catalog.formats.poses import KeyedPoses, load_poses, plan_sequence
 from carlaocc.pipeline.audit import audit_command
 from carlaocc.pipeline.cli import app
 from carlaocc.stages.quality import isolated_mask_reference, spatial_continuity_counts
+from shared_data import needs, shared_path
 
 cli = CliRunner()
-OCC3D_SAMPLE = Path("/work/shared/testdata/occupancy/occ3d-nuscenes/labels.npz")
+OCC3D_SAMPLE = shared_path("occupancy/occ3d-nuscenes/labels.npz")
 
 
 def _run(*args):
@@ -39,7 +40,7 @@ def _isolated_per_class(sem: np.ndarray, classes) -> tuple[int, int]:
     return occupied, isolated
 
 
-@pytest.mark.skipif(not OCC3D_SAMPLE.is_file(), reason="shared Occ3D sample not present")
+@needs(OCC3D_SAMPLE)
 def test_real_occ3d_sample(tmp_path):
     out = tmp_path / "occ3d.json"
     r = _run("occ3d", OCC3D_SAMPLE.parent, "--json", out, "--per-frame")

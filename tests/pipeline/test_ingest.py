@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 from carlaocc.catalog.sql import query
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.cli import app
+from shared_data import require, shared_path
 
 cli = CliRunner()
 
@@ -171,12 +172,10 @@ def test_carla_export_through_the_cli(tmp_path):
 
 
 def test_meshfleet_rows_without_mesh_are_reported_not_fatal(tmp_path):
-    csv = "/work/shared/testdata/meshfleet/meshfleet_with_vehicle_categories_df.csv"
     import csv as csvlib
     import os
 
-    if not os.path.exists(csv):
-        pytest.skip("shared MeshFleet sample absent")
+    csv = str(require(shared_path("meshfleet/meshfleet_with_vehicle_categories_df.csv")))
     with open(csv, newline="") as fh:
         first = next(csvlib.DictReader(fh))
     meshes = tmp_path / "meshfleet"
@@ -198,13 +197,10 @@ def test_shapenet_model_in_its_own_frame_comes_out_upright_and_forward(tmp_path)
     """ShapeNetCore v2 models are normalized, +Y up, front facing -Z: the BMW hull (ours: +X
     forward, +Z up) written in that frame must come back long along X, upright, at car size."""
     import json
-    import os
 
     from carlaocc.stages.ingest.standardize import rotation_to_asset_frame
 
-    hull = "/work/shared/testdata/meshes/scenic/bmwx5_hull.obj"
-    if not os.path.exists(hull):
-        pytest.skip("shared BMW hull absent")
+    hull = str(require(shared_path("meshes/scenic/bmwx5_hull.obj")))
     car = trimesh.load(hull, force="mesh")
     R = rotation_to_asset_frame("+y", "-z")  # ShapeNet -> ours; its transpose: ours -> ShapeNet
     v = (car.vertices - car.vertices.mean(axis=0)) @ R  # row vectors: v @ R == (R.T @ v.T).T

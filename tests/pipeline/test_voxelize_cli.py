@@ -10,9 +10,10 @@ import trimesh
 from typer.testing import CliRunner
 
 from carlaocc.pipeline.cli import app
+from shared_data import require, shared_path
 
 cli = CliRunner()
-MODELS = Path(__file__).resolve().parents[3] / "shared" / "testdata" / "meshes" / "trimesh-models"
+MODELS = shared_path("meshes/trimesh-models")
 
 
 @pytest.fixture
@@ -41,8 +42,7 @@ def test_cube_known_answer_filled_and_surface(tmp_path, cube_obj):
 
 
 def test_per_file_classes_and_default_grid(tmp_path, cube_obj):
-    if not (MODELS / "chair_model.obj").exists():
-        pytest.skip("shared test data absent")
+    require(MODELS / "chair_model.obj")
     out = tmp_path / "two.npz"
     r = cli.invoke(app, ["voxelize", str(cube_obj), str(MODELS / "chair_model.obj"), "--class", "Car",
                          "--class", "Sidewalk", "--voxel-size", "0.05", "--out", str(out)])

@@ -28,7 +28,7 @@ def test_fields_order_and_defaults():
     assert _fields(SourceAsset) == [
         ("source", M), ("source_path", M), ("licence", M), ("category", M), ("subclass", M), ("parts", M),
         ("up", "+z"), ("forward", "+x"), ("units", "unknown"), ("normalized", False), ("target_length", None),
-        ("licence_required", False),
+        ("licence_required", False), ("notes", ()),
     ]  # fmt: skip
     assert _fields(MeshPart) == [("name", M), ("vertices", M), ("faces", M), ("semantic_id", M),
                                  ("material", "default"), ("transparent", False), ("color", (200, 200, 200, 255))]

@@ -10,8 +10,9 @@ import pydantic
 import pytest
 
 from carlaocc.schemas import taxonomy as tx
+from shared_data import require, shared_path
 
-SEMANTIC_KITTI_YAML = Path("/work/shared/testdata/occupancy/semantic-kitti/semantic-kitti.yaml")
+SEMANTIC_KITTI_YAML = shared_path("occupancy/semantic-kitti/semantic-kitti.yaml")
 
 ROAD_USERS = ("Pedestrian", "Rider", "Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle")
 
@@ -184,10 +185,9 @@ def test_unknown_target_raises_value_error_naming_targets() -> None:
 
 
 def test_semantickitti_agrees_with_yaml_learning_map() -> None:
-    if not SEMANTIC_KITTI_YAML.exists():
-        pytest.skip(f"{SEMANTIC_KITTI_YAML} not present")
-    yaml = pytest.importorskip("yaml")
-    cfg = yaml.safe_load(SEMANTIC_KITTI_YAML.read_text())
+    import yaml
+
+    cfg = yaml.safe_load(require(SEMANTIC_KITTI_YAML).read_text())
     raw_by_name = {v: int(k) for k, v in cfg["labels"].items()}
     learning_map = {int(k): int(v) for k, v in cfg["learning_map"].items()}
     # our names table is the yaml's learning classes, in learning-id order

@@ -3,8 +3,6 @@ hand-worked numbers, the real Occ3D sample, and hypothesis properties."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -13,8 +11,9 @@ from hypothesis.extra import numpy as hnp
 
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.evaluation.ssc import LABEL_MAPS, LabelMap, SSCAccumulator, confusion_matrix, label_map
+from shared_data import needs, shared_path
 
-OCC3D_SAMPLE = Path(__file__).resolve().parents[2] / ".." / "shared" / "testdata" / "occupancy" / "occ3d-nuscenes" / "labels.npz"
+OCC3D_SAMPLE = shared_path("occupancy/occ3d-nuscenes/labels.npz")
 
 # a tiny label space: 0 free, 1..4 classes
 SMALL = LabelMap("small", ("free", "a", "b", "c", "d"), 0, (3, 4), (0,) * 30)
@@ -190,7 +189,7 @@ def test_label_maps_come_from_the_taxonomy():
     assert set(LABEL_MAPS) == {"carlaocc", "benchmark", "occ3d", "sscbench", "semantickitti"}
 
 
-@pytest.mark.skipif(not OCC3D_SAMPLE.is_file(), reason="shared Occ3D sample not present")
+@needs(OCC3D_SAMPLE)
 def test_real_occ3d_sample_with_camera_mask():
     z = np.load(OCC3D_SAMPLE)
     gt, cam = z["semantics"], z["mask_camera"].astype(bool)

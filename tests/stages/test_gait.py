@@ -14,8 +14,9 @@ from carlaocc.stages.scenes.gait.cycles import canonical_cycle, detect_gait_cycl
 from carlaocc.stages.scenes.gait.kinematics import BVH_TO_ZUP, clip_positions, forward_kinematics, select_gait_joints
 from carlaocc.stages.scenes.gait.matching import GaitModel, phase_accuracy
 from carlaocc.stages.scenes.gait.walker import add_joint_noise, procedural_walk, resample_walk
+from shared_data import require, shared_path
 
-CLIP = Path("/work/shared/testdata/motion/cmu_131_01_walk_metres.bvh")
+CLIP = shared_path("motion/cmu_131_01_walk_metres.bvh")
 SPEEDS = (0.8, 1.2, 1.6)
 NOISES = (0.0, 0.01, 0.02, 0.03)  # metres, std of Gaussian noise per joint coordinate
 TRAIN_SPEEDS = (0.7, 0.9, 1.1, 1.3, 1.5, 1.7)
@@ -24,11 +25,9 @@ D, W, RATE = 32, 11, 20.0
 
 @pytest.fixture(scope="module")
 def cmu():
-    if not CLIP.exists():
-        pytest.skip("test clip not available")
     from carlaocc.catalog.bvh import read_bvh  # tests may cross layers; the module under test does not
 
-    clip = read_bvh(str(CLIP))
+    clip = read_bvh(str(require(CLIP)))
     pos = clip_positions(clip)
     t = np.arange(clip.n_frames) * clip.frame_time
     g = select_gait_joints(clip.joint_names, pos)

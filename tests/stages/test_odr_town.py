@@ -4,7 +4,6 @@ CARLA towns of the shared test data, signals, non-overlapping placements, determ
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +18,9 @@ from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes.network import check_network
 from carlaocc.stages.scenes.odr_network import build_opendrive_network
 from carlaocc.stages.scenes.odr_town import build_opendrive_town, build_opendrive_town_with_stats
+from shared_data import needs, shared_path
 
-DATA = Path("/work/shared/testdata/opendrive")
+DATA = shared_path("opendrive")
 SEM = {n: taxonomy.by_name(n).id for n in ("Building", "Vegetation", "TrafficLight", "TrafficSign", "Terrain")}
 
 
@@ -354,7 +354,7 @@ def test_crossroads_deterministic(crossroads, lib):
 # ---------------------------------------------------------------------------- CARLA towns
 
 
-@pytest.mark.skipif(not DATA.is_dir(), reason="shared OpenDRIVE test data not present")
+@needs(DATA)
 @pytest.mark.parametrize("name, lanes, min_signals", [("Town01", 124, 30), ("Town10HD", 149, 15)])
 def test_carla_towns_build(lib, extents, name, lanes, min_signals):
     odr = read_opendrive(DATA / f"{name}.xodr")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,9 +12,10 @@ from scipy.special import fresnel
 
 from carlaocc.schemas.opendrive import Geometry, LaneRecord, LaneSection, Poly3Record, Road, RoadMark
 from carlaocc.stages.scenes import opendrive as od
+from shared_data import needs, shared_path
 
-DATA = Path("/work/shared/testdata/opendrive")
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared OpenDRIVE test data not present")
+DATA = shared_path("opendrive")
+needs_data = needs(DATA)
 
 
 def geom(kind="line", s=0.0, x=0.0, y=0.0, hdg=0.0, length=10.0, **kw):

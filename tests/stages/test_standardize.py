@@ -22,11 +22,12 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.meshes import SourceAsset, SourcePart
 from carlaocc.stages.geometry import is_watertight, signed_volume
 from carlaocc.stages.ingest.checks import Rejection
-from carlaocc.stages.ingest.sizes import SIZE_RANGES, SUBCLASS_SIZE_RANGES, size_range
+from carlaocc.stages.ingest.sizes import SIZE_RANGES, SUBCLASS_SIZE_RANGES, THIN_FACTOR, min_extent, size_range
 from carlaocc.stages.ingest.standardize import StandardizedAsset, rotation_to_asset_frame, standardize
+from shared_data import needs, shared_path
 
-DATA = Path("/work/shared/testdata/meshes")
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared test data not available")
+DATA = shared_path("meshes")
+needs_data = needs(DATA)
 
 
 # --------------------------------------------------------------------------------------------
@@ -467,3 +468,80 @@ def test_sideways_vehicle_is_turned_long_side_to_x():
     # a building may be wider than deep: left as declared
     b = _ok(standardize(_raw(((box.vertices * 4, box.faces),), category="Building", subclass="house", units="m")))
     np.testing.assert_allclose(b.asset.extent, [7.2, 18.0, 6.0], atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# degenerate extents (issue 17): things are solid, stuff may be flat
+# --------------------------------------------------------------------------------------------
+
+THING_CLASSES = [c for c in taxonomy.CLASSES if c.kind == "thing"]
+FLAT_STUFF = ["Road", "RoadLine", "Ground", "Sidewalk", "Terrain", "Water", "Fence", "TrafficSign"]
+
+
+def _sheet(length: float, width: float, zero_axis: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Two triangles spanning ``length`` x ``width`` with no extent along ``zero_axis``."""
+    quad = np.array([[0.0, 0.0], [length, 0.0], [length, width], [0.0, width]])
+    v = np.insert(quad, zero_axis, 0.0, axis=1)
+    return v, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+
+
+@pytest.mark.parametrize("cls", THING_CLASSES, ids=lambda c: c.name)
+def test_a_flat_triangle_is_never_a_thing(cls):
+    # the issue's case: one flat triangle ingested as a car (zero height), for every thing class
+    _, typical, _ = size_range(cls.name, cls.subclasses[0])[1:]
+    v = np.array([[0.0, 0.0, 0.0], [typical, 0.0, 0.0], [0.0, typical / 2, 0.0]])
+    r = _rejected(_raw([(v, np.array([[0, 1, 2]]))], category=cls.name, subclass=cls.subclasses[0]))
+    assert r.reason == "flat mesh"
+    assert "along z" in r.hint and cls.name in r.hint and "up axis" in r.hint
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cls=st.sampled_from(THING_CLASSES), axis=st.integers(0, 2), units=st.sampled_from(["m", "cm", "unknown"]))
+def test_things_flat_on_any_axis_are_quarantined(cls, axis, units):
+    typ = size_range(cls.name, cls.subclasses[0])[2]
+    scale = 100.0 if units == "cm" else 1.0
+    v, f = _sheet(typ * scale, typ * scale / 2, zero_axis=axis)
+    r = standardize(_raw([(v, f)], category=cls.name, subclass=cls.subclasses[0], units=units))
+    assert isinstance(r, Rejection) and r.reason == "flat mesh", r
+    assert "no extent along" in r.hint  # the axis of the asset frame (vehicles may be turned first)
+
+
+@pytest.mark.parametrize("name", FLAT_STUFF)
+def test_flat_stuff_is_kept(name):
+    cls = taxonomy.by_name(name)
+    dim, lo, typ, hi = size_range(name, cls.subclasses[0])
+    # ground-like stuff lies flat (no height); sheets measured by height stand up (no depth)
+    v, f = _sheet(typ, typ / 2, zero_axis=2 if dim == "length" else 1)
+    s = _ok(standardize(_raw([(v, f)], category=name, subclass=cls.subclasses[0])))
+    assert min(s.asset.extent) == 0.0 and s.asset.face_count == 2
+
+
+def test_a_thing_far_too_thin_for_its_class_is_quarantined():
+    car = trimesh.creation.box((4.5, 1.8, 0.05))  # a 5 cm "car": a decal, not a vehicle
+    r = _rejected(_raw([(car.vertices, car.faces)], category="Car", subclass="sedan", units="m"))
+    assert r.reason == "too thin" and "z below 0.175 m" in r.hint and "3.5" in r.hint
+    # the limit follows the sub-class range: 1/20 of its smallest size, on every axis
+    assert min_extent("Car", "sedan") == pytest.approx(3.5 / THIN_FACTOR)
+    assert min_extent("Car", "hatchback") == pytest.approx(2.5 / THIN_FACTOR)
+    ok = trimesh.creation.box((4.5, 1.8, 0.2))  # thin, but not absurdly so
+    assert isinstance(standardize(_raw([(ok.vertices, ok.faces)], category="Car", subclass="sedan", units="m")),
+                      StandardizedAsset)
+    person = trimesh.creation.box((0.3, 0.02, 1.75))  # a cut-out figure, 2 cm deep
+    r = _rejected(_raw([(person.vertices, person.faces)], category="Pedestrian", subclass="adult", units="m"))
+    assert r.reason == "too thin" and "y below" in r.hint
+
+
+def test_min_extent_is_zero_exactly_for_stuff():
+    for c in taxonomy.CLASSES:
+        for sub in c.subclasses or ("",):
+            m = min_extent(c.name, sub)
+            assert (m > 0.0) == (c.kind == "thing"), (c.name, sub, m)
+
+
+def test_source_notes_come_first_in_the_record_notes():
+    box = trimesh.creation.box((4.5, 1.8, 1.5))
+    src_notes = ("car.obj: material library 'car.mtl' not found (materials default: no transparency or texture)",)
+    s = _ok(standardize(_raw([(box.vertices, box.faces)], category="Car", subclass="sedan", notes=src_notes)))
+    assert s.notes[0] == src_notes[0] and s.asset.notes.startswith(src_notes[0])
+    plain = _ok(standardize(_raw([(box.vertices, box.faces)], category="Car", subclass="sedan")))
+    assert plain.asset.notes == "" and s.asset.asset_id == plain.asset.asset_id  # notes are not identity

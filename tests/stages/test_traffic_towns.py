@@ -15,8 +15,9 @@ from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_sta
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_traffic import _boxes, _overlap  # noqa: E402
+from shared_data import needs, shared_path  # noqa: E402
 
-TOWN10 = Path(__file__).resolve().parents[3] / "shared" / "testdata" / "opendrive" / "Town10HD.xodr"
+TOWN10 = shared_path("opendrive/Town10HD.xodr")
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +41,7 @@ def test_crowded_suburb_walkers(lib, monkeypatch):
     _no_overlaps(res, lib)
 
 
-@pytest.mark.skipif(not TOWN10.exists(), reason="shared test data not present")
+@needs(TOWN10)
 def test_town10hd_dense_vehicles(lib, monkeypatch):
     from carlaocc.catalog.opendrive import read_opendrive
 

@@ -459,7 +459,9 @@ def test_parallel_and_serial_kernels_agree(monkeypatch):
 # known answers, tiles, fill modes, rotated frames
 # ------------------------------------------------------------------------------------------------
 
-TESTDATA_MESHES = __import__("pathlib").Path(__file__).resolve().parents[3] / "shared" / "testdata" / "meshes"
+from shared_data import require, shared_path  # noqa: E402
+
+TESTDATA_MESHES = shared_path("meshes")
 
 
 def _unit_cube(closed=True, stuff=False):
@@ -541,8 +543,7 @@ def test_chair_matches_binvox_loosely():
     from scipy import ndimage
 
     root = TESTDATA_MESHES / "trimesh-models"
-    if not (root / "chair_model.binvox").exists():
-        pytest.skip("shared test data absent")
+    require(root / "chair_model.binvox")
     ref_grid = trimesh.load(root / "chair_model.binvox")
     chair = trimesh.load(root / "chair_model.obj", force="mesh")
     T = ref_grid.transform

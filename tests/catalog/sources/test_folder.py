@@ -13,9 +13,10 @@ from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.folder import FolderAdapter
 from carlaocc.schemas.meshes import SourceAsset, SourcePart
 from carlaocc.stages.ingest.standardize import StandardizedAsset, standardize
+from shared_data import needs, shared_path
 
-MESHES = "/work/shared/testdata/meshes"
-pytestmark = pytest.mark.skipif(not os.path.isdir(MESHES), reason="shared test meshes not present")
+MESHES = str(shared_path("meshes"))
+pytestmark = needs(MESHES)
 
 MAP = """glob,category,subclass,length_m
 kenney-roads/road-*.glb,Road,lane,
@@ -360,3 +361,59 @@ DAE = """<?xml version="1.0" encoding="utf-8"?>
   <scene><instance_visual_scene url="#scene"/></scene>
 </COLLADA>
 """
+
+
+# -- issue 17: missing side files are noted, a dataset root inside the folder is skipped ------
+
+_TETRA = "v 0 0 0\nv 4 0 0\nv 0 2 0\nv 0 0 1.5\nusemtl paint\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+def test_missing_mtl_and_texture_are_noted_not_fatal(tmp_path):
+    root, a = _folder(tmp_path, "glob,category,subclass\n*.obj,Car,sedan\n")
+    (root / "no_mtl.obj").write_text("mtllib no_mtl.mtl\n" + _TETRA)
+    (root / "no_tex.obj").write_text("mtllib no_tex.mtl\n" + _TETRA)
+    (root / "no_tex.mtl").write_text("newmtl paint\nKd 1 0 0\nmap_Kd tex/paint.png\n")
+    (root / "whole.obj").write_text("mtllib whole.mtl\n" + _TETRA)
+    (root / "whole.mtl").write_text("newmtl paint\nKd 1 0 0\nmap_Kd paint.png\n")
+    (root / "paint.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (root / "plain.obj").write_text(_TETRA)  # names no library: nothing is missing
+    got = {it.key: a.read(str(root), it) for it in a.list_items(str(root))}
+    assert got["no_mtl.obj"].notes == (
+        "no_mtl.obj: material library 'no_mtl.mtl' not found (materials default: no transparency or texture)",)
+    assert got["no_tex.obj"].notes == ("no_tex.obj: texture 'tex/paint.png' not found (kept by reference)",)
+    assert got["whole.obj"].notes == () and got["plain.obj"].notes == ()
+    # the geometry is whole: standardized, with the note on the asset record
+    s = standardize(got["no_mtl.obj"])
+    assert isinstance(s, StandardizedAsset) and "material library 'no_mtl.mtl' not found" in s.asset.notes
+
+
+def test_missing_gltf_texture_is_noted(tmp_path):
+    root, a = _folder(tmp_path, "glob,category,subclass\n*.glb,Static,bench\n")
+    shutil.copy(os.path.join(MESHES, "kenney-retro-urban/detail-bench.glb"), root / "bench.glb")  # no Textures/
+    [item] = a.list_items(str(root))
+    notes = a.read(str(root), item).notes
+    assert notes == ("bench.glb: texture 'Textures/metal.png' not found (kept by reference)",
+                     "bench.glb: texture 'Textures/planks.png' not found (kept by reference)")
+
+
+def test_excluded_directories_are_not_listed(tmp_path):
+    root, a = _folder(tmp_path, "glob,category,subclass\n*,Static,bollard\n")
+    for rel in ("a.obj", "sub/b.obj", "data/admesh/meshes/0123.glb", "data/x.obj", "database/c.obj"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(_TETRA)
+    keys = lambda **kw: [it.key for it in a.list_items(str(root), **kw)]  # noqa: E731
+    assert "data/x.obj" in keys()
+    # the excluded tree goes, a sibling whose name merely starts the same stays
+    assert keys(exclude=(str(root / "data"),)) == ["a.obj", "database/c.obj", "sub/b.obj"]
+    assert keys(exclude=(str(root),)) == []  # the dataset root is the source itself
+    assert keys(exclude=(str(tmp_path / "elsewhere"),)) == keys()
+
+
+def test_excluded_directory_reached_through_a_link_is_still_excluded(tmp_path):
+    root, a = _folder(tmp_path, "glob,category,subclass\n*,Static,bollard\n")
+    (root / "data").mkdir()
+    (root / "data" / "x.obj").write_text(_TETRA)
+    (root / "a.obj").write_text(_TETRA)
+    link = tmp_path / "link"
+    link.symlink_to(root)  # the source given through a link, the root by its real path
+    assert [it.key for it in a.list_items(str(link), exclude=(str(root / "data"),))] == ["a.obj"]

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import csv
-import os
 
 import pytest
 import trimesh
 
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.meshfleet import MeshFleetAdapter
+from shared_data import needs, shared_path
 
-CSV = "/work/shared/testdata/meshfleet/meshfleet_with_vehicle_categories_df.csv"
-pytestmark = pytest.mark.skipif(not os.path.isfile(CSV), reason="shared MeshFleet CSV not present")
+CSV = str(shared_path("meshfleet/meshfleet_with_vehicle_categories_df.csv"))
+pytestmark = needs(CSV)
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,10 @@ import pytest
 
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.shapenet import ShapeNetAdapter, classify
+from shared_data import needs, shared_path
 
-HULL = "/work/shared/testdata/meshes/scenic/bmwx5_hull.obj"
-pytestmark = pytest.mark.skipif(not os.path.isfile(HULL), reason="shared test meshes not present")
+HULL = str(shared_path("meshes/scenic/bmwx5_hull.obj"))
+pytestmark = needs(HULL)
 
 TAXONOMY = [
     {"synsetId": "02958343", "name": "car,auto,automobile,machine,motorcar",
