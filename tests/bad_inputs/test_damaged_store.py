@@ -40,8 +40,15 @@ def built(tmp_path_factory) -> tuple[Path, Path]:
     config = base / "config.yaml"
     config.write_text(yaml.safe_dump(CONFIG))
     root = base / "good"
-    outcomes = carlaocc.run(str(root), config=DatasetConfig.model_validate(CONFIG), voxel_sizes=(float(RES),),
-                            stages=STAGES.split(","), scheduler="synchronous")
+    # one lineage file per stage (a slow machine would otherwise flush a stage's records in parts)
+    from carlaocc.pipeline import runner
+
+    flush, runner._LINEAGE_FLUSH_SECONDS = runner._LINEAGE_FLUSH_SECONDS, float("inf")
+    try:
+        outcomes = carlaocc.run(str(root), config=DatasetConfig.model_validate(CONFIG), voxel_sizes=(float(RES),),
+                                stages=STAGES.split(","), scheduler="synchronous")
+    finally:
+        runner._LINEAGE_FLUSH_SECONDS = flush
     assert all(not o.failed for o in outcomes) and {o.stage: o.ran for o in outcomes} == {
         "ingest": 1, "scenes": 1, "voxelize": 2, "sensors": 2}
     return root, config
