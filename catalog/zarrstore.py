@@ -19,6 +19,8 @@ what a damaged store lost. Reading a damaged node is a :class:`StoreError` namin
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 from collections.abc import Callable, Iterable
 from typing import ClassVar
 
@@ -89,7 +91,7 @@ def chunk_flags(data: np.ndarray, cx: int, cy: int, candidates: np.ndarray | Non
                         np.ascontiguousarray(candidates, dtype=np.uint8))
 
 
-class FrameArrayStore:
+class FrameArrayStore(ABC):
     """Frame-indexed Zarr v3 arrays ``<zarr_root>/<sequence>/<group>/<name>`` of a store.
 
     ``group`` is what a subclass places between the sequence and the array name (a
@@ -109,9 +111,9 @@ class FrameArrayStore:
 
     # -- addressing ---------------------------------------------------------------------------
     @staticmethod
+    @abstractmethod
     def array_path(sequence_id: str, group, name: str) -> str:
-        """``<sequence>/<group key>/<name>`` inside the hierarchy (the subclass's layout)."""
-        raise NotImplementedError
+        """``<sequence>/<group key>/<name>`` inside the hierarchy: each store's own layout."""
 
     def output_key(self, sequence_id: str, group, name: str, frame: int) -> str:
         """Lineage key of one frame of one array: ``<root>.zarr/<array path>[<frame>]``."""
