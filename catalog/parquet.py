@@ -3,7 +3,8 @@
 A table is a directory of Parquet files, one per producing partition (``<dir>/<key>.parquet``), so
 no two tasks write the same file and a re-run of one partition replaces exactly its file. A file
 that cannot be read as the table's (truncated, garbage bytes, another schema) is a
-:class:`StoreError` naming it (:func:`read_parquet`), never an Arrow traceback.
+:class:`StoreError` naming it (:func:`read_parquet`), never an Arrow traceback. A file that lacks
+only columns whose fields have a default (written before they were added) loads with those defaults.
 """
 
 from __future__ import annotations
@@ -80,9 +81,32 @@ def table_bytes(table: pa.Table) -> bytes:
     return buf.getvalue()
 
 
-def read_parquet(store: Store, rel: str, schema: pa.Schema | None = None) -> pa.Table:
+def field_defaults(model: type[Record]) -> dict[str, object]:
+    """Name -> default of the model's fields that have a plain default (not required)."""
+    return {name: info.default for name, info in model.model_fields.items()
+            if not info.is_required() and info.default_factory is None}
+
+
+def _add_defaulted(table: pa.Table, schema: pa.Schema, defaults: typing.Mapping[str, object]) -> pa.Table:
+    """``table`` with the columns of ``schema`` it lacks that have a default (fields added to a
+    model after the file was written) filled with that default, in ``schema``'s column order;
+    unchanged when another column is missing or an unknown one is present (cast refuses it)."""
+    missing = [f for f in schema if f.name not in table.column_names]
+    if not missing or any(f.name not in defaults for f in missing):
+        return table
+    for f in missing:
+        table = table.append_column(f, pa.array([defaults[f.name]] * table.num_rows, type=f.type))
+    if set(table.column_names) != set(schema.names):
+        return table
+    return table.select(schema.names)
+
+
+def read_parquet(store: Store, rel: str, schema: pa.Schema | None = None,
+                 defaults: typing.Mapping[str, object] | None = None) -> pa.Table:
     """A stored Parquet file (store-relative path) as an Arrow table, cast to ``schema`` when
-    given; StoreError naming the file when it is missing or cannot be read as such."""
+    given; StoreError naming the file when it is missing or cannot be read as such. Columns of
+    ``schema`` the file lacks are filled from ``defaults`` (name -> value) when all have one:
+    files written before a field with a default was added still load."""
     data = store.read_bytes(rel)
     try:
         table = pq.read_table(io.BytesIO(data))
@@ -91,6 +115,8 @@ def read_parquet(store: Store, rel: str, schema: pa.Schema | None = None) -> pa.
                          f"(truncated or overwritten)") from None
     if schema is None:
         return table
+    if defaults:
+        table = _add_defaulted(table, schema, defaults)
     try:
         return table.cast(schema)
     except (pa.ArrowException, ValueError, KeyError):  # other columns or types
@@ -140,7 +166,8 @@ class ParquetTable(Generic[R]):
         StoreError naming a file that is missing (a given key) or cannot be read."""
         schema = arrow_schema(self.model)
         paths = self.paths() if keys is None else [self.path(k) for k in keys]
-        tables = [read_parquet(self.store, p, schema) for p in paths]
+        defaults = field_defaults(self.model)
+        tables = [read_parquet(self.store, p, schema, defaults) for p in paths]
         return pa.concat_tables(tables) if tables else schema.empty_table()
 
     def load(self, keys: typing.Iterable[str] | None = None) -> list[R]:

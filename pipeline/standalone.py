@@ -3,7 +3,10 @@
 Each input is a mesh file (anything trimesh reads: OBJ, PLY, STL, OFF, GLB/glTF; a multi-mesh
 file is concatenated) labelled by ``--class``, or the id of an ADMesh asset in ``--root``, whose
 parts keep their own classes. Thing inputs get instance ids 1, 2, ... in argument order; stuff
-gets 0. Closed (watertight) inputs are filled according to ``--fill``. The grid is the inputs'
+gets 0. Inputs are filled according to ``--fill`` (one rule with the pipeline,
+:mod:`carlaocc.stages.voxelize.fill`: ``auto`` fills volumetric classes -- watertight meshes by
+column parity, open ones by generalized winding numbers -- ``solid`` every input, ``surface``
+none); a file's name is its part name (``trunk`` marks a tree trunk). The grid is the inputs'
 bounding box snapped to the voxel lattice of the origin (0, 0, 0), unless ``--origin`` and
 ``--shape`` give it. Meshes are used as they are (metres, their own frame). A file whose faces
 all have zero area (the ingest stage's degenerate-face rule: twice the area below 1e-12 of the
@@ -39,6 +42,20 @@ class VoxelizeResult:
     semantic: np.ndarray  # uint8 (X, Y, Z)
     instance: np.ndarray  # uint32 (X, Y, Z)
     meshes: list[SceneMesh]
+    seconds: float = 0.0  # the voxelization's wall time
+
+
+def fill_summary(result: VoxelizeResult, fill: str) -> str:
+    """One line on where the voxels came from: surface, fill (and how: parity or winding
+    numbers, per mesh), and hole handling (filled voxels a flood fill would not have found)."""
+    from carlaocc.stages.voxelize.breakdown import fill_breakdown
+    from carlaocc.stages.voxelize.fill import fill_method, fills
+
+    b = fill_breakdown(result.meshes, result.grid, fill, solid=result.semantic)
+    methods = [fill_method(fills(m.semantic_id, m.part, fill), m.closed) for m in result.meshes]
+    how = ", ".join(f"{methods.count(k)} by {k}" for k in ("parity", "winding") if methods.count(k))
+    return (f"voxels: {b.surface:,} surface, {b.filled:,} filled ({how or 'no mesh filled'}), "
+            f"{b.from_holes:,} of them from hole handling")
 
 
 def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +132,7 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
             cls = next(labels)
             thing = cls.kind == "thing"
             out.append(SceneMesh(V, F, cls.id, next_instance if thing else 0, not thing, is_watertight(F),
-                                 name=str(item)))
+                                 name=str(item), part=Path(item).stem))
             next_instance += thing
         else:
             geom = assets[item]
@@ -124,7 +141,8 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
                 cls = taxonomy.by_id(part.semantic_id)
                 is_thing = cls.kind == "thing"
                 out.append(SceneMesh(part.vertices, part.faces, cls.id, next_instance if is_thing else 0,
-                                     not is_thing, closed, name=f"{item}/{part.name}", transparent=part.transparent))
+                                     not is_thing, closed, name=f"{item}/{part.name}", transparent=part.transparent,
+                                     part=part.name))
                 thing |= is_thing
             next_instance += thing
     return out
@@ -168,8 +186,11 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
 def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:
     from carlaocc.stages.voxelize import voxelize_scene
 
+    import time
+
+    t0 = time.perf_counter()
     semantic, instance = voxelize_scene(meshes, grid, fill=fill)
-    return VoxelizeResult(grid, semantic, instance, meshes)
+    return VoxelizeResult(grid, semantic, instance, meshes, time.perf_counter() - t0)
 
 
 def save_result(result: VoxelizeResult, out: Path) -> None:

@@ -98,9 +98,11 @@ class VoxelizeConfig(StageConfig):
 
     region_min: tuple[float, float, float] = DEFAULT_REGION_MIN
     region_max: tuple[float, float, float] = DEFAULT_REGION_MAX
-    fill: Literal["auto", "surface"] = Field(
-        "auto", description="auto: fill closed thing meshes; surface: fill nothing (stuff is cut to the region, "
-        "so the standalone voxelizer's 'solid' has no meaning here)")
+    fill: Literal["auto", "surface", "solid"] = Field(
+        "auto", description="auto: fill the volumetric classes (vehicles, people, buildings, walls, poles, "
+        "traffic lights and signs, props, rocks, tree trunks), leave roads, terrain, fences, guard rails and "
+        "foliage surfaces; solid: fill every mesh; surface: fill nothing. Watertight meshes are filled by column "
+        "parity, open ones by generalized winding numbers")
     chunk_edge: int = Field(128, ge=16, le=1024, description="x/y chunk edge of the Zarr arrays, voxels")
     tile_chunks: int = Field(1, ge=1, le=64, description="x chunks per voxelization tile (memory per worker)")
     masks: bool = Field(True, description="compute mask_camera and mask_lidar (ray traversal from the rig's sensors)")

@@ -105,8 +105,10 @@ class AssetGeometry:
 class SceneMesh:
     """A mesh of one frame's panoptic scene, in the grid's frame (LiDAR frame, metres).
 
-    ``closed`` meshes are watertight things whose interior is filled by voxelization; stuff and
-    open meshes are surfaces. ``instance_id`` is 0 for stuff.
+    ``closed``: the mesh is watertight as given (a whole asset part; a part cut to a region is
+    not). Whether it is filled is the voxelizer's fill rule (class, ``part``, fill mode): a filled
+    closed mesh by column parity, a filled open one by winding numbers. ``instance_id`` is 0 for
+    stuff. ``part`` is the asset part's name (``trunk`` marks a tree trunk).
     """
 
     vertices: np.ndarray  # (N, 3) float64
@@ -118,6 +120,7 @@ class SceneMesh:
     name: str = field(default="")
     transparent: bool = False  # glass and other see-through parts (cameras see past them)
     asset_id: str = ""  # the ADMesh asset (or town stuff key) the mesh is a part of
+    part: str = ""  # the asset part's name
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))

@@ -62,6 +62,13 @@ class AssetRecord(Record):
     surface_area: float  # m^2
     volume: float | None  # m^3, watertight assets only
     watertight: bool  # every part closed and consistently wound
+    # how the voxelizer fills the asset under ``auto`` (carlaocc.stages.voxelize.breakdown.asset_fill,
+    # measured in the asset frame at fill_voxel_size); "" in rows written before these fields existed
+    fill_method: str = ""  # "surface" (no part filled), "parity" (filled parts watertight), "winding" (some open)
+    fill_voxel_size: float = 0.0  # m, the reference voxel edge: 0.05, or longest side / 256 when coarser
+    fill_voxels: int = 0  # occupied voxels of the asset at fill_voxel_size (surface + filled)
+    hole_fill_voxels: int = 0  # filled voxels reached only through holes (a flood fill would miss them)
+    hole_fill_fraction: float = 0.0  # hole_fill_voxels / fill_voxels
     scale_applied: float = 1.0  # source units -> metres
     scale_rule: str = ""  # why that scale (declared units, inferred from a size range...)
     geometry_hash: str  # content hash of the standardized geometry (duplicates share it)

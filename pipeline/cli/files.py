@@ -4,7 +4,6 @@ to a grid), ``export`` (to the layouts models train on), ``compare-resolutions``
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -22,16 +21,17 @@ def voxelize_files(
     voxel_size: Annotated[float, typer.Option("--voxel-size", help="voxel edge, metres (0.02 to 1.0 is the tested range)")],
     out: Annotated[Path, typer.Option("--out", help="OUT.npz (semantic, instance, voxel_size, voxel_origin, shape) or OUT.zarr")],
     class_name: Annotated[Optional[list[str]], typer.Option("--class", help="class of the mesh files: once for all, or once per file in order (e.g. Car)")] = None,
-    fill: Annotated[str, typer.Option("--fill", help="auto: fill closed thing meshes; surface: fill nothing; solid: fill every closed mesh")] = "auto",
+    fill: Annotated[str, typer.Option("--fill", help="auto: fill volumetric classes (vehicles, people, buildings, walls, poles, props, trunks); solid: fill every mesh; surface: fill nothing. Watertight meshes are filled by column parity, open ones by winding numbers")] = "auto",
     origin: Annotated[Optional[str], typer.Option("--origin", help="grid minimum corner x,y,z in metres (with --shape)")] = None,
     shape: Annotated[Optional[str], typer.Option("--shape", help="grid size nx,ny,nz in voxels (with --origin)")] = None,
     root: Annotated[Optional[str], typer.Option("--root", help="dataset root holding the ADMesh library, for asset ids")] = None,
 ) -> None:
-    """Voxelize mesh files or ADMesh assets exactly (triangle-box overlap, closed meshes filled),
-    without a dataset. Things get instance ids 1, 2, ... in argument order. The grid defaults to
+    """Voxelize mesh files or ADMesh assets exactly (triangle-box overlap, solids filled even when
+    not watertight), without a dataset. Prints where the voxels came from: surface, fill, and
+    hole handling (filled voxels a flood fill from outside would not have found). Things get instance ids 1, 2, ... in argument order. The grid defaults to
     the meshes' bounding box snapped to multiples of the voxel size."""
-    from carlaocc.pipeline.standalone import InputError, grid_for, load_inputs, save_result, voxelize_inputs
-    from carlaocc.stages.voxelize.compose import FILL_MODES
+    from carlaocc.pipeline.standalone import InputError, fill_summary, grid_for, load_inputs, save_result, voxelize_inputs
+    from carlaocc.stages.voxelize.fill import FILL_MODES
 
     if fill not in FILL_MODES:
         fail(f"--fill must be one of {', '.join(FILL_MODES)}, got {fill!r}")
@@ -41,9 +41,8 @@ def voxelize_files(
     try:
         scene = load_inputs(meshes, class_name or [], store)
         grid = grid_for(scene, voxel_size, _floats(origin, "--origin"), _floats(shape, "--shape", int))
-        t0 = time.perf_counter()
         result = voxelize_inputs(scene, grid, fill)
-        seconds = time.perf_counter() - t0
+        seconds = result.seconds
         save_result(result, out)
     except (InputError, ValueError) as exc:
         fail(exc)
@@ -54,6 +53,7 @@ def voxelize_files(
     typer.echo(f"wrote {out}: {X}x{Y}x{Z} grid at {voxel_size:g} m from origin "
                f"({', '.join(f'{c:g}' for c in grid.origin)}), {occupied:,} occupied voxels, "
                f"{sum(len(m.faces) for m in scene):,} triangles in {seconds:.2f} s")
+    typer.echo(fill_summary(result, fill))
 
 
 @app.command("export")

@@ -47,6 +47,10 @@ Steps, in order:
    breadth-first walk over its faces; closed bodies whose signed volume is negative (inside out)
    are flipped unless they lie inside another body of the part (an inner shell of a hollow solid
    is meant to face inward). Both repairs are recorded in the notes.
+9. **Fill figures.** How the voxelizer fills the asset under ``auto`` and how many of its voxels
+   hole handling recovers, at a reference voxel size in the asset frame
+   (:func:`carlaocc.stages.voxelize.breakdown.asset_fill`): ``AssetRecord.fill_method``,
+   ``fill_voxel_size``, ``fill_voxels``, ``hole_fill_voxels``, ``hole_fill_fraction``.
 
 Notes the source adapter attached (:attr:`SourceAsset.notes`: a missing material library or
 texture file) come first in the notes; all of them end up in ``AssetRecord.notes`` (``"; "``
@@ -74,6 +78,7 @@ from carlaocc.stages.ingest.repair import (
 from carlaocc.stages.ingest.sizes import (
     ABSURD_FACTOR, THIN_FACTOR, choose_scale, measured_size, min_extent, range_label, size_range,
 )
+from carlaocc.stages.voxelize.breakdown import asset_fill
 
 __all__ = ["StandardizedAsset", "standardize", "rotation_to_asset_frame"]
 
@@ -277,6 +282,9 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     ids = ",".join(f"{p.semantic_id}:{p.material}:{int(p.transparent)}" for p in mesh_parts)
     aid = hashlib.sha256(f"{category}|{raw.subclass}|{ghash}|{ids}".encode()).hexdigest()[:16]
     watertight = all(closed)
+    geometry = AssetGeometry(asset_id=aid, parts=tuple(mesh_parts), part_closed=tuple(closed))
+    # how the voxelizer fills it, and how much of its volume hole handling recovers
+    fill = asset_fill(geometry)
     asset = AssetRecord(
         asset_id=aid, source=raw.source, source_path=raw.source_path, licence=raw.licence or "",
         category_id=cls.id, category=category, subclass=raw.subclass,
@@ -286,8 +294,8 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
         part_count=len(mesh_parts), transparent_part_count=sum(p.transparent for p in mesh_parts),
         surface_area=float(sum(surface_area(p.vertices, p.faces) for p in mesh_parts)),
         volume=float(sum(signed_volume(p.vertices, p.faces) for p in mesh_parts)) if watertight else None,
-        watertight=watertight, scale_applied=float(scale), scale_rule=rule, geometry_hash=ghash,
-        aliases=[], notes="; ".join(notes), mesh_path="",
+        watertight=watertight, **fill.record_fields(), scale_applied=float(scale), scale_rule=rule,
+        geometry_hash=ghash, aliases=[], notes="; ".join(notes), mesh_path="",
     )  # fmt: skip
     part_records = [
         PartRecord(
@@ -296,5 +304,4 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
         )  # fmt: skip
         for k, (p, t, (part, _, _)) in enumerate(zip(mesh_parts, closed, cleaned))
     ]
-    geometry = AssetGeometry(asset_id=aid, parts=tuple(mesh_parts), part_closed=tuple(closed))
     return StandardizedAsset(asset=asset, parts=part_records, geometry=geometry, notes=tuple(notes))

@@ -17,12 +17,14 @@ Implements the selection of the paper's "Mesh-Based Scene Reconstruction" for on
    :class:`~carlaocc.schemas.meshes.SceneMesh` per asset part, with the rules of the former
    ``compose_frame_scene``:
 
-   * stuff parts (taxonomy stuff classes) are surfaces (``closed=False``, instance 0), culled
+   * stuff parts (taxonomy stuff classes) that the fill rule leaves surfaces under ``auto``
+     (:func:`carlaocc.stages.voxelize.fill.fills`: roads, terrain, fences, crowns...) are culled
      per triangle: only triangles whose LiDAR-frame bounding box touches the region are kept,
-     with the vertices they use; a part left empty is dropped;
-   * thing parts are kept whole (a closed part needs every triangle for its interior fill) or
-     dropped when the bounding box of their LiDAR-frame vertices misses the region;
-     ``closed`` is the part's watertightness, ``instance_id`` the placement's / actor's;
+     with the vertices they use; a part left empty is dropped; ``closed=False``, instance 0;
+   * thing parts and the stuff parts ``auto`` fills (walls, poles, props, trunks) are kept whole
+     (a fill needs every triangle) or dropped when the bounding box of their LiDAR-frame
+     vertices misses the region; ``closed`` is the part's watertightness, ``instance_id`` the
+     placement's / actor's (0 for stuff);
    * ``transparent`` is the part's flag (glass: cameras see past it, occupancy does not).
 
    Order is deterministic: placements by placement id, then actors by instance id, parts in
@@ -53,6 +55,7 @@ from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import AssetGeometry, SceneMesh
 from carlaocc.schemas.records import ActorStateRecord, FrameRecord, PlacementRecord
 from carlaocc.stages.geometry import invert_pose, pose_from_list, transform_points
+from carlaocc.stages.voxelize.fill import fills
 
 __all__ = [
     "PanopticMesh",
@@ -179,17 +182,19 @@ class _Prepared:
     whole every frame.
     """
 
-    __slots__ = ("big", "geom", "small", "starts", "stuff", "vertices")
+    __slots__ = ("big", "geom", "small", "starts", "stuff", "vertices", "whole")
 
     def __init__(self, geom: AssetGeometry) -> None:
         self.geom = geom
         self.stuff = [int(p.semantic_id) in _STUFF for p in geom.parts]
+        # stuff parts the fill rule fills are kept whole like things (the fill needs every triangle)
+        self.whole = [not st or fills(p.semantic_id, p.name) for st, p in zip(self.stuff, geom.parts)]
         self.small: list[int] = []
         self.big: dict[int, tuple[np.ndarray, ...]] = {}
         for k, p in enumerate(geom.parts):
             if len(p.faces) == 0:
                 continue
-            if self.stuff[k] and len(p.faces) >= _BIG_STUFF:
+            if not self.whole[k] and len(p.faces) >= _BIG_STUFF:
                 tri = p.vertices[p.faces]  # (M, 3, 3)
                 tmin, tmax = tri.min(axis=1), tri.max(axis=1)
                 grow = (np.sqrt(3.0) * np.linalg.norm(tmax - tmin, axis=1))[:, None]
@@ -252,10 +257,10 @@ def _emit(
             if region is not None:
                 if not reaches[j]:
                     continue  # nothing of the part reaches the region
-                if is_stuff:
-                    # stuff is a surface: drop the triangles lying wholly outside the region
+                if not prep.whole[k]:
+                    # a surface: drop the triangles lying wholly outside the region
                     V, F = _cull(V, F, *region)
-                # a thing part reaching the region is kept whole
+                # a thing or filled stuff part reaching the region is kept whole
         elif k in prep.big:
             if region is None:
                 V, F = transform_points(T, part.vertices), part.faces
@@ -281,8 +286,8 @@ def _emit(
         out.append(SceneMesh(
             vertices=V, faces=F, semantic_id=int(part.semantic_id),
             instance_id=0 if is_stuff else int(instance_id), is_stuff=is_stuff,
-            closed=bool(closed) and not is_stuff, name=f"{name}/{part.name}",
-            transparent=bool(part.transparent), asset_id=geom.asset_id,
+            closed=bool(closed) and prep.whole[k], name=f"{name}/{part.name}",
+            transparent=bool(part.transparent), asset_id=geom.asset_id, part=part.name,
         ))  # fmt: skip
     return out
 

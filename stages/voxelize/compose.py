@@ -3,26 +3,27 @@
 The paper's topology-aware mesh permutation (section 3, "Panoptic Occupancy Generation") as a
 deterministic rule:
 
-a. **Fuse stuff.** All stuff meshes of one semantic class become one mesh (vertices concatenated,
-   faces offset); it is a surface (never filled) with instance 0.
+a. **Fuse stuff.** All stuff meshes of one semantic class that are not filled become one mesh
+   (vertices concatenated, faces offset); it is a surface with instance 0. Things and filled
+   stuff meshes stay one entry each (the fill of overlapping meshes is decided mesh by mesh).
 b. **Cull** to the grid region (the closed box ``[origin, effective_max]``, LiDAR frame, metres).
-   Open meshes and fused stuff keep only the triangles whose bounding box touches the region;
-   a closed thing mesh is kept whole (its fill needs every crossing) or dropped whole when the
-   bounding box of its vertices misses the region.
+   Surfaces keep only the triangles whose bounding box touches the region; a filled mesh is kept
+   whole (its fill needs every triangle) or dropped whole when the bounding box of its vertices
+   misses the region.
 c. **Order** by the elevation key, ascending: (min z of the kept triangles' vertices, max z,
    semantic id, instance id, position of the first input mesh) -- z in the grid frame (z up).
-d. **Write** each mesh in turn -- its surface voxels (exact triangle/closed-box overlap), plus the
-   voxels whose centre is inside it when it is a closed thing -- so a later (higher) mesh
+d. **Write** each mesh in turn -- its surface voxels (exact triangle/closed-box overlap), plus,
+   when it is filled, the voxels whose centre is inside it -- so a later (higher) mesh
    overwrites an earlier (lower) one where they share voxels: a car resting on the road wins the
    voxels they share, a building wins over the terrain it stands on.
 
 Output: ``semantic`` uint8 and ``instance`` uint32 of ``grid.shape`` (X, Y, Z), 0 = free; stuff
 voxels carry instance 0.
 
-Fill modes (``fill``): ``"auto"`` fills closed thing meshes only (the rule above); ``"surface"``
-fills nothing; ``"solid"`` also fills closed stuff meshes (poles, walls, kerbs modelled as closed
-solids): those are then written one by one, not fused, since the parity of overlapping closed
-meshes is meaningless once they are concatenated. Open meshes are never filled.
+Fill (``fill``): which meshes are filled is one rule, :func:`carlaocc.stages.voxelize.fill.fills`
+(``"auto"`` by class: vehicles, people, buildings, walls, poles, props and tree trunks; ``"surface"``
+nothing; ``"solid"`` everything). A filled watertight mesh is filled by column parity, any other by
+generalized winding numbers (:mod:`carlaocc.stages.voxelize.winding`).
 
 Tiles
 -----
@@ -44,21 +45,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from collections.abc import Iterator
-from typing import Literal
-
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.scratch import scratch
+from carlaocc.stages.voxelize.fill import FILL_MODES, FillMode, check_fill_mode, fills
 from carlaocc.stages.voxelize.kernels import paint_interior, paint_surface, to_voxel_units
+from carlaocc.stages.voxelize.winding import WindingTree, paint_winding_interior, winding_tree
 
 __all__ = ["voxelize_scene", "voxelize_tiles", "Tile", "elevation_order", "composition_plan", "PlannedMesh",
            "FillMode", "FILL_MODES"]
-
-FillMode = Literal["auto", "surface", "solid"]
-FILL_MODES: tuple[str, ...] = ("auto", "surface", "solid")
-
 
 @dataclass(frozen=True)
 class PlannedMesh:
@@ -69,7 +66,8 @@ class PlannedMesh:
     semantic_id: int
     instance_id: int
     is_stuff: bool
-    fill: bool  # closed thing: interior filled
+    fill: bool  # interior filled (the fill rule)
+    closed: bool  # watertight: filled by column parity, else by winding numbers
     sources: tuple[int, ...]  # positions of the input meshes it came from (ascending)
     key: tuple[float, float, int, int, int]  # (zmin, zmax, semantic, instance, first source)
 
@@ -81,19 +79,19 @@ def _check_labels(m: SceneMesh, pos: int) -> None:
         raise ValueError(f"mesh {pos} ({m.name!r}): instance id {m.instance_id} outside uint32")
 
 
-def _fuse(meshes: Sequence[SceneMesh], fill: str = "auto") -> list[tuple[np.ndarray, np.ndarray, int, int, bool, bool, tuple[int, ...]]]:
-    """Step a: one entry per thing mesh, one per stuff class (its meshes concatenated); with
-    ``fill="solid"`` closed stuff meshes stay separate entries (to be filled)."""
+def _fuse(meshes: Sequence[SceneMesh], fill: str = "auto") -> list[tuple[np.ndarray, np.ndarray, int, int, bool, bool, bool, tuple[int, ...]]]:
+    """Step a: one entry per thing mesh and per filled stuff mesh, one per stuff class for the
+    other stuff meshes (concatenated): (V, F, semantic, instance, is_stuff, filled, closed, sources)."""
     out = []
     stuff: dict[int, list[int]] = {}
     for pos, m in enumerate(meshes):
         _check_labels(m, pos)
-        if m.is_stuff and fill == "solid" and m.closed:
-            out.append((m.vertices, m.faces, int(m.semantic_id), 0, True, True, (pos,)))
-        elif m.is_stuff:
+        filled = fills(m.semantic_id, m.part, fill)
+        if m.is_stuff and not filled:
             stuff.setdefault(int(m.semantic_id), []).append(pos)
         else:
-            out.append((m.vertices, m.faces, int(m.semantic_id), int(m.instance_id), False, bool(m.closed), (pos,)))
+            inst = 0 if m.is_stuff else int(m.instance_id)
+            out.append((m.vertices, m.faces, int(m.semantic_id), inst, bool(m.is_stuff), filled, bool(m.closed), (pos,)))
     for sem, members in stuff.items():
         verts, faces, offset = [], [], 0
         for pos in members:
@@ -101,7 +99,7 @@ def _fuse(meshes: Sequence[SceneMesh], fill: str = "auto") -> list[tuple[np.ndar
             verts.append(v)
             faces.append(np.asarray(meshes[pos].faces, dtype=np.int64).reshape(-1, 3) + offset)
             offset += len(v)
-        out.append((np.concatenate(verts), np.concatenate(faces), sem, 0, True, False, tuple(members)))
+        out.append((np.concatenate(verts), np.concatenate(faces), sem, 0, True, False, False, tuple(members)))
     return out
 
 
@@ -125,11 +123,6 @@ def _cull(V: np.ndarray, F: np.ndarray, whole: bool, lo: np.ndarray, hi: np.ndar
     return F[keep]
 
 
-def _check_fill(fill: str) -> None:
-    if fill not in FILL_MODES:
-        raise ValueError(f"fill mode must be one of {', '.join(FILL_MODES)}, got {fill!r}")
-
-
 def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
                      fill: FillMode = "auto") -> list[PlannedMesh]:
     """Steps a-c: the fused, culled meshes in writing order (lowest first).
@@ -137,17 +130,16 @@ def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
     Without ``grid`` nothing is culled. Meshes left without a triangle are dropped. ``fill``:
     see the module docstring.
     """
-    _check_fill(fill)
+    check_fill_mode(fill)
     if grid is not None:
         lo = np.asarray(grid.origin, dtype=np.float64)
         hi = np.asarray(grid.effective_max, dtype=np.float64)
     plan = []
-    for V, F, sem, inst, is_stuff, closed, sources in _fuse(meshes, fill):
+    for V, F, sem, inst, is_stuff, filled, closed, sources in _fuse(meshes, fill):
         V = np.ascontiguousarray(V, dtype=np.float64).reshape(-1, 3)
         F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
         if len(F) and (F.min() < 0 or F.max() >= len(V)):
             raise ValueError(f"mesh {sources}: face index outside [0, {len(V)})")
-        filled = closed and fill != "surface" and (not is_stuff or fill == "solid")
         if grid is not None:
             F = _cull(V, F, filled, lo, hi)
         if len(F) == 0:
@@ -158,7 +150,7 @@ def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
         if len(z) == 0:
             continue
         key = (float(z.min()), float(z.max()), sem, inst, sources[0])
-        plan.append(PlannedMesh(V, F, sem, inst, is_stuff, filled, sources, key))
+        plan.append(PlannedMesh(V, F, sem, inst, is_stuff, filled, closed, sources, key))
     # step c: ascending elevation key (fully deterministic: the last field is unique)
     plan.sort(key=lambda p: p.key)
     return plan
@@ -210,6 +202,14 @@ class _TiledMesh:
             self.box = np.concatenate([np.floor(V.min(axis=0)) - 1, np.floor(V.max(axis=0)) + 2])
         else:
             self.box = None
+        self._tree: WindingTree | None = None
+
+    @property
+    def tree(self) -> WindingTree:
+        """The winding-number tree of the whole mesh in grid voxel units (built on first use)."""
+        if self._tree is None:
+            self._tree = winding_tree(self.P, self.plan.faces)
+        return self._tree
 
     def faces_for(self, x0: int, x1: int) -> np.ndarray | None:
         """Faces that can touch voxels [x0, x1) (closed boxes: [x0, x1] in voxel units); a filled
@@ -255,8 +255,11 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
             P = t.P - offset
             p = t.plan
             # step d: interior first, then the surface (same labels; order matters across meshes)
-            if p.fill:
+            if p.fill and p.closed:
                 paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
+            elif p.fill:
+                paint_winding_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id,
+                                       t.tree, offset)
             paint_surface(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
         yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape),
                    np.array(things, dtype=np.int64).reshape(-1, 7))

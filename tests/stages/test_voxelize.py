@@ -322,7 +322,7 @@ def test_fill_mesh_beyond_grid_and_outside():
 # composition
 # ------------------------------------------------------------------------------------------------
 
-ROAD, BUILDING, TERRAIN, CAR = 1, 3, 10, 14
+ROAD, BUILDING, FENCE, TERRAIN, CAR = 1, 3, 5, 10, 14
 
 
 def _grid(vs=0.25):
@@ -396,8 +396,12 @@ def test_building_wins_over_terrain():
     # the building's walls win over the terrain wherever they meet
     assert (sem[i0, j0 : j1 + 1, k0 : k1 + 1] == BUILDING).all()
     assert elevation_order([building, terrain], grid) == [1, 0]
-    # stuff is a surface, never filled: the building's inside stays free
-    assert sem[i0 + 3, j0 + 3, k0 + 4] == 0
+    # Building is a volumetric class: filled even when given as stuff
+    assert sem[i0 + 3, j0 + 3, k0 + 4] == BUILDING
+    # a fence (a thin/open class) given as the same closed box stays a surface under auto
+    fence = _box((0.0, 0.0, 0.0), (2.0, 2.0, 2.5), FENCE, 0, stuff=True)
+    sem, _ = voxelize_scene([fence, terrain], grid)
+    assert sem[i0 + 3, j0 + 3, k0 + 4] == 0 and sem[i0, j0 + 3, k0 + 4] == FENCE
 
 
 def test_stuff_of_one_class_is_fused_and_things_are_not():
@@ -414,19 +418,22 @@ def test_stuff_of_one_class_is_fused_and_things_are_not():
     assert (inst[sem == ROAD] == 0).all()
 
 
-def test_single_open_mesh_equals_surface_kernel():
+def test_single_mesh_surface_parity_and_winding():
     grid = _grid()
     m = trimesh.creation.icosphere(subdivisions=2, radius=1.3)
     mesh = SceneMesh(m.vertices, m.faces, semantic_id=20, instance_id=3, is_stuff=False, closed=False)
-    sem, inst = voxelize_scene([mesh], grid)
+    sem, inst = voxelize_scene([mesh], grid, fill="surface")
     want = surface_voxels(m.vertices, m.faces, grid.origin, grid.voxel_size, grid.shape)
     np.testing.assert_array_equal(np.flatnonzero(sem), want)
     assert (inst.reshape(-1)[want] == 3).all()
-    # closed: surface plus filled inside
+    # closed: surface plus the inside by column parity
     closed = SceneMesh(m.vertices, m.faces, semantic_id=20, instance_id=3, is_stuff=False, closed=True)
     sem2, _ = voxelize_scene([closed], grid)
     fill = fill_interior(m.vertices, m.faces, grid.origin, grid.voxel_size, grid.shape)
     np.testing.assert_array_equal(np.flatnonzero(sem2), np.union1d(want, fill))
+    # not known to be closed: the inside by winding numbers, the same voxels on a closed sphere
+    sem3, _ = voxelize_scene([mesh], grid)
+    np.testing.assert_array_equal(sem3, sem2)
 
 
 def test_culling_keeps_stuff_inside_region_only_and_sets_its_elevation():
@@ -474,21 +481,24 @@ def test_unit_cube_known_answer_602_surface_1331_filled():
     # the known answer: 1 m cube at the origin, 0.1 m voxels, grid origin (-0.55,)*3
     grid = GridSpec(region_min=(-0.55,) * 3, region_max=(0.75,) * 3, voxel_size=0.1)
     assert grid.shape == (13, 13, 13)
-    sem, _ = voxelize_scene([_unit_cube(closed=False)], grid)
+    sem, _ = voxelize_scene([_unit_cube(closed=False)], grid, fill="surface")
     assert np.count_nonzero(sem) == 602
+    # filled: by parity when known closed, by winding numbers otherwise -- the same 1331
+    assert np.count_nonzero(voxelize_scene([_unit_cube(closed=False)], grid)[0]) == 1331
     sem, inst = voxelize_scene([_unit_cube(closed=True)], grid)
     assert np.count_nonzero(sem) == 1331 and (inst[sem > 0] == 1).all()
     assert np.count_nonzero(voxelize_scene([_unit_cube(closed=True)], grid, fill="surface")[0]) == 602
 
 
-def test_fill_modes_solid_fills_closed_stuff_auto_does_not():
+def test_fill_modes_solid_fills_every_class_auto_only_volumetric_ones():
     grid = GridSpec(region_min=(-0.55,) * 3, region_max=(0.75,) * 3, voxel_size=0.1)
-    cube = _unit_cube(closed=True, stuff=True)
+    cube = _unit_cube(closed=True, stuff=True)  # a Road cube: a surface class
     assert np.count_nonzero(voxelize_scene([cube], grid, fill="auto")[0]) == 602
     sem, inst = voxelize_scene([cube], grid, fill="solid")
     assert np.count_nonzero(sem) == 1331 and not inst.any()
-    # an open mesh stays a surface whatever the mode
-    assert np.count_nonzero(voxelize_scene([_unit_cube(closed=False)], grid, fill="solid")[0]) == 602
+    # solid fills open meshes too (winding numbers); surface fills nothing
+    assert np.count_nonzero(voxelize_scene([_unit_cube(closed=False, stuff=True)], grid, fill="solid")[0]) == 1331
+    assert np.count_nonzero(voxelize_scene([_unit_cube(closed=True)], grid, fill="surface")[0]) == 602
     with pytest.raises(ValueError, match="fill mode"):
         voxelize_scene([cube], grid, fill="hollow")
 

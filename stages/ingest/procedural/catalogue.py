@@ -1,7 +1,7 @@
 """The procedural catalogue and its driver: which builder makes each (category, sub-class), and
 :func:`ingest_procedural`, which runs every builder with its own seeded generator, moves the parts
 into the asset frame (origin at the bottom centre of the bounding box), derives content ids and
-describes the assets as records.
+describes the assets as records (fill figures included: :func:`carlaocc.stages.voxelize.breakdown.asset_fill`).
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from carlaocc.stages.ingest.procedural.vegetation import _bush, _conifer, _hedge
 from carlaocc.stages.ingest.procedural.vehicles import (
     _bus, _car, _convertible, _double_decker, _locomotive, _metro, _pickup, _school_bus, _tram, _truck,
 )
+from carlaocc.stages.voxelize.breakdown import asset_fill
 
 
 SOURCE = "procedural"
@@ -185,6 +186,9 @@ def _records(
     parts, extent = _recentre(parts)
     aid = asset_id_for(category, subclass, parts)
     closed = tuple(is_watertight(p.faces) for p in parts)
+    geometry = AssetGeometry(asset_id=aid, parts=tuple(parts), part_closed=closed)
+    # how the voxelizer fills it, and how much of its volume hole handling recovers
+    fill = asset_fill(geometry)
     asset = AssetRecord(
         asset_id=aid, source=SOURCE, source_path=f"procedural://{category}/{subclass}/{variant}",
         licence=LICENCE, category_id=_ID[category], category=category, subclass=subclass,
@@ -193,7 +197,7 @@ def _records(
         part_count=len(parts), transparent_part_count=sum(p.transparent for p in parts),
         surface_area=sum(surface_area(p.vertices, p.faces) for p in parts),
         volume=sum(signed_volume(p.vertices, p.faces) for p in parts) if all(closed) else None,
-        watertight=all(closed), scale_applied=1.0, scale_rule="metric by construction",
+        watertight=all(closed), **fill.record_fields(), scale_applied=1.0, scale_rule="metric by construction",
         geometry_hash=geometry_hash([(p.vertices, p.faces) for p in parts]), mesh_path="",
     )  # fmt: skip
     part_records = [
@@ -203,7 +207,7 @@ def _records(
         )  # fmt: skip
         for k, (p, c) in enumerate(zip(parts, closed))
     ]
-    return asset, part_records, AssetGeometry(asset_id=aid, parts=tuple(parts), part_closed=closed)
+    return asset, part_records, geometry
 
 
 def ingest_procedural(config: IngestConfig) -> IngestResult:
