@@ -26,6 +26,7 @@ from carlaocc.stages.scenes.assembly import (
 )
 
 ROAD, BUILDING, CAR, PED, POLE = (taxonomy.by_name(n).id for n in ("Road", "Building", "Car", "Pedestrian", "Pole"))
+VEGETATION, FENCE = taxonomy.by_name("Vegetation").id, taxonomy.by_name("Fence").id
 BOX_F = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
                   [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])  # fmt: skip
 
@@ -443,3 +444,27 @@ def test_prepared_cache_follows_new_geometry():
     second = assemble_frame(frame(), [], index, GEOMETRY | {"pole": taller}, REGION)
     assert first[0].vertices[:, 2].max() == pytest.approx(5 - 1.73)
     assert second[0].vertices[:, 2].max() == pytest.approx(9 - 1.73)
+
+
+def test_filled_stuff_kept_whole_surface_stuff_culled():
+    # the fill rule (auto) fills poles and trunks: a pole part straddling the region's border is
+    # kept whole and closed (its fill needs every triangle); a crown and a fence are surfaces, cut
+    TREE_G = geom("tree", ("trunk", box([-0.2, -0.2, 0], [0.2, 0.2, 4]), VEGETATION, True, False),
+                  ("crown", box([-2, -2, 3], [2, 2, 7]), VEGETATION, True, False))  # fmt: skip
+    FENCE_G = geom("fence", ("panel", box([-3, -0.05, 0], [3, 0.05, 1.2]), FENCE, True, False))
+    geometry = {**GEOMETRY, "tree": TREE_G, "fence": FENCE_G}
+    f = frame()
+    x_border = float(REGION[1][0])
+    index = PlacementIndex([
+        place(0, POLE_G, x=x_border, y=0.0),  # 0.1 m either side of the +x border
+        place(1, TREE_G, x=x_border, y=5.0),
+        place(2, FENCE_G, x=x_border, y=-5.0),
+    ])  # fmt: skip
+    by_name = {m.name.split("/")[-1]: m for m in assemble_frame(f, [], index, geometry, REGION)}
+    pole, trunk, crown, fence = by_name["pole"], by_name["trunk"], by_name["crown"], by_name["panel"]
+    for m in (pole, trunk):  # whole: all 12 faces, watertight, past the border
+        assert m.is_stuff and m.instance_id == 0 and m.closed and len(m.faces) == 12
+        assert m.vertices[:, 0].max() > x_border
+    assert trunk.part == "trunk" and crown.part == "crown"
+    for m in (crown, fence):  # cut to the triangles touching the region: no longer closed
+        assert not m.closed and len(m.faces) < 12
