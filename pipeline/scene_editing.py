@@ -43,7 +43,7 @@ def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
 
     t_place = ParquetTable(store, PlacementRecord)
     if not t_place.exists(f"town={town}"):
-        towns = sorted(p.split("town=")[-1][: -len(".parquet")] for p in t_place.paths())
+        towns = sorted(p.split("town=")[-1][: -len(".parquet")] for p in t_place.paths() if "/town=" in p)
         raise StoreError(f"town {town!r} is not in {store.url} (towns: {', '.join(towns) or 'none; run the scenes stage'})")
     placements = t_place.load([f"town={town}"])
     geometry = load_geometry(store, {p.asset_id for p in placements}, placements)
@@ -61,13 +61,15 @@ def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> 
 
 @dataclass(frozen=True)
 class SwapResult:
-    """One edited sequence: its id, the parent, and how many actor instances got a new asset
-    (and how many kept theirs for want of a compatible one)."""
+    """One edited sequence: its id, the parent, and how many actor instances and static
+    placements got a new asset (and how many kept theirs for want of a compatible one)."""
 
     sequence_id: str
     parent: str
     swapped: int
     kept: int
+    swapped_static: int = 0
+    kept_static: int = 0
 
 
 def compatible(original: AssetRecord, candidates: Sequence[AssetRecord]) -> list[AssetRecord]:
@@ -85,6 +87,37 @@ def compatible(original: AssetRecord, candidates: Sequence[AssetRecord]) -> list
     return sorted(out, key=lambda a: a.asset_id)
 
 
+def _draw(items, by_id: dict[str, AssetRecord], pool: Sequence[AssetRecord], seed: int,
+          stream: int) -> tuple[dict[int, AssetRecord], int]:
+    """For (key, asset id) items, a compatible replacement per key drawn from ``seed`` (stream 0:
+    actors by instance id, 1: placements by placement id), and how many had none."""
+    choice: dict[int, AssetRecord] = {}
+    kept = 0
+    for key, asset_id in items:
+        original = by_id.get(asset_id)
+        options = compatible(original, pool) if original is not None else []
+        if not options:
+            kept += 1
+            continue
+        entropy = [seed, key] if stream == 0 else [seed, stream, key]  # actors keep their former draws
+        rng = np.random.default_rng(np.random.SeedSequence(entropy))
+        choice[key] = options[int(rng.integers(len(options)))]
+    return choice, kept
+
+
+def _swapped_placement(p: PlacementRecord, new: AssetRecord | None) -> PlacementRecord:
+    """``p`` with ``new`` standing on its lot (same pose: the asset origin is the bottom centre of
+    its box), its world AABB that of the new box."""
+    if new is None:
+        return p
+    from carlaocc.stages.scenes.placing import box_corners_aabb
+
+    l, w, h = (float(e) for e in new.extent)
+    lo, hi = box_corners_aabb((-l / 2, -w / 2, 0.0), (l / 2, w / 2, h), np.array(p.pose, dtype=np.float64).reshape(4, 4))
+    return p.model_copy(update={"asset_id": new.asset_id, "semantic_id": new.category_id, "mesh_path": "",
+                                "aabb_min": lo, "aabb_max": hi})
+
+
 def swap_id(sequence_id: str, category: str, seed: int) -> str:
     return f"{sequence_id}~swap-{category.lower()}-s{seed}"
 
@@ -92,16 +125,17 @@ def swap_id(sequence_id: str, category: str, seed: int) -> str:
 def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] | None = None,
                asset_sources: Sequence[str] | None = None) -> list[SwapResult]:  # fmt: skip
     """For every original sequence (or the given ones), write a new sequence in which every
-    actor of ``category`` uses another asset of a compatible footprint, drawn per instance from
-    ``seed``; trajectories, rig poses and timing are copied unchanged, boxes take the new
-    extent. The new sequence's ``parent_sequence_id`` names the original and a lineage record
-    (stage ``scenes-swap``) lists the files read and written."""
+    actor and every static placement (buildings, props, poles...) of ``category`` uses another
+    asset of a compatible footprint, drawn per instance / placement from ``seed``; trajectories,
+    rig poses, timing and lots are unchanged, boxes take the new extent. Swapped placements go to
+    the new sequence's own copy of the placements (``SequenceRecord.placements``). A sequence with
+    nothing to swap gets no edit; when no sequence has anything to swap, nothing is written and
+    StoreError says why. The new sequence's ``parent_sequence_id`` names the original and a
+    lineage record (stage ``scenes-swap``) lists the files read and written."""
     try:
         cls = taxonomy.by_name(category)
     except (KeyError, ValueError):
         raise StoreError(f"unknown class {category!r}; classes: {', '.join(c.name for c in taxonomy.CLASSES)}") from None
-    if cls.id not in taxonomy.thing_ids():
-        raise StoreError(f"class {category} is stuff; only thing classes have actors to swap")
     t_seq = ParquetTable(store, SequenceRecord)
     all_seqs = {s.sequence_id: s for s in t_seq.load()}
     if sequences:
@@ -123,23 +157,30 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
         "sensor_poses": ParquetTable(store, SensorPoseRecord),
         "actors": ParquetTable(store, ActorStateRecord),
     }
-    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
-    results, runs = [], []
+    t_place = ParquetTable(store, PlacementRecord)
+    # 1. plan every edit before writing anything: nothing is written when nothing can be swapped
+    plans = []
     for parent in targets:
-        started = datetime.now(timezone.utc)
         new_id = swap_id(parent.sequence_id, cls.name, seed)
         actors = tables["actors"].load([parent.sequence_id])
-        asset_of = {a.instance_id: a.asset_id for a in actors if a.semantic_id == cls.id}
-        choice: dict[int, AssetRecord] = {}
-        kept = 0
-        for inst in sorted(asset_of):
-            original = by_id.get(asset_of[inst])
-            options = compatible(original, pool) if original is not None else []
-            if not options:
-                kept += 1
-                continue
-            rng = np.random.default_rng(np.random.SeedSequence([seed, inst]))
-            choice[inst] = options[int(rng.integers(len(options)))]
+        choice, kept = _draw(sorted({a.instance_id: a.asset_id for a in actors if a.semantic_id == cls.id}.items()),
+                             by_id, pool, seed, 0)
+        key = parent.placements_key()
+        placements = t_place.load([key]) if t_place.exists(key) else []
+        statics, kept_static = _draw([(p.placement_id, p.asset_id) for p in placements if p.semantic_id == cls.id],
+                                     by_id, pool, seed, 1)
+        if choice or statics:
+            plans.append((parent, new_id, actors, choice, kept, placements, statics, kept_static))
+    if not plans:
+        raise StoreError(
+            f"nothing to swap: no actor or static placement of class {cls.name} in "
+            f"{', '.join(t.sequence_id for t in targets)} has another {cls.name} asset of a compatible footprint "
+            f"(length within {LENGTH_TOLERANCE:.0%}, width {WIDTH_TOLERANCE:.0%}, height {HEIGHT_TOLERANCE:.0%}); "
+            f"nothing written")
+    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    results, runs = [], []
+    for parent, new_id, actors, choice, kept, placements, statics, kept_static in plans:
+        started = datetime.now(timezone.utc)
         new_actors = []
         for a in actors:
             new = choice.get(a.instance_id)
@@ -152,17 +193,23 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
                 "sequence_id": new_id, "asset_id": new.asset_id, "semantic_id": new.category_id,
                 "box_size": [l, w, h], "box_center": [a.box_center[0], a.box_center[1], z + h / 2],
             }))  # fmt: skip
-        record = parent.model_copy(update={
-            "sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}",
-        })  # fmt: skip
+        update = {"sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}"}
         inputs = {t.path(parent.sequence_id): store.fingerprint(t.path(parent.sequence_id))
                   for t in (t_seq, *tables.values())}  # fmt: skip
-        outputs = {t_seq.path(new_id): t_seq.save(new_id, [record])}
+        outputs = {}
+        if statics:
+            # the static objects: a copy of the placements with the swapped ones on their lot
+            key = f"sequence={new_id}"
+            update["placements"] = key
+            inputs[t_place.path(parent.placements_key())] = store.fingerprint(t_place.path(parent.placements_key()))
+            outputs[t_place.path(key)] = t_place.save(key, [_swapped_placement(p, statics.get(p.placement_id))
+                                                            for p in placements])
+        outputs[t_seq.path(new_id)] = t_seq.save(new_id, [parent.model_copy(update=update)])
         for name, table in tables.items():
             rows = new_actors if name == "actors" else [
                 r.model_copy(update={"sequence_id": new_id}) for r in table.load([parent.sequence_id])]
             outputs[table.path(new_id)] = table.save(new_id, rows)
-        results.append(SwapResult(new_id, parent.sequence_id, len(choice), kept))
+        results.append(SwapResult(new_id, parent.sequence_id, len(choice), kept, len(statics), kept_static))
         runs.append(RunRecord(
             run_id=run_id, stage=SWAP_STAGE, partition=new_id, code_version="", config_hash=f"{cls.name}:{seed}",
             cache_key="", input_fingerprints=json.dumps(inputs, sort_keys=True),

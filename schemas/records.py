@@ -150,6 +150,13 @@ class SequenceRecord(Record):
     ego_asset_id: str
     parent_sequence_id: str | None = None  # edited sequences (``scenes swap``): the original
     edit: str = ""  # what the edit changed, e.g. "swap Car seed=3"
+    # key of the placements table the frames use: "" = the town's ("town=<town>"); an edit that
+    # swaps static objects (buildings, props) writes its own copy ("sequence=<sequence_id>")
+    placements: str = ""
+
+    def placements_key(self) -> str:
+        """The key of the placements table holding this sequence's static objects."""
+        return self.placements or f"town={self.town}"
 
 
 class FrameRecord(Record):

@@ -4,6 +4,7 @@ metrics through the CLI, then the arrays, the catalog, re-runs and scheduler ind
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -234,7 +235,7 @@ def test_swap_makes_a_sequence_that_voxelizes(config_file, built, tmp_path):
     shutil.copytree(built.root, copy.root)
     seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     r = cli.invoke(app, ["scenes", "swap", "--class", "Car", "--seed", "5", "--sequence", seq, "--root", copy.url])
-    assert r.exit_code == 0 and "Car instance(s) swapped" in r.output, r.output
+    assert r.exit_code == 0 and "Car actor(s)" in r.output, r.output
     new = query(copy, f"SELECT sequence_id FROM sequences WHERE parent_sequence_id = '{seq}'")[1][0][0]
     r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
@@ -245,6 +246,55 @@ def test_swap_makes_a_sequence_that_voxelizes(config_file, built, tmp_path):
     cars_b = set(np.unique(b["instance"][b["semantic"] == car]))
     assert cars_a and cars_a == cars_b
     assert not np.array_equal(a["semantic"], b["semantic"])  # other models, other voxels
+
+
+def test_building_swap_changes_voxels_only_where_the_swapped_buildings_stand(config_file, built, tmp_path):
+    """``scenes swap --class Building`` (static objects) on a copy: new buildings on the same lots,
+    traffic unchanged; the edited sequence's occupancy differs from the original's only inside
+    the boxes of the swapped buildings (old or new, one voxel of margin). A class with nothing to
+    swap writes nothing and exits 2."""
+    import shutil
+
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import FrameRecord, PlacementRecord, SequenceRecord
+    from carlaocc.stages.geometry import invert_pose, transform_points
+
+    copy = Store(str(tmp_path / "copy"))
+    shutil.copytree(built.root, copy.root)
+    seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    before = sorted(p.name for p in Path(copy.root, "scenes").rglob("*.parquet"))
+    r = cli.invoke(app, ["scenes", "swap", "--class", "Train", "--seed", "5", "--sequence", seq, "--root", copy.url])
+    assert r.exit_code == 2 and "nothing to swap" in r.output, r.output
+    assert sorted(p.name for p in Path(copy.root, "scenes").rglob("*.parquet")) == before  # nothing written
+    r = cli.invoke(app, ["scenes", "swap", "--class", "Building", "--seed", "5", "--sequence", seq, "--root", copy.url])
+    assert r.exit_code == 0 and "static placement(s) swapped" in r.output, r.output
+    (new,) = [s for s in ParquetTable(copy, SequenceRecord).load() if s.parent_sequence_id == seq]
+    old_pl = {p.placement_id: p for p in ParquetTable(copy, PlacementRecord).load([f"town={new.town}"])}
+    new_pl = {p.placement_id: p for p in ParquetTable(copy, PlacementRecord).load([new.placements_key()])}
+    assert old_pl.keys() == new_pl.keys()
+    swapped = [k for k in old_pl if old_pl[k].asset_id != new_pl[k].asset_id]
+    assert swapped and all(old_pl[k].semantic_id == taxonomy.by_name("Building").id for k in swapped)
+    assert all(old_pl[k].pose == new_pl[k].pose for k in swapped)  # same lots
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url,
+                         "--stages", "voxelize", "--scheduler", "synchronous"])
+    assert r.exit_code == 0, r.output
+    grid = GridSpec(voxel_size=RES)
+    a = OccupancyStore(copy).read_frame(seq, grid, 0, ("semantic", "instance"))
+    b = OccupancyStore(copy).read_frame(new.sequence_id, grid, 0, ("semantic", "instance"))
+    differ = (a["semantic"] != b["semantic"]) | (a["instance"] != b["instance"])
+    assert differ.any()
+    # every differing voxel centre lies in the LiDAR-frame box of a swapped building, old or new
+    (f0,) = [f for f in ParquetTable(copy, FrameRecord).load([seq]) if f.frame_index == 0]
+    to_lidar = invert_pose(np.array(f0.lidar_pose, dtype=np.float64).reshape(4, 4))
+    centres = np.asarray(grid.origin) + (np.argwhere(differ) + 0.5) * RES
+    inside = np.zeros(len(centres), dtype=bool)
+    for k in swapped:
+        for pl in (old_pl[k], new_pl[k]):
+            lo, hi = np.array(pl.aabb_min), np.array(pl.aabb_max)
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            c = transform_points(to_lidar, corners)
+            inside |= np.all((centres >= c.min(axis=0) - RES) & (centres <= c.max(axis=0) + RES), axis=1)
+    assert inside.all(), f"{int((~inside).sum())} voxels changed outside the swapped buildings"
 
 
 def _frame(built, names=("semantic", "instance", "mask_camera", "mask_lidar", "flow"), t=3):

@@ -65,15 +65,16 @@ def scenes_frame_mesh(
 
 @scenes_app.command("swap")
 def scenes_swap(
-    class_name: Annotated[str, typer.Option("--class", help="thing class whose actors get other assets, e.g. Car")],
+    class_name: Annotated[str, typer.Option("--class", help="class whose actors and static objects get other assets, e.g. Car, Building, Static")],
     seed: Annotated[int, typer.Option("--seed", help="seed of the replacement draw")],
     sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to edit (default: every original sequence)")] = None,
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Parametric editing: new sequences <id>~swap-<class>-s<seed> in which every actor of the
-    class uses another asset with a compatible footprint; trajectories, rig and timing are
-    unchanged; parent_sequence_id and the runs table record where they came from. Then
+    """Parametric editing: new sequences <id>~swap-<class>-s<seed> in which every actor and static
+    object (building, prop) of the class uses another asset with a compatible footprint;
+    trajectories, rig, timing and lots are unchanged; nothing is written (exit 2) when nothing can
+    be swapped; parent_sequence_id and the runs table record where they came from. Then
     `carlaocc run --stages voxelize,quality` voxelizes them."""
     from carlaocc.pipeline.scene_editing import swap_class
 
@@ -84,5 +85,5 @@ def scenes_swap(
     except StoreError as exc:
         fail(str(exc))
     for r in results:
-        typer.echo(f"{r.sequence_id}: {r.swapped} {class_name} instance(s) swapped, {r.kept} kept (no compatible asset)"
-                   f"; parent {r.parent}")
+        typer.echo(f"{r.sequence_id}: {r.swapped} {class_name} actor(s) and {r.swapped_static} static placement(s) "
+                   f"swapped, {r.kept + r.kept_static} kept (no compatible asset); parent {r.parent}")

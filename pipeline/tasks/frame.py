@@ -142,7 +142,7 @@ def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameIn
     # the town's placement index, kept per worker while the placements file is unchanged (its
     # per-asset preparation of big stuff meshes is then reused across frames)
     t_place = ParquetTable(store, PlacementRecord)
-    key = f"town={sequence.town}"
+    key = sequence.placements_key()
     index = _cached(_INDEX_CACHE, (store.url, key, store.fingerprint(t_place.path(key))),
                     lambda: PlacementIndex(t_place.load([key])), 8)
     # geometry of the placements whose world AABB meets the frame's region, and of the actors

@@ -125,6 +125,11 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
             # removed: they are stale, so they go too (run swap again)
             if sid not in written or is_edited(sid):
                 store.remove(rel)
+    # so do the placement copies of edited sequences that swapped static objects of this town
+    for rel in t_place.paths():
+        key = rel[len(t_place.dir) + 1 : -len(".parquet")]
+        if key.startswith(f"sequence={town.name}_") and is_edited(key[len("sequence="):]):
+            store.remove(rel)
     return outputs
 
 

@@ -102,8 +102,15 @@ def test_swap_writes_a_child_sequence_with_lineage(store):
 def test_swap_errors(store):
     with pytest.raises(StoreError, match="unknown class"):
         swap_class(store, "Spaceship", 1)
-    with pytest.raises(StoreError, match="stuff"):
+    # nothing of the class to swap: a clear error, and no file written
+    files = sorted(store.listdir("scenes")) if hasattr(store, "listdir") else None
+    with pytest.raises(StoreError, match="nothing to swap.*Road.*nothing written"):
         swap_class(store, "Road", 1)
+    with pytest.raises(StoreError, match="nothing to swap"):
+        swap_class(store, "Bus", 1)
+    assert [s.sequence_id for s in ParquetTable(store, SequenceRecord).load()] == ["town00_low_seq000"]
+    if files is not None:
+        assert sorted(store.listdir("scenes")) == files
     with pytest.raises(StoreError, match="not in"):
         swap_class(store, "Car", 1, ["nope"])
 
@@ -111,6 +118,35 @@ def test_swap_errors(store):
 def test_swap_cli(store):
     r = cli.invoke(app, ["scenes", "swap", "--class", "Car", "--seed", "4", "--root", store.url])
     assert r.exit_code == 0, r.output
-    assert "~swap-car-s4: 2 Car instance(s) swapped, 1 kept" in r.output
+    assert "~swap-car-s4: 2 Car actor(s) and 0 static placement(s) swapped, 1 kept" in r.output
     r = cli.invoke(app, ["scenes", "swap", "--class", "Tree", "--seed", "4", "--root", store.url])
     assert r.exit_code == 2 and "unknown class" in r.output
+
+
+def test_static_swap_writes_its_own_placements(store):
+    """Static objects (buildings) are placements, not actors: a swap writes the edited sequence's
+    own copy of the town's placements with the swapped assets on the same lots (same pose, AABB of
+    the new box); the town's placements are untouched."""
+    from carlaocc.schemas.records import PlacementRecord
+
+    houses = [_asset("house_a", "Building", 3, (10.0, 8.0, 6.0)), _asset("house_b", "Building", 3, (10.5, 8.4, 6.5)),
+              _asset("tower", "Building", 3, (12.0, 12.0, 40.0))]
+    ParquetTable(store, AssetRecord).save("source=procedural/procedural", ASSETS + houses)
+    pose = [1.0, 0, 0, 20.0, 0, 1.0, 0, 5.0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
+    town = [PlacementRecord(town="town00", placement_id=i, name=n, asset_id=a, mesh_path="", semantic_id=3,
+                            instance_id=i + 1, pose=pose, is_thing=True, aabb_min=[0, 0, 0], aabb_max=[1, 1, 1])
+            for i, (n, a) in enumerate((("building_000", "house_a"), ("building_001", "tower")))]
+    t_place = ParquetTable(store, PlacementRecord)
+    t_place.save("town=town00", town)
+    (r,) = swap_class(store, "Building", 2)
+    assert (r.swapped, r.swapped_static, r.kept_static) == (0, 1, 1)  # the tower has no compatible asset
+    (new,) = ParquetTable(store, SequenceRecord).load([r.sequence_id])
+    assert new.placements == f"sequence={r.sequence_id}" and new.placements_key() == new.placements
+    got = {p.placement_id: p for p in t_place.load([new.placements])}
+    assert got[0].asset_id == "house_b" and got[0].pose == pose
+    assert got[0].aabb_min == pytest.approx([20 - 5.25, 5 - 4.2, 0]) and got[0].aabb_max == pytest.approx([25.25, 9.2, 6.5])
+    assert got[1] == town[1]
+    assert t_place.load(["town=town00"]) == town  # the town itself is untouched
+    # actors unchanged: no car swapped in a building swap
+    assert ParquetTable(store, ActorStateRecord).load([r.sequence_id]) == [
+        a.model_copy(update={"sequence_id": r.sequence_id}) for a in ParquetTable(store, ActorStateRecord).load(["town00_low_seq000"])]
