@@ -27,6 +27,7 @@ TABLE_DIRS: dict[str, str] = {
     "frames": "scenes/frames",
     "sensor_poses": "scenes/sensor_poses",
     "actors": "scenes/actors",
+    "skeletons": "scenes/skeletons",
     "quality": "metrics/quality",
     "rectification": "metrics/rectification",
     "quality_classes": "metrics/quality_classes",

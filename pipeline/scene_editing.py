@@ -20,7 +20,7 @@ from carlaocc.catalog.panoptic import panoptic_glb_bytes
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.tasks.frame import frame_scene, load_geometry
-from carlaocc.pipeline.tasks.scenes import is_edited
+from carlaocc.pipeline.tasks.scenes import is_edited, sequence_skeletons
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.records import (
     ActorStateRecord,
@@ -30,6 +30,7 @@ from carlaocc.schemas.records import (
     RunRecord,
     SensorPoseRecord,
     SequenceRecord,
+    SkeletonRecord,
 )
 
 SWAP_STAGE = "scenes-swap"
@@ -158,6 +159,7 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
         "actors": ParquetTable(store, ActorStateRecord),
     }
     t_place = ParquetTable(store, PlacementRecord)
+    t_skel = ParquetTable(store, SkeletonRecord)
     # 1. plan every edit before writing anything: nothing is written when nothing can be swapped
     plans = []
     for parent in targets:
@@ -209,6 +211,13 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
             rows = new_actors if name == "actors" else [
                 r.model_copy(update={"sequence_id": new_id}) for r in table.load([parent.sequence_id])]
             outputs[table.path(new_id)] = table.save(new_id, rows)
+        # the walkers' skeletons: posed anew when pedestrians got other assets, else copied
+        if cls.name == "Pedestrian" and choice:
+            frames = [r.model_copy(update={"sequence_id": new_id}) for r in tables["frames"].load([parent.sequence_id])]
+            outputs[t_skel.path(new_id)] = t_skel.save(new_id, sequence_skeletons(store, new_actors, frames))
+        elif t_skel.exists(parent.sequence_id):
+            outputs[t_skel.path(new_id)] = t_skel.save(new_id, [
+                r.model_copy(update={"sequence_id": new_id}) for r in t_skel.load([parent.sequence_id])])
         results.append(SwapResult(new_id, parent.sequence_id, len(choice), kept, len(statics), kept_static))
         runs.append(RunRecord(
             run_id=run_id, stage=SWAP_STAGE, partition=new_id, code_version="", config_hash=f"{cls.name}:{seed}",

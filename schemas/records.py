@@ -189,6 +189,22 @@ class ActorStateRecord(Record):
     phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
 
 
+class SkeletonRecord(Record):
+    """One joint of a walker in one frame: the gait cycle's bones as posed for the frame (the
+    canonical phase the Skeletal Motion Analyzer matched, or the rest pose), in the world frame
+    and in the frame's LiDAR frame (metres)."""
+
+    TABLE: ClassVar[str] = "skeletons"
+    sequence_id: str
+    frame_index: int
+    instance_id: int
+    asset_id: str
+    joint_index: int  # position in the skeleton's joint list
+    joint: str  # pelvis, l_hip, l_knee, l_ankle, r_hip, r_knee, r_ankle, l_shoulder, l_hand, ...
+    world: Vec3
+    lidar: Vec3
+
+
 class SensorPoseRecord(Record):
     """A rig sensor's pose in one frame (cameras: OpenCV camera frame, x right, y down, z forward;
     LiDAR: x forward, y left, z up)."""
@@ -309,6 +325,7 @@ PERSISTED: tuple[type[Record], ...] = (
     FrameRecord,
     SensorPoseRecord,
     ActorStateRecord,
+    SkeletonRecord,
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,

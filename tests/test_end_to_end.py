@@ -297,6 +297,44 @@ def test_building_swap_changes_voxels_only_where_the_swapped_buildings_stand(con
     assert inside.all(), f"{int((~inside).sum())} voxels changed outside the swapped buildings"
 
 
+def test_skeletons_lie_on_their_walkers(built):
+    """The ``skeletons`` table (SQL): 11 named joints per pedestrian and frame, world and LiDAR
+    frames consistent with the frame's LiDAR pose, and every joint within one voxel of that
+    walker's voxels."""
+    from carlaocc.stages.geometry import pose_from_list, transform_points
+
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    cols, rows = query(built, "SELECT frame_index, instance_id, joint, world, lidar FROM skeletons "
+                              f"WHERE sequence_id = '{seq}' ORDER BY frame_index, instance_id, joint_index")
+    assert rows, "no skeletons"
+    _, peds = query(built, f"SELECT count(*) FROM actors WHERE sequence_id = '{seq}' AND semantic_id = "
+                           f"{taxonomy.by_name('Pedestrian').id}")
+    assert len(rows) == 11 * peds[0][0]
+    from carlaocc.stages.scenes.pedestrians import JOINT_NAMES
+
+    assert [r[2] for r in rows[:11]] == list(JOINT_NAMES)
+    grid = GridSpec(voxel_size=RES)
+    _, frames = query(built, f"SELECT frame_index, lidar_pose FROM frames WHERE sequence_id = '{seq}'")
+    lidar_pose = {f: pose_from_list(p) for f, p in frames}
+    checked = 0
+    for t in sorted({r[0] for r in rows})[:3]:
+        occ = OccupancyStore(built).read_frame(seq, grid, t, ("instance",))["instance"]
+        for inst in sorted({r[1] for r in rows if r[0] == t}):
+            joints = [r for r in rows if r[0] == t and r[1] == inst]
+            world = np.array([r[3] for r in joints])
+            lidar = np.array([r[4] for r in joints])
+            np.testing.assert_allclose(transform_points(lidar_pose[t], lidar), world, atol=1e-6)
+            vox = np.argwhere(occ == inst)
+            if len(vox) == 0:
+                continue  # the walker is outside the grid this frame
+            ijk = np.floor((lidar - np.asarray(grid.origin)) / RES).astype(int)
+            # Chebyshev distance (voxels) from each joint's voxel to the nearest voxel of the walker
+            d = np.abs(ijk[:, None, :] - vox[None, :, :]).max(axis=2).min(axis=1)
+            assert (d <= 1).all(), (t, inst, [j[2] for j, dd in zip(joints, d) if dd > 1])
+            checked += 1
+    assert checked > 0
+
+
 def _frame(built, names=("semantic", "instance", "mask_camera", "mask_lidar", "flow"), t=3):
     grid = GridSpec(voxel_size=RES)
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]

@@ -13,7 +13,7 @@ from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, town_key
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, SensorPoseRecord,
-                                      SequenceRecord, TownRecord)
+                                      SequenceRecord, SkeletonRecord, TownRecord)
 
 
 
@@ -64,6 +64,20 @@ def read_town_network(spec: TownSpec):
     return read_opendrive(resolve_opendrive(spec.opendrive))
 
 
+def sequence_skeletons(store: Store, actors, frames) -> list:
+    """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.pedestrians.skeleton_rows`):
+    pedestrian rigs built from their ADMesh geometry, once per asset."""
+    from carlaocc.pipeline.tasks.frame import load_geometry
+    from carlaocc.schemas import taxonomy
+    from carlaocc.stages.scenes.pedestrians import rig_pedestrian, skeleton_rows
+
+    ped = taxonomy.by_name("Pedestrian").id
+    ids = {a.asset_id for a in actors if a.semantic_id == ped}
+    geometry = load_geometry(store, ids, []) if ids else {}
+    rigs = {aid: rig_pedestrian(geometry[aid]) for aid in sorted(ids)}
+    return skeleton_rows(actors, frames, rigs.__getitem__)
+
+
 def is_edited(sequence_id: str) -> bool:
     """Edited sequences (``scenes swap``) carry a ``~`` in their id; re-simulating their town
     removes them, since their trajectories are copies of the old simulation."""
@@ -106,13 +120,14 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         "frames": ParquetTable(store, FrameRecord),
         "sensor_poses": ParquetTable(store, SensorPoseRecord),
         "actors": ParquetTable(store, ActorStateRecord),
+        "skeletons": ParquetTable(store, SkeletonRecord),
     }
     written = set()
     for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases):
         sid = seq.sequence.sequence_id
         written.add(sid)
         rows = {"sequence": [seq.sequence], "frames": seq.frames, "sensor_poses": seq.sensor_poses,
-                "actors": seq.actors}
+                "actors": seq.actors, "skeletons": sequence_skeletons(store, seq.actors, seq.frames)}
         for name, table in tables.items():
             outputs[table.path(sid)] = table.save(sid, rows[name])
     # sequences this town no longer has (fewer levels or sequences) are removed, not left stale
@@ -137,9 +152,9 @@ SPEC = StageSpec(
     name="scenes",
     description="towns (procedural styles, OpenDRIVE), traffic, ego sequences, rig poses, actors",
     upstream=("ingest",),
-    reads=("admesh/assets/",),
+    reads=("admesh/assets/", "admesh/parts/", "admesh/meshes/"),
     writes=("scenes/meshes/", "scenes/placements/", "scenes/towns/", "scenes/sequences/", "scenes/frames/",
-            "scenes/sensor_poses/", "scenes/actors/"),
+            "scenes/sensor_poses/", "scenes/actors/", "scenes/skeletons/"),
     partitions=scenes_partitions,
     task=scenes_task,
 )

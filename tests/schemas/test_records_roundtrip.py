@@ -55,6 +55,12 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
                            velocity=[1.2, 0.0, 0.0], angular_velocity=[0.0, 0.0, 0.0], gait_phase=0.25,
                            phase_index=8),
     ],
+    R.SkeletonRecord: [
+        R.SkeletonRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", joint_index=0, joint="pelvis",
+                         world=[10.0, 2.0, 0.95], lidar=[3.5, -1.25, -0.8]),
+        R.SkeletonRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", joint_index=10,
+                         joint="r_hand", world=[10.2, 1.7, 0.8], lidar=[3.7, -1.55, -0.95]),
+    ],
     R.QualityRecord: [
         R.QualityRecord(sequence_id="s", resolution=0.2, frame_index=0, metric="spatial_continuity",
                         value=0.99, occupied=100, isolated=1),
