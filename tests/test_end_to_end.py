@@ -557,3 +557,25 @@ def test_show_sensors_png(built, tmp_path):
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--camera", "camera_09",
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 2 and "camera_09" in r.output
+
+
+def test_show_sensors_draws_skeletons_where_walkers_are_seen(built, tmp_path):
+    """``show sensors --skeletons``: in some frame a walker is seen by a camera, and the sheet
+    then differs from the one without skeletons only by skeleton colours (white/grey)."""
+    from PIL import Image
+
+    seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    ped = taxonomy.by_name("Pedestrian").id
+    for t in range(0, 20, 2):
+        a, b = tmp_path / f"plain{t}.png", tmp_path / f"skel{t}.png"
+        args = ["show", "sensors", "--seq", seq, "--frame", str(t), "--root", built.url, "--step", "1"]
+        assert cli.invoke(app, [*args, "--out", str(a)]).exit_code == 0
+        r = cli.invoke(app, [*args, "--skeletons", "--out", str(b)])
+        assert r.exit_code == 0, r.output
+        A, B = np.asarray(Image.open(a).convert("RGB")), np.asarray(Image.open(b).convert("RGB"))
+        changed = np.any(A != B, axis=2)
+        if changed.any():
+            colours = {tuple(c) for c in B[changed]}
+            assert colours <= {(255, 255, 255), (140, 140, 140)}, colours
+            return
+    pytest.fail(f"no frame of {seq} shows a walker ({ped}) to a camera")

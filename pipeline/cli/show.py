@@ -136,6 +136,39 @@ def show_occupancy(
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 
 
+def _frame_skeletons(store, seq: str, frame: int):
+    """(W, J, 3) LiDAR-frame joints of the frame's walkers from the skeletons table (W may be 0)."""
+    import numpy as np
+
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import SkeletonRecord
+
+    table = ParquetTable(store, SkeletonRecord)
+    if not table.exists(seq):
+        fail(f"--skeletons: {seq} has no skeletons table in {store.url}: run the scenes stage")
+    rows = [r for r in table.load([seq]) if r.frame_index == frame]
+    by_walker: dict[int, list] = {}
+    for r in sorted(rows, key=lambda r: (r.instance_id, r.joint_index)):
+        by_walker.setdefault(r.instance_id, []).append(r.lidar)
+    return np.array(list(by_walker.values()), dtype=np.float64).reshape(len(by_walker), -1, 3)
+
+
+def _with_skeletons(view, joints, poses, rig, cam: str):
+    """``view`` with the walkers' joints projected into camera ``cam``."""
+    import dataclasses
+
+    from carlaocc.stages.geometry import invert_pose, transform_points
+    from carlaocc.stages.render.sensors import project_skeletons
+
+    spec = next((c for c in rig.cameras if c.name == cam), None)
+    if spec is None or len(joints) == 0:
+        return view
+    to_cam = invert_pose(poses[cam])
+    cam_pts = transform_points(to_cam, joints.reshape(-1, 3)).reshape(joints.shape)
+    uv, visible = project_skeletons(cam_pts, spec.intrinsics, view.depth)
+    return dataclasses.replace(view, skeleton_uv=uv, skeleton_visible=visible)
+
+
 @show_app.command("sensors")
 def show_sensors(
     seq: Annotated[str, typer.Option("--seq", help="sequence id (see: carlaocc catalog query 'select * from sequences')")],
@@ -143,12 +176,14 @@ def show_sensors(
     out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("sensors.png"),
     camera: Annotated[Optional[list[str]], typer.Option("--camera", help="camera(s) to show (default: every camera stored)")] = None,
     step: Annotated[int, typer.Option("--step", min=1, max=16, help="draw every n-th pixel row and column (2 halves 1408x376 images)")] = 2,
+    skeletons: Annotated[bool, typer.Option("--skeletons", help="draw the walkers' skeletons (the skeletons table) over the semantic and instance maps: white where visible, grey where hidden")] = False,
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
     """Contact sheet of one frame's camera maps (no RGB: depth, normals, semantics, instances per
     camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
-    transparency region tinted red and of the omission region blue (epsilon from the config)."""
+    transparency region tinted red and of the omission region blue (epsilon from the config).
+    With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""
     from carlaocc.catalog.sensors import SensorStore
     from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
@@ -161,6 +196,12 @@ def show_sensors(
     missing = [c for c in (camera or []) if c not in stored]
     if missing:
         fail(f"--camera {', '.join(missing)}: {seq} has maps of {', '.join(stored)} only")
+    joints = _frame_skeletons(store, seq, frame) if skeletons else None
+    poses = None
+    if joints is not None:
+        from carlaocc.stages.sensors import camera_poses
+
+        poses = camera_poses(cfg.scenes.rig)
     views = []
     for cam in camera or stored:
         names = set(sensors.names(seq, cam))
@@ -173,8 +214,11 @@ def show_sensors(
 
         if read("normal") is None:
             fail(f"{seq}/{cam} has no normal map: run the sensors stage")
-        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
-                                read("depth_raw"), read("semantic_raw")))
+        view = CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
+                          read("depth_raw"), read("semantic_raw"))
+        if joints is not None:
+            view = _with_skeletons(view, joints, poses, cfg.scenes.rig, cam)
+        views.append(view)
     image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
     _write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")

@@ -85,6 +85,65 @@ class CameraView:
     normal: np.ndarray
     depth_raw: np.ndarray | None = None
     semantic_raw: np.ndarray | None = None
+    # walkers' skeletons to draw over the semantic and instance maps: (W, J, 2) pixel coordinates
+    # (u right, v down, pixel centres at i + 0.5; NaN behind the camera) and (W, J) visibility
+    skeleton_uv: np.ndarray | None = None
+    skeleton_visible: np.ndarray | None = None
+
+
+def project_skeletons(joints_cam: np.ndarray, K, depth: np.ndarray, tolerance: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates and visibility of joints given in a camera's OpenCV optical frame
+    ((W, J, 3) metres: x right, y down, z forward) through the 3x3 intrinsics ``K`` (pixel centres
+    at i + 0.5). A joint is visible when it is in front of the camera, inside the image and not
+    more than ``tolerance`` metres behind the planar ``depth`` map's surface at its pixel (its
+    own body's surface lies a few centimetres in front of it). Returns ((W, J, 2), (W, J) bool);
+    joints behind the camera get NaN coordinates."""
+    P = np.asarray(joints_cam, dtype=np.float64)
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    z = P[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # 1. pinhole projection of the points in front of the camera
+        u = np.where(z > 1e-6, K[0, 0] * P[..., 0] / z + K[0, 2], np.nan)
+        v = np.where(z > 1e-6, K[1, 1] * P[..., 1] / z + K[1, 2], np.nan)
+    uv = np.stack([u, v], axis=-1)
+    H, W = depth.shape
+    inside = np.isfinite(u) & np.isfinite(v) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    # 2. occlusion: the depth map's surface at the joint's pixel is not well in front of it
+    i = np.clip(np.nan_to_num(np.floor(v), nan=0).astype(int), 0, H - 1)
+    j = np.clip(np.nan_to_num(np.floor(u), nan=0).astype(int), 0, W - 1)
+    d = depth[i, j]
+    visible = inside & ((d <= 0) | (z <= d + tolerance))
+    return uv, visible
+
+
+def draw_skeletons(image: np.ndarray, uv: np.ndarray, visible: np.ndarray, bones, step: int = 1) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 (subsampled by ``step``) with every skeleton drawn: bones as
+    one-pixel lines and joints as 3x3 dots, white where visible, grey where hidden."""
+    out = image.copy()
+    H, W = out.shape[:2]
+    q = np.asarray(uv, dtype=np.float64) / max(int(step), 1)
+
+    def put(r, c, colour):
+        ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        out[r[ok], c[ok]] = colour
+
+    for s in range(q.shape[0]):
+        for a, b in bones:
+            if not (np.isfinite(q[s, a]).all() and np.isfinite(q[s, b]).all()):
+                continue
+            # sample the segment at least once per pixel
+            n = int(max(abs(q[s, b, 0] - q[s, a, 0]), abs(q[s, b, 1] - q[s, a, 1]), 1.0)) + 1
+            t = np.linspace(0.0, 1.0, n)[:, None]
+            pts = q[s, a] + t * (q[s, b] - q[s, a])
+            colour = (255, 255, 255) if visible[s, a] and visible[s, b] else (140, 140, 140)
+            put(np.floor(pts[:, 1]).astype(int), np.floor(pts[:, 0]).astype(int), colour)
+        for k in range(q.shape[1]):
+            if not np.isfinite(q[s, k]).all():
+                continue
+            r0, c0 = int(np.floor(q[s, k, 1])), int(np.floor(q[s, k, 0]))
+            rr, cc = np.mgrid[r0 - 1 : r0 + 2, c0 - 1 : c0 + 2]
+            put(rr.ravel(), cc.ravel(), (255, 255, 255) if visible[s, k] else (140, 140, 140))
+    return out
 
 
 def repair_regions(view: CameraView, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
@@ -98,20 +157,30 @@ def repair_regions(view: CameraView, epsilon: float) -> tuple[np.ndarray, np.nda
     return transparency, view.semantic_raw == 0
 
 
+def _skeletons(image: np.ndarray, view: CameraView, step: int) -> np.ndarray:
+    """``image`` with the view's skeletons drawn, when it has any."""
+    if view.skeleton_uv is None or len(view.skeleton_uv) == 0:
+        return image
+    from carlaocc.stages.scenes.pedestrians import SKELETON_BONES
+
+    return draw_skeletons(image, view.skeleton_uv, view.skeleton_visible, SKELETON_BONES, step)
+
+
 def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int = 2) -> np.ndarray:
     """The contact sheet of a frame: a column per camera, rows depth, normals, semantics,
     instances and, where raw maps exist, raw depth / rectified depth / raw semantics / rectified
-    semantics with the repaired pixels highlighted. Images are subsampled by ``step``."""
+    semantics with the repaired pixels highlighted; skeletons (when the views carry them) over the
+    semantic and instance maps. Images are subsampled by ``step``."""
     if not views:
         raise ValueError("no camera maps to draw")
     s = slice(None, None, max(int(step), 1))
     rows: list[tuple[str, list[np.ndarray]]] = [
         ("depth", [depth_image(v.depth[s, s]) for v in views]),
         ("normal", [normal_image(v.normal[s, s]) for v in views]),
-        ("semantic", [semantic_image(v.semantic[s, s]) for v in views]),
+        ("semantic", [_skeletons(semantic_image(v.semantic[s, s]), v, step) for v in views]),
     ]
     if all(v.instance is not None for v in views):
-        rows.append(("instance", [instance_image(v.semantic[s, s], v.instance[s, s]) for v in views]))
+        rows.append(("instance", [_skeletons(instance_image(v.semantic[s, s], v.instance[s, s]), v, step) for v in views]))
     if all(v.depth_raw is not None and v.semantic_raw is not None for v in views):
         regions = [repair_regions(v, epsilon) for v in views]
         rows += [

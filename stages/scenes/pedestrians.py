@@ -54,6 +54,9 @@ BONE_NAMES = ("body", "thigh_l", "shin_l", "thigh_r", "shin_r", "arm_l", "arm_r"
 # joints reported by PedestrianRig.joints
 JOINT_NAMES = ("pelvis", "l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle", "l_shoulder", "l_hand",
                "r_shoulder", "r_hand")  # fmt: skip
+# the bones drawn between JOINT_NAMES (indices): legs, arms, shoulders, trunk
+SKELETON_BONES: tuple[tuple[int, int], ...] = ((0, 1), (1, 2), (2, 3), (0, 4), (4, 5), (5, 6), (7, 9), (7, 8), (9, 10),
+                                               (0, 7), (0, 9))  # fmt: skip
 
 _LIMB = re.compile(r"^(leg|arm)[_\- ]?(l|left|r|right)$")
 

@@ -142,3 +142,24 @@ def test_contact_sheet_checks_its_input():
         contact_sheet([], [])
     long = contact_sheet([np.zeros((10, 30, 3), np.uint8)], ["a very long label indeed"])
     assert long.shape == (10 + label_strip_height(1), 30, 3)
+
+
+def test_project_skeletons_and_draw():
+    from carlaocc.stages.render.sensors import draw_skeletons, project_skeletons
+
+    K = [[100.0, 0.0, 50.0], [0.0, 100.0, 20.0], [0.0, 0.0, 1.0]]
+    depth = np.full((40, 100), 10.0, dtype=np.float32)
+    depth[:, :30] = 2.0  # a wall in front of the left part of the image
+    # one walker: a joint straight ahead at 5 m, one to the left (behind the wall), one behind the camera
+    joints = np.array([[[0.0, 0.0, 5.0], [-1.5, 0.0, 5.0], [0.0, 0.0, -1.0]]])
+    uv, visible = project_skeletons(joints, K, depth)
+    np.testing.assert_allclose(uv[0, 0], [50.0, 20.0])
+    np.testing.assert_allclose(uv[0, 1], [20.0, 20.0])
+    assert np.isnan(uv[0, 2]).all()
+    assert visible[0].tolist() == [True, False, False]
+    image = np.zeros((40, 100, 3), dtype=np.uint8)
+    out = draw_skeletons(image, uv, visible, [(0, 1), (1, 2)], step=1)
+    assert tuple(out[20, 50]) == (255, 255, 255)  # the visible joint
+    assert tuple(out[20, 20]) == (140, 140, 140)  # the hidden one, grey
+    assert tuple(out[20, 35]) == (140, 140, 140)  # the bone between them (one end hidden): grey
+    assert not image.any()  # the input is left as it is
