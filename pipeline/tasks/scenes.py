@@ -69,7 +69,8 @@ def sequence_skeletons(store: Store, actors, frames) -> list:
     pedestrian rigs built from their ADMesh geometry, once per asset."""
     from carlaocc.pipeline.tasks.frame import load_geometry
     from carlaocc.schemas import taxonomy
-    from carlaocc.stages.scenes.pedestrians import rig_pedestrian, skeleton_rows
+    from carlaocc.stages.scenes.pedestrians import rig_pedestrian
+    from carlaocc.stages.scenes.skeletons import skeleton_rows
 
     ped = taxonomy.by_name("Pedestrian").id
     ids = {a.asset_id for a in actors if a.semantic_id == ped}
