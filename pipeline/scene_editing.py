@@ -207,14 +207,14 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
             outputs[t_place.path(key)] = t_place.save(key, [_swapped_placement(p, statics.get(p.placement_id))
                                                             for p in placements])
         outputs[t_seq.path(new_id)] = t_seq.save(new_id, [parent.model_copy(update=update)])
+        copied = {name: new_actors if name == "actors" else [
+            r.model_copy(update={"sequence_id": new_id}) for r in table.load([parent.sequence_id])]
+            for name, table in tables.items()}  # fmt: skip
         for name, table in tables.items():
-            rows = new_actors if name == "actors" else [
-                r.model_copy(update={"sequence_id": new_id}) for r in table.load([parent.sequence_id])]
-            outputs[table.path(new_id)] = table.save(new_id, rows)
+            outputs[table.path(new_id)] = table.save(new_id, copied[name])
         # the walkers' skeletons: posed anew when pedestrians got other assets, else copied
         if cls.name == "Pedestrian" and choice:
-            frames = [r.model_copy(update={"sequence_id": new_id}) for r in tables["frames"].load([parent.sequence_id])]
-            outputs[t_skel.path(new_id)] = t_skel.save(new_id, sequence_skeletons(store, new_actors, frames))
+            outputs[t_skel.path(new_id)] = t_skel.save(new_id, sequence_skeletons(store, new_actors, copied["frames"]))
         elif t_skel.exists(parent.sequence_id):
             outputs[t_skel.path(new_id)] = t_skel.save(new_id, [
                 r.model_copy(update={"sequence_id": new_id}) for r in t_skel.load([parent.sequence_id])])

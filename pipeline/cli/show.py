@@ -141,12 +141,12 @@ def _frame_skeletons(store, seq: str, frame: int):
     import numpy as np
 
     from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.pipeline.tasks.frame import frame_rows
     from carlaocc.schemas.records import SkeletonRecord
 
-    table = ParquetTable(store, SkeletonRecord)
-    if not table.exists(seq):
+    if not ParquetTable(store, SkeletonRecord).exists(seq):
         fail(f"--skeletons: {seq} has no skeletons table in {store.url}: run the scenes stage")
-    rows = [r for r in table.load([seq]) if r.frame_index == frame]
+    rows = frame_rows(store, SkeletonRecord, seq, frame)
     by_walker: dict[int, list] = {}
     for r in sorted(rows, key=lambda r: (r.instance_id, r.joint_index)):
         by_walker.setdefault(r.instance_id, []).append(r.lidar)

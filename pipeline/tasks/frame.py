@@ -88,25 +88,31 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
     return out
 
 
-def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
-    """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
-    (rigs cached per worker by asset id and geometry content)."""
+def pedestrian_rigs(geometry: dict[str, AssetGeometry]):
+    """``asset_id -> PedestrianRig`` of the pedestrian assets in ``geometry``, cached per worker by
+    asset id and geometry content (each asset's content hashed once per call of this)."""
     from carlaocc.stages.geometry import geometry_hash
     from carlaocc.stages.scenes.pedestrians import rig_pedestrian
 
-    keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key, hashed once per frame
+    keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key
 
-    def posed(asset_id: str, phase_index: int) -> AssetGeometry:
+    def rig(asset_id: str):
         geom = geometry[asset_id]
         if asset_id not in keys:
             keys[asset_id] = (asset_id, geometry_hash([(p.vertices, p.faces) for p in geom.parts]))
-        rig = _cached(_RIG_CACHE, keys[asset_id], lambda: rig_pedestrian(geom), 256)
-        return rig.posed(phase_index)
+        return _cached(_RIG_CACHE, keys[asset_id], lambda: rig_pedestrian(geom), 256)
 
-    return posed
+    return rig
 
 
-def _frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
+def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
+    """``(asset_id, phase_index) -> AssetGeometry``: pedestrians posed in a canonical gait phase
+    (rigs from :func:`pedestrian_rigs`)."""
+    rig = pedestrian_rigs(geometry)
+    return lambda asset_id, phase_index: rig(asset_id).posed(phase_index)
+
+
+def frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
     """The rows of one frame of a per-sequence table (filtered in Arrow before validation)."""
     import pyarrow.compute as pc
 
@@ -135,10 +141,10 @@ def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameIn
     if not sequences:
         raise StoreError(f"sequence {seq_id!r} is not in {store.url}: run the scenes stage first")
     (sequence,) = sequences
-    frames = _frame_rows(store, FrameRecord, seq_id, frame_index)
+    frames = frame_rows(store, FrameRecord, seq_id, frame_index)
     if not frames:
         raise StoreError(f"sequence {seq_id} has no frame {frame_index} (it has {sequence.frame_count})")
-    actors = _frame_rows(store, ActorStateRecord, seq_id, frame_index)
+    actors = frame_rows(store, ActorStateRecord, seq_id, frame_index)
     # the town's placement index, kept per worker while the placements file is unchanged (its
     # per-asset preparation of big stuff meshes is then reused across frames)
     t_place = ParquetTable(store, PlacementRecord)

@@ -66,17 +66,14 @@ def read_town_network(spec: TownSpec):
 
 def sequence_skeletons(store: Store, actors, frames) -> list:
     """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.pedestrians.skeleton_rows`):
-    pedestrian rigs built from their ADMesh geometry, once per asset."""
-    from carlaocc.pipeline.tasks.frame import load_geometry
+    pedestrian rigs built from their ADMesh geometry (the per-worker cache the frames use)."""
+    from carlaocc.pipeline.tasks.frame import load_geometry, pedestrian_rigs
     from carlaocc.schemas import taxonomy
-    from carlaocc.stages.scenes.pedestrians import rig_pedestrian
     from carlaocc.stages.scenes.skeletons import skeleton_rows
 
     ped = taxonomy.by_name("Pedestrian").id
     ids = {a.asset_id for a in actors if a.semantic_id == ped}
-    geometry = load_geometry(store, ids, []) if ids else {}
-    rigs = {aid: rig_pedestrian(geometry[aid]) for aid in sorted(ids)}
-    return skeleton_rows(actors, frames, rigs.__getitem__)
+    return skeleton_rows(actors, frames, pedestrian_rigs(load_geometry(store, ids, []) if ids else {}))
 
 
 def is_edited(sequence_id: str) -> bool:

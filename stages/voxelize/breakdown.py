@@ -55,14 +55,15 @@ class FillBreakdown:
 
 
 def fill_breakdown(meshes: Sequence[SceneMesh], grid: GridSpec, fill: str = "auto",
-                   solid: np.ndarray | None = None) -> FillBreakdown:
+                   solid: np.ndarray | None = None, surface: np.ndarray | None = None) -> FillBreakdown:
     """Surface, filled and hole-handled voxel counts of ``meshes`` (grid frame, metres) on ``grid``
-    under ``fill``. ``solid`` may pass the semantic volume of that voxelization when the caller
-    already has it (it is computed otherwise)."""
-    surface_sem, _ = voxelize_scene(meshes, grid, fill="surface")
+    under ``fill``. ``solid`` and ``surface`` may pass the semantic volumes of the voxelizations
+    under ``fill`` and ``"surface"`` when the caller already has them (computed otherwise)."""
+    if surface is None:
+        surface, _ = voxelize_scene(meshes, grid, fill="surface")
     if solid is None:
         solid, _ = voxelize_scene(meshes, grid, fill=fill)
-    surf = surface_sem > 0
+    surf = surface > 0
     added = (solid > 0) & ~surf
     # filled voxels a flood fill from the boundary reaches were reached through an opening
     from_holes = added & outside(surf)
@@ -175,5 +176,5 @@ def asset_fill(geom: AssetGeometry) -> AssetFill:
         # and the flood fill is skipped
         return AssetFill(method, vs, voxels, voxels - n_surface, 0)
     # 3. some filled part open: the filled voxels a flood fill from the boundary reaches
-    from_holes = int(np.count_nonzero((solid > 0) & outside(surf)))
-    return AssetFill(method, vs, voxels, voxels - n_surface, from_holes)
+    b = fill_breakdown(meshes, grid, "auto", solid=solid, surface=surface)
+    return AssetFill(method, vs, b.total, b.filled, b.from_holes)

@@ -357,38 +357,12 @@ def _touches_window(labels, n_labels, ni, nj, nk):
     return out
 
 
-@njit(cache=True, nogil=True)
-def _lattice_points(labels, state, ni, nj, nk, step):
+def _lattice_points(labels, state, ni, nj, nk, step) -> np.ndarray:
     """Flat indices of the lattice voxels (every ``step``-th along each axis, and the last) that
     belong to components to be evaluated (``state`` 2), in C order."""
-    cnt = 0
-    for i in range(ni):
-        if i % step and i != ni - 1:
-            continue
-        for j in range(nj):
-            if j % step and j != nj - 1:
-                continue
-            for k in range(nk):
-                if k % step and k != nk - 1:
-                    continue
-                if state[labels[(i * nj + j) * nk + k]] == 2:
-                    cnt += 1
-    out = np.empty(cnt, dtype=np.int64)
-    w = 0
-    for i in range(ni):
-        if i % step and i != ni - 1:
-            continue
-        for j in range(nj):
-            if j % step and j != nj - 1:
-                continue
-            for k in range(nk):
-                if k % step and k != nk - 1:
-                    continue
-                x = (i * nj + j) * nk + k
-                if state[labels[x]] == 2:
-                    out[w] = x
-                    w += 1
-    return out
+    axes = [np.unique(np.r_[0:n:step, n - 1]) for n in (ni, nj, nk)]
+    flat = ((axes[0][:, None, None] * nj + axes[1][None, :, None]) * nk + axes[2][None, None, :]).ravel()
+    return flat[state[labels[flat]] == 2]
 
 
 @njit(cache=True, nogil=True)
