@@ -32,6 +32,7 @@ from carlaocc.schemas.records import (
     SequenceRecord,
     SkeletonRecord,
 )
+from carlaocc.stages.geometry import box_center, pose_from_list
 
 SWAP_STAGE = "scenes-swap"
 LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relative footprint/height difference
@@ -190,10 +191,10 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
                 new_actors.append(a.model_copy(update={"sequence_id": new_id}))
                 continue
             l, w, h = (float(e) for e in new.extent)
-            z = a.box_center[2] - a.box_size[2] / 2  # the ground under the box
+            # the new box stands on the same pose origin (pitch and roll kept)
             new_actors.append(a.model_copy(update={
                 "sequence_id": new_id, "asset_id": new.asset_id, "semantic_id": new.category_id,
-                "box_size": [l, w, h], "box_center": [a.box_center[0], a.box_center[1], z + h / 2],
+                "box_size": [l, w, h], "box_center": box_center(pose_from_list(a.pose), h),
             }))  # fmt: skip
         update = {"sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}"}
         inputs = {t.path(parent.sequence_id): store.fingerprint(t.path(parent.sequence_id))

@@ -183,6 +183,10 @@ class ActorStateRecord(Record):
     box_center: Vec3  # world frame, m
     box_size: Vec3  # length, width, height, m
     yaw: float  # rad, about world z
+    # rad: pitch about the body's y axis (positive: nose down) and roll about its x axis
+    # (positive: right side down); pose rotation = Rz(yaw) Ry(pitch) Rx(roll) (ROS REP 103)
+    pitch: float = 0.0
+    roll: float = 0.0
     velocity: Vec3  # world frame, m/s
     angular_velocity: Vec3  # world frame, rad/s
     gait_phase: float | None = None  # walkers only: simulated phase of the gait cycle, [0, 1)

@@ -20,13 +20,85 @@ def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     return pts @ np.asarray(T, dtype=np.float64)[:3, :3].T + np.asarray(T, dtype=np.float64)[:3, 3]
 
 
-def pose_matrix(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    """4x4 pose of a frame at (x, y, z) m rotated by ``yaw`` rad about +Z (right-handed)."""
-    c, s = np.cos(yaw), np.sin(yaw)
+def rotation_matrix(yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """3x3 rotation of a body frame (x forward, y left, z up) with the given Tait-Bryan angles, rad.
+
+    The convention of ROS REP 103 and of the records: ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, i.e.
+    roll about the body's x axis, then pitch about y, then yaw about the world's z, all
+    right-handed: positive pitch turns the nose **down**, positive roll lowers the **right** side.
+    (CARLA's left-handed ``Rotation`` has the opposite signs of pitch and yaw.)"""
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    if pitch == 0.0 and roll == 0.0:
+        # yaw only: the exact planar matrix (no products with cos 0 = 1 that could differ in the last bit)
+        return np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cr, sr = np.cos(roll), np.sin(roll)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])  # fmt: skip
+
+
+def pose_matrix(x: float, y: float, z: float, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """4x4 pose of a frame at (x, y, z) m turned by ``yaw``, ``pitch`` and ``roll`` rad
+    (:func:`rotation_matrix`: ``Rz(yaw) Ry(pitch) Rx(roll)``, right-handed; yaw alone turns about +Z)."""
     T = np.eye(4)
-    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, :3] = rotation_matrix(yaw, pitch, roll)
     T[:3, 3] = (x, y, z)
     return T
+
+
+def yaw_pitch_roll(R: np.ndarray) -> tuple[float, float, float]:
+    """The angles (rad) of :func:`rotation_matrix` that give the 3x3 rotation ``R``: yaw in
+    (-pi, pi], pitch in [-pi/2, pi/2], roll in (-pi, pi]. At pitch +-pi/2 (gimbal lock) roll is 0."""
+    R = np.asarray(R, dtype=np.float64)[:3, :3]
+    # pitch from the forward axis' fall, yaw from its heading, roll from the lateral axis' rise
+    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    if abs(R[2, 0]) > 1.0 - 1e-12:
+        return float(np.arctan2(-R[0, 1], R[1, 1])), pitch, 0.0
+    return float(np.arctan2(R[1, 0], R[0, 0])), pitch, float(np.arctan2(R[2, 1], R[2, 2]))
+
+
+def tilt_to_normal(yaw, up) -> tuple[np.ndarray, np.ndarray]:
+    """Pitch and roll (rad) that stand a body heading ``yaw`` (rad, (...,)) on a surface whose
+    upward unit normal is ``up`` ((..., 3), world frame, z up): the body's z axis becomes ``up``
+    and its x axis stays in the vertical plane of the heading (so it lies in the surface).
+
+    With ``R = Rz(yaw) Ry(pitch) Rx(roll)`` the body's up axis is ``Rz(yaw) (cos(roll) sin(pitch),
+    -sin(roll), cos(roll) cos(pitch))``; turning ``up`` back by ``-yaw`` reads both angles off it.
+    A level surface (0, 0, 1) gives exactly 0 and 0."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    n = np.asarray(up, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    # 1. the normal in the heading's frame (x along the heading, y to its left)
+    c, s = np.cos(yaw), np.sin(yaw)
+    nx = c * n[..., 0] + s * n[..., 1]
+    ny = -s * n[..., 0] + c * n[..., 1]
+    # 2. pitch tips it forward/back, roll sideways (+ 0.0: a level surface gives +0, never -0)
+    pitch = np.arctan2(nx, n[..., 2]) + 0.0
+    roll = np.arctan2(-ny, np.hypot(nx, n[..., 2])) + 0.0
+    return pitch, roll
+
+
+def angular_velocity(yaw, pitch, roll, yaw_rate, pitch_rate, roll_rate) -> np.ndarray:
+    """World-frame angular velocity (..., 3) rad/s of a body with :func:`rotation_matrix` angles
+    (rad) changing at the given rates (rad/s): ``yaw_rate ez + pitch_rate Rz(yaw) ey + roll_rate
+    Rz(yaw) Ry(pitch) ex``. Yaw alone gives exactly (0, 0, yaw_rate)."""
+    yaw, pitch = np.asarray(yaw, dtype=np.float64), np.asarray(pitch, dtype=np.float64)
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    wx = -sy * pitch_rate + cy * cp * roll_rate
+    wy = cy * pitch_rate + sy * cp * roll_rate
+    wz = yaw_rate - sp * roll_rate
+    # + 0.0: no -0 components when only the yaw turns
+    return np.stack(np.broadcast_arrays(wx + 0.0, wy + 0.0, wz + 0.0), axis=-1)
+
+
+def box_center(pose: np.ndarray, height: float) -> list[float]:
+    """World centre (3 floats, m) of an actor's 3D box of ``height`` m whose bottom face is centred
+    on the origin of its 4x4 ``pose`` (asset-to-world): half the height up the body's z axis."""
+    T = np.asarray(pose, dtype=np.float64)
+    return [float(v) for v in T[:3, 3] + T[:3, 2] * (height / 2)]
 
 
 def invert_pose(T: np.ndarray) -> np.ndarray:

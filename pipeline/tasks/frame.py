@@ -12,6 +12,8 @@ import dataclasses
 import hashlib
 from collections import OrderedDict
 
+import numpy as np
+
 from carlaocc.catalog.meshes import load_glb_arrays
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
@@ -130,6 +132,12 @@ class FrameInputs:
     frame: FrameRecord
     actors: list[ActorStateRecord]
     scene: list  # SceneMesh, LiDAR frame, cut to the requested region
+
+    @property
+    def up(self) -> np.ndarray:
+        """The world's up direction (0, 0, 1) in the frame's LiDAR frame: the last row of the
+        LiDAR-to-world rotation (the LiDAR's z when the ego stands level)."""
+        return np.asarray(self.frame.lidar_pose, dtype=np.float64).reshape(4, 4)[2, :3].copy()
 
 
 def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameInputs:

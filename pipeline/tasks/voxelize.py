@@ -109,7 +109,8 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     voxel_size = float(grid.voxel_size)
     # 1. per tile: semantic, instance (only the chunks its things' boxes reach are read), flow,
     #    and the tile's occupancy packed for the masks
-    for tile in voxelize_tiles(inputs.scene, grid, tile_x, cfg.fill):
+    # elevation order along the world's up (the LiDAR tilts with the ego on slopes and banks)
+    for tile in voxelize_tiles(inputs.scene, grid, tile_x, cfg.fill, inputs.up):
         nx = tile.semantic.shape[0]
         occ.write_tile(seq_id, grid, frame_index, "semantic", tile.semantic, tile.x0)
         shape = tile.instance.shape

@@ -95,7 +95,28 @@ class Lane(_Polyline):
     junction: int = -1  # id of the junction a connector lane crosses, -1 on ordinary road
     speed_limit: float = URBAN_SPEED_LIMIT  # m/s
     road: str = ""  # the road it belongs to (OpenDRIVE road id, or the builder's road name)
+    # (K, 3) upward unit normals of the road surface at ``points`` (elevation and superelevation
+    # tilt it), or None for a level road (0, 0, 1)
+    normals: np.ndarray | None = field(default=None, repr=False, compare=False)
     cum: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.normals is not None:
+            n = np.asarray(self.normals, dtype=np.float64).reshape(-1, 3)
+            object.__setattr__(self, "normals", n / np.linalg.norm(n, axis=1, keepdims=True))
+
+    def up_at(self, s) -> np.ndarray:
+        """Upward unit normal(s) (…, 3) of the road surface at arc length(s) ``s`` (clamped):
+        linear between the points' normals, renormalized; (0, 0, 1) on a level lane."""
+        s = np.asarray(s, dtype=np.float64)
+        if self.normals is None:
+            return np.broadcast_to(np.array([0.0, 0.0, 1.0]), s.shape + (3,)).copy()
+        s = np.clip(s, 0.0, self.cum[-1])
+        i = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.cum) - 2)
+        t = (s - self.cum[i]) / np.maximum(self.cum[i + 1] - self.cum[i], 1e-12)
+        n = self.normals[i] + t[..., None] * (self.normals[i + 1] - self.normals[i])
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
 
@@ -150,7 +171,7 @@ class Town:
 def check_network(net: RoadNetwork) -> None:
     """Raise ``ValueError`` naming the first broken invariant of ``net``: at least one lane, ids
     equal to positions, successor and neighbour references valid, lanes at least 0.5 m long with
-    finite points and a positive width, neighbours running the same way, walkways with finite
+    finite points and a positive width, normals (when given) finite, one per point and upward, neighbours running the same way, walkways with finite
     points and non-negative node ids, and a positive road length. (Dead ends are the builders'
     business: they keep the strongly connected part of their lane graph.)"""
     if not net.lanes:
@@ -164,6 +185,9 @@ def check_network(net: RoadNetwork) -> None:
             raise ValueError(f"{where}: points must be (K >= 2, 3), got {ln.points.shape}")
         if not np.all(np.isfinite(ln.points)):
             raise ValueError(f"{where}: non-finite points")
+        if ln.normals is not None and (ln.normals.shape != ln.points.shape or not np.all(np.isfinite(ln.normals))
+                                       or np.any(ln.normals[:, 2] <= 0.0)):  # fmt: skip
+            raise ValueError(f"{where}: normals must be finite, one per point, and point upwards")
         if ln.length < 0.5:
             raise ValueError(f"{where}: {ln.length:.3f} m long, shorter than 0.5 m")
         if not (math.isfinite(ln.width) and ln.width > 0):

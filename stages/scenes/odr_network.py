@@ -6,14 +6,16 @@ World frame = the file's inertial frame (metres, right-handed, Z up).
 
 * **Lanes** (contract :class:`~carlaocc.stages.scenes.network.Lane`): one per (road, lane section,
   driving lane) whose width reaches 1 m: the centre line sampled every <= 1 m at the road surface,
-  in the travel direction (right-hand traffic: negative ids along +s, positive ids against s).
+  in the travel direction (right-hand traffic: negative ids along +s, positive ids against s),
+  with the road surface's upward normal at each point (elevation and superelevation).
   Successors follow lane links inside a road, road links (``elementType="road"`` with the lane's
   successor / predecessor id) and junction connections (``incomingRoad`` + ``laneLink from``); a
   link is kept only when the lane's end meets the successor's start within :data:`JOIN_TOL` m
   (the rest are counted as mismatches). Left / right neighbours: adjacent driving lanes of the
   same section and side. Connector lanes carry ``junction`` = the junction's id as an int (the
   file's id when every junction id is an integer, else the position in sorted id order). Only the
-  largest strongly connected component of the lane graph is kept, lanes renumbered to positions.
+  lanes on a cycle are kept (every strongly connected component of at least two lanes: no route
+  dead-ends), renumbered to positions.
   ``road_length`` = the summed length of the non-junction roads that keep at least one lane.
 * **Walkways**: one per (road, section, sidewalk lane): its centre line on the raised surface.
   Ends closer than :data:`WALK_JOIN` m share a walk-graph node (sidewalks continue across
@@ -95,15 +97,17 @@ def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: s
                 w = np.abs(st.t_outer - st.t_inner)
                 if float(w.max()) < MIN_LANE_WIDTH:
                     continue
-                pts = od.st_to_world(road, s, (st.t_inner + st.t_outer) / 2, ref)
+                t_mid = (st.t_inner + st.t_outer) / 2
+                pts = od.st_to_world(road, s, t_mid, ref)
+                normals = od.surface_normal(road, s, t_mid, ref)
                 if st.lane_id > 0:
-                    pts = pts[::-1]
+                    pts, normals = pts[::-1], normals[::-1]
                 keep = np.concatenate([[True], np.hypot(*np.diff(pts[:, :2], axis=0).T) > 1e-6])
-                pts = pts[keep]
+                pts, normals = pts[keep], normals[keep]
                 if len(pts) < 2:
                     continue
                 raw[(rid, i, st.lane_id)] = dict(
-                    points=pts, width=float(w.mean()), lane=st.lane, road=rid,
+                    points=pts, normals=normals, width=float(w.mean()), lane=st.lane, road=rid,
                     junction=jids.get(str(road.junction), -1) if str(road.junction) != "-1" else -1,
                     speed=_speed(road, float(s[0])),
                 )  # fmt: skip
@@ -159,16 +163,17 @@ def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: s
             if index[t] != n:
                 succ[n].append(index[t])
 
-    # 3. largest strongly connected component
+    # 3. the lanes on a cycle: every strongly connected component of two lanes or more (from any
+    #    of them a route goes on forever; the one-way circuits of a loop road without junctions,
+    #    one per lane and direction, are separate components)
     rows = [n for n, ss in enumerate(succ) for _ in ss]
     cols = [m for ss in succ for m in ss]
     graph = csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(keys), len(keys)))
     _, comp = connected_components(graph, directed=True, connection="strong")
     sizes = np.bincount(comp)
-    best = int(np.argmax(sizes))
-    if sizes[best] < 2 and not any(n in succ[n] for n in range(len(keys))):
+    if sizes.max() < 2:
         raise ValueError(f"{label}: the lane graph has no cycle (every route dead-ends), nothing to drive on")
-    kept = [n for n in range(len(keys)) if comp[n] == best]
+    kept = [n for n in range(len(keys)) if sizes[comp[n]] >= 2]
     new = {old: k for k, old in enumerate(kept)}
     stats["scc_dropped"] = len(keys) - len(kept)
 
@@ -185,7 +190,7 @@ def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: s
             return new.get(m, -1) if m is not None else -1
 
         lanes.append(Lane(
-            lane_id=new[old], points=info["points"], width=info["width"],
+            lane_id=new[old], points=info["points"], normals=info["normals"], width=info["width"],
             successors=tuple(sorted({new[m] for m in succ[old] if m in new})),
             left=neighbour(-1), right=neighbour(+1), junction=info["junction"], speed_limit=info["speed"], road=rid,
         ))  # fmt: skip

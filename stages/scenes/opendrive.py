@@ -353,6 +353,26 @@ def st_to_world(road: Road, s, t, ref=None) -> np.ndarray:
     return np.stack([x - th * np.sin(h), y + th * np.cos(h), elevation(road, s) + tz], axis=-1)
 
 
+def surface_normal(road: Road, s, t, ref=None, ds: float = 1e-3) -> np.ndarray:
+    """Upward unit normals ``(..., 3)`` of the road surface at road coordinates (s, t): the cross
+    product of the surface's tangents along s (central difference of :func:`st_to_world` over
+    ``ds`` m, one-sided at the road's ends) and along t (the superelevated cross section,
+    ``(-cos(phi) sin(h), cos(phi) cos(h), sin(phi))``). A level road gives (0, 0, 1)."""
+    s = np.asarray(s, dtype=float)
+    t = np.asarray(t, dtype=float)
+    # 1. tangent along s at constant t (the lane's own t(s) does not tilt the surface)
+    s0 = np.clip(s - ds, 0.0, road.length)
+    s1 = np.clip(s + ds, 0.0, road.length)
+    d_s = st_to_world(road, s1, t) - st_to_world(road, s0, t)
+    # 2. tangent along t: the cross section rolled by the superelevation
+    _, _, h = reference_pose(road, s) if ref is None else ref
+    phi = superelevation(road, s)
+    d_t = np.stack([-np.cos(phi) * np.sin(h), np.cos(phi) * np.cos(h), np.sin(phi)], axis=-1)
+    # 3. s x t points up (s forward, t to the left)
+    n = np.cross(d_s, d_t)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
 def _section_samples(road: Road, s0: float, s1: float, step: float) -> np.ndarray:
     s = _samples(s0, s1, step)
     knots = [g.s for g in road.geometries if s0 < g.s < s1]

@@ -37,8 +37,11 @@ The vehicles live in :mod:`~carlaocc.stages.scenes.traffic_vehicles`, the walker
 
 Recorded per frame: the frame (ego and LiDAR poses), every rig sensor's pose, and every actor
 within ``actor_range`` m of the ego: stable instance id (numbered above the town's placements),
-asset, class, pose (asset-to-world), 3D box (centre at half height, extent l, w, h), yaw,
-linear and angular velocity (central differences of the simulated poses over the frames).
+asset, class, pose (asset-to-world), 3D box (centre half its height above the pose origin along the
+body's up axis, extent l, w, h), yaw, pitch and roll, linear and angular velocity (central
+differences of the simulated poses over the frames). Vehicles and the ego stand on the road
+surface: their up axis is the lane's surface normal (elevation and superelevation pitch and roll
+them; the frame's LiDAR and cameras turn with the ego); walkers stay upright.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ import numpy as np
 
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
-from carlaocc.stages.geometry import pose_matrix, pose_to_list
+from carlaocc.stages.geometry import angular_velocity, box_center, pose_matrix, pose_to_list, tilt_to_normal
 from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town
 from carlaocc.stages.scenes.traffic_junctions import JunctionReservations
 from carlaocc.stages.scenes.traffic_vehicles import EGO_GAP, IDM_DECEL, Vehicle, VehicleTraffic, vehicle_pose
@@ -293,6 +296,7 @@ def simulate_sequence(
         tries += 1
         lane = road[int(rng.choice(len(road), p=p_lane))]
         try_spawn(lane.lane_id, float(rng.uniform(0.0, lane.length)), _pick_vehicle(rng, pools))
+    safe_start_speeds(vehicles)
 
     # 4. walkers on sidewalks (not on crosswalks), spaced along their walkway
     sidewalks = [w for w in net.walkways if not w.crosswalk and w.length >= 1.0]
@@ -319,10 +323,12 @@ def simulate_sequence(
     F, nv, nw = scenes.frame_count, len(vehicles), len(walkers)
     pos = np.zeros((F, nv + nw, 3))
     yaw = np.zeros((F, nv + nw))
+    up = np.zeros((F, nv + nw, 3))
+    up[..., 2] = 1.0  # walkers stay upright; vehicles stand on the road surface
     phase = np.full((F, nw), np.nan)
     for f in range(F):
         for i, a in enumerate(vehicles):
-            pos[f, i], yaw[f, i] = vehicle_pose(lanes, a)
+            pos[f, i], yaw[f, i], up[f, i] = vehicle_pose(lanes, a)
         for i, w in enumerate(walkers):
             pos[f, nv + i], yaw[f, nv + i] = w.pos, w.yaw
             phase[f, i] = w.phase if w.v >= STAND_SPEED else np.nan
@@ -330,8 +336,8 @@ def simulate_sequence(
             for _ in range(n_sub):
                 sim.step(dt)
     times = np.arange(F) / scenes.rate_hz
-    frames, sensors, actors = _records(scenes, sequence_id, times, pos, yaw, phase, vehicles, walkers, match_phases,
-                                       town, seq_seed)  # fmt: skip
+    frames, sensors, actors = _records(scenes, sequence_id, times, pos, yaw, up, phase, vehicles, walkers,
+                                       match_phases, town, seq_seed)  # fmt: skip
     sequence = SequenceRecord(
         sequence_id=sequence_id, town=town.name, seed=seq_seed, frame_count=F, rate_hz=scenes.rate_hz,
         traffic_level=level_name, ego_asset_id=ego_asset.asset_id,
@@ -342,18 +348,37 @@ def simulate_sequence(
     )  # fmt: skip
 
 
-def _records(scenes, sequence_id, times, pos, yaw, phase, vehicles: list[Vehicle], walkers: list[Walker],
+def safe_start_speeds(vehicles: list[Vehicle], decel: float = IDM_DECEL) -> None:
+    """Slow down, in place, every spawned vehicle that could not stop behind the vehicle ahead of
+    it on its lane: front to back per lane, a follower starts no faster than ``sqrt(v_lead**2 +
+    2 * decel * gap)`` m/s (both braking at ``decel`` m/s2 to a stop end ``gap`` m apart, gap
+    bumper to bumper). Vehicles with a fixed speed (the ego) keep it."""
+    by_lane: dict[int, list[Vehicle]] = {}
+    for a in vehicles:
+        by_lane.setdefault(a.lane, []).append(a)
+    for queue in by_lane.values():
+        queue.sort(key=lambda a: -a.s)
+        for lead, a in zip(queue, queue[1:]):
+            gap = max(0.0, lead.s - a.s - (lead.length + a.length) / 2)
+            if a.v_fixed is None:
+                a.v = min(a.v, math.sqrt(lead.v**2 + 2 * decel * gap))
+
+
+def _records(scenes, sequence_id, times, pos, yaw, up, phase, vehicles: list[Vehicle], walkers: list[Walker],
              match_phases, town: Town, seed: int):  # fmt: skip
-    """Frame, sensor-pose and actor records from the simulated poses ``pos`` (F, A, 3) and
-    ``yaw`` (F, A); agent 0 is the ego. Velocities are central differences over the frames
-    (one-sided at the ends); yaw is unwrapped first."""
+    """Frame, sensor-pose and actor records from the simulated poses: positions ``pos`` (F, A, 3),
+    headings ``yaw`` (F, A) and the upward normals ``up`` (F, A, 3) of the surface each agent
+    stands on (pitch and roll follow from them); agent 0 is the ego. Velocities and angle rates
+    are central differences over the frames (one-sided at the ends), angles unwrapped first."""
     F = len(times)
-    yaw_u = np.unwrap(yaw, axis=0)
+    pitch, roll = tilt_to_normal(yaw, up)
+    yaw_u, roll_u = np.unwrap(yaw, axis=0), np.unwrap(roll, axis=0)
     if F >= 2:
         vel = np.gradient(pos, times, axis=0)
-        yaw_rate = np.gradient(yaw_u, times, axis=0)
+        rates = [np.gradient(a, times, axis=0) for a in (yaw_u, pitch, roll_u)]
     else:
-        vel, yaw_rate = np.zeros_like(pos), np.zeros_like(yaw)
+        vel, rates = np.zeros_like(pos), [np.zeros_like(yaw)] * 3
+    omega = angular_velocity(yaw, pitch, roll, *rates)  # (F, A, 3) world frame
     nv = len(vehicles)
     agents: list[AssetRecord] = [a.asset for a in vehicles] + [w.asset for w in walkers]
     phase_index: dict[int, list[int]] = {}
@@ -367,7 +392,7 @@ def _records(scenes, sequence_id, times, pos, yaw, phase, vehicles: list[Vehicle
     first_instance = town.max_instance_id + 1
     frames, sensors, actors = [], [], []
     for f in range(F):
-        ego_pose = pose_matrix(pos[f, 0, 0], pos[f, 0, 1], pos[f, 0, 2], yaw[f, 0])
+        ego_pose = pose_matrix(*pos[f, 0], yaw[f, 0], pitch[f, 0], roll[f, 0])
         lidar = ego_pose @ lidar_to_ego
         frames.append(FrameRecord(sequence_id=sequence_id, frame_index=f, timestamp=float(times[f]),
                                   ego_pose=pose_to_list(ego_pose), lidar_pose=pose_to_list(lidar)))  # fmt: skip
@@ -385,12 +410,14 @@ def _records(scenes, sequence_id, times, pos, yaw, phase, vehicles: list[Vehicle
             walker = i - nv if i >= nv else -1
             gait = None if walker < 0 or not np.isfinite(phase[f, walker]) else float(phase[f, walker])
             pidx = phase_index[walker][f] if walker >= 0 and walker in phase_index else None
+            pose = pose_matrix(x, y, z, yaw[f, i], pitch[f, i], roll[f, i])
             actors.append(ActorStateRecord(
                 sequence_id=sequence_id, frame_index=f, instance_id=first_instance + i - 1, asset_id=asset.asset_id,
-                semantic_id=asset.category_id, pose=pose_to_list(pose_matrix(x, y, z, yaw[f, i])),
-                box_center=[x, y, z + h / 2], box_size=[l, w, h], yaw=float(math.remainder(yaw[f, i], 2 * math.pi)),
-                velocity=[float(c) for c in vel[f, i]], angular_velocity=[0.0, 0.0, float(yaw_rate[f, i])],
-                gait_phase=gait, phase_index=None if pidx is None else int(pidx),
+                semantic_id=asset.category_id, pose=pose_to_list(pose), box_center=box_center(pose, h),
+                box_size=[l, w, h], yaw=float(math.remainder(yaw[f, i], 2 * math.pi)), pitch=float(pitch[f, i]),
+                roll=float(roll[f, i]), velocity=[float(c) for c in vel[f, i]],
+                angular_velocity=[float(c) for c in omega[f, i]], gait_phase=gait,
+                phase_index=None if pidx is None else int(pidx),
             ))  # fmt: skip
     return frames, sensors, actors
 

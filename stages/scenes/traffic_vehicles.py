@@ -71,22 +71,29 @@ def s_on_old_lane(lanes: Sequence[Lane], a: Vehicle) -> float:
     return a.s * lanes[a.lc_from].length / lanes[a.lane].length
 
 
-def vehicle_pose(lanes: Sequence[Lane], a: Vehicle) -> tuple[np.ndarray, float]:
-    """World position (3,) and yaw of a vehicle: on its lane, or blended from the lane it leaves
-    (at the same fraction of the lane) during a lane change."""
+def vehicle_pose(lanes: Sequence[Lane], a: Vehicle) -> tuple[np.ndarray, float, np.ndarray]:
+    """World position (3,), yaw (rad) and the road surface's upward unit normal (3,) under a
+    vehicle: on its lane, or blended from the lane it leaves (at the same fraction of the lane)
+    during a lane change. The vehicle stands on the surface: its up axis is the normal
+    (:func:`carlaocc.stages.geometry.tilt_to_normal` turns it into pitch and roll)."""
     lane = lanes[a.lane]
     p, yaw = lane.at(a.s)
+    up = lane.up_at(a.s)
     if a.lc_from < 0:
-        return p, float(yaw)
-    q, _ = lanes[a.lc_from].at(s_on_old_lane(lanes, a))
+        return p, float(yaw), up
+    s_old = s_on_old_lane(lanes, a)
+    q, _ = lanes[a.lc_from].at(s_old)
     w = smoothstep(a.lc_t / LANE_CHANGE_TIME)
+    # between two points of one cross section the blend stays on a planar (banked) surface
     pos = q + w * (p - q)
+    n = lanes[a.lc_from].up_at(s_old)
+    n = n + w * (up - n)
     # heading: the lane's plus the drift angle of the lateral motion
     dw = 6.0 * (a.lc_t / LANE_CHANGE_TIME) * (1 - a.lc_t / LANE_CHANGE_TIME) / LANE_CHANGE_TIME
     lateral = float(np.hypot(*(p - q)[:2])) * dw
     normal = np.array([-math.sin(yaw), math.cos(yaw)])
     side = float(np.sign((p - q)[:2] @ normal))
-    return pos, float(yaw) + math.atan2(side * lateral, max(a.v, 0.5))
+    return pos, float(yaw) + math.atan2(side * lateral, max(a.v, 0.5)), n / np.linalg.norm(n)
 
 
 def idm(v: np.ndarray, v0: np.ndarray, gap: np.ndarray, v_lead: np.ndarray, s0: np.ndarray) -> np.ndarray:

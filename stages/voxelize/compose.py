@@ -10,8 +10,11 @@ b. **Cull** to the grid region (the closed box ``[origin, effective_max]``, LiDA
    Surfaces keep only the triangles whose bounding box touches the region; a filled mesh is kept
    whole (its fill needs every triangle) or dropped whole when the bounding box of its vertices
    misses the region.
-c. **Order** by the elevation key, ascending: (min z of the kept triangles' vertices, max z,
-   semantic id, instance id, position of the first input mesh) -- z in the grid frame (z up).
+c. **Order** by the elevation key, ascending: (min height of the kept triangles' vertices, max
+   height, semantic id, instance id, position of the first input mesh) -- heights along the
+   world's up direction ``up`` given in the grid frame (default (0, 0, 1): the grid's z; a frame
+   whose LiDAR pitches or rolls with the ego on a slope passes the world's up in its LiDAR frame,
+   so "higher" keeps meaning higher in the world).
 d. **Write** each mesh in turn -- its surface voxels (exact triangle/closed-box overlap), plus,
    when it is filled, the voxels whose centre is inside it -- so a later (higher) mesh
    overwrites an earlier (lower) one where they share voxels: a car resting on the road wins the
@@ -123,14 +126,27 @@ def _cull(V: np.ndarray, F: np.ndarray, whole: bool, lo: np.ndarray, hi: np.ndar
     return F[keep]
 
 
+def _up_axis(up) -> np.ndarray | None:
+    """The unit world-up direction in the grid frame, or None for the grid's own z (0, 0, 1)."""
+    if up is None:
+        return None
+    u = np.asarray(up, dtype=np.float64).reshape(3)
+    norm = float(np.linalg.norm(u))
+    if not (np.isfinite(u).all() and norm > 0):
+        raise ValueError(f"up must be a finite non-zero 3-vector, got {u.tolist()}")
+    u = u / norm
+    return None if (u[0] == 0.0 and u[1] == 0.0 and u[2] == 1.0) else u
+
+
 def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
-                     fill: FillMode = "auto") -> list[PlannedMesh]:
+                     fill: FillMode = "auto", up=None) -> list[PlannedMesh]:
     """Steps a-c: the fused, culled meshes in writing order (lowest first).
 
-    Without ``grid`` nothing is culled. Meshes left without a triangle are dropped. ``fill``:
-    see the module docstring.
+    Without ``grid`` nothing is culled. Meshes left without a triangle are dropped. ``fill`` and
+    ``up`` (the world's up direction in the grid frame, default its z): see the module docstring.
     """
     check_fill_mode(fill)
+    axis = _up_axis(up)
     if grid is not None:
         lo = np.asarray(grid.origin, dtype=np.float64)
         hi = np.asarray(grid.effective_max, dtype=np.float64)
@@ -145,7 +161,8 @@ def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
         if len(F) == 0:
             continue
         # heights of the kept triangles' corners (a closed mesh is kept whole: all its vertices)
-        z = V[:, 2] if filled else V[:, 2][F.reshape(-1)]
+        height = V[:, 2] if axis is None else V @ axis
+        z = height if filled else height[F.reshape(-1)]
         z = z[np.isfinite(z)]
         if len(z) == 0:
             continue
@@ -156,13 +173,14 @@ def composition_plan(meshes: Sequence[SceneMesh], grid: GridSpec | None = None,
     return plan
 
 
-def elevation_order(meshes: Sequence[SceneMesh], grid: GridSpec | None = None, fill: FillMode = "auto") -> list[int]:
+def elevation_order(meshes: Sequence[SceneMesh], grid: GridSpec | None = None, fill: FillMode = "auto",
+                    up=None) -> list[int]:
     """Positions of the input meshes in writing order (lowest first; later ones win).
 
     The members of a fused stuff class appear together, ascending, where the fused mesh is
     written. With ``grid``, meshes culled away entirely are left out.
     """
-    return [pos for p in composition_plan(meshes, grid, fill) for pos in p.sources]
+    return [pos for p in composition_plan(meshes, grid, fill, up) for pos in p.sources]
 
 
 @dataclass(frozen=True)
@@ -224,18 +242,19 @@ class _TiledMesh:
 
 
 def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
-                   fill: FillMode = "auto") -> Iterator[Tile]:
+                   fill: FillMode = "auto", up=None) -> Iterator[Tile]:
     """The frame's panoptic occupancy one x-slab at a time, ``tile_x`` voxels wide (the last may
     be narrower), in ascending x. The same as :func:`voxelize_scene` (see the module docstring).
 
-    ``meshes`` in the grid's frame (LiDAR frame, metres). Each yielded :class:`Tile` views
-    per-thread buffers that the next tile overwrites.
+    ``meshes`` in the grid's frame (LiDAR frame, metres); ``up`` the world's up direction in it
+    (default the grid's z). Each yielded :class:`Tile` views per-thread buffers that the next
+    tile overwrites.
     """
     if tile_x < 1:
         raise ValueError(f"tile width must be at least one voxel, got {tile_x}")
     X, Y, Z = (int(s) for s in grid.shape)
     # steps a-c once for the whole grid: every tile writes the meshes in the same order
-    tiled = [_TiledMesh(p, grid) for p in composition_plan(meshes, grid, fill)]
+    tiled = [_TiledMesh(p, grid) for p in composition_plan(meshes, grid, fill, up)]
     offset = np.zeros(3)
     for x0 in range(0, X, tile_x):
         x1 = min(x0 + tile_x, X)
@@ -278,10 +297,11 @@ def _tile_box(instance_id: int, box: np.ndarray, x0: int, shape: tuple[int, int,
 
 
 def voxelize_scene(meshes: Sequence[SceneMesh], grid: GridSpec, fill: FillMode = "auto",
-                   tile_x: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   tile_x: int | None = None, up=None) -> tuple[np.ndarray, np.ndarray]:
     """Panoptic occupancy of one frame: (semantic uint8, instance uint32), both ``grid.shape``.
 
-    ``meshes`` are in the grid's frame (LiDAR frame, metres). 0 = free. See the module docstring
+    ``meshes`` are in the grid's frame (LiDAR frame, metres), ``up`` the world's up direction in
+    it (default the grid's z). 0 = free. See the module docstring
     for the rule; a dense 0.05 m default grid is 0.4 GB (semantic) + 1.6 GB (instance): the
     pipeline uses :func:`voxelize_tiles` instead. ``tile_x`` (default 64 voxels) only changes
     how the work is cut, never the result.
@@ -289,7 +309,7 @@ def voxelize_scene(meshes: Sequence[SceneMesh], grid: GridSpec, fill: FillMode =
     shape = tuple(int(s) for s in grid.shape)
     semantic = np.zeros(shape, dtype=np.uint8)
     instance = np.zeros(shape, dtype=np.uint32)
-    for tile in voxelize_tiles(meshes, grid, tile_x or 64, fill):
+    for tile in voxelize_tiles(meshes, grid, tile_x or 64, fill, up):
         x1 = tile.x0 + tile.semantic.shape[0]
         semantic[tile.x0:x1] = tile.semantic
         instance[tile.x0:x1] = tile.instance

@@ -12,7 +12,7 @@ from carlaocc.catalog.towns import builtin_names, resolve_opendrive
 
 def test_builtin_names_lists_crossroads():
     names = builtin_names()
-    assert "crossroads.xodr" in names and names == sorted(names)
+    assert {"crossroads.xodr", "hills.xodr"} <= set(names) and names == sorted(names)
 
 
 def test_resolve_builtin_and_path(tmp_path):
@@ -62,3 +62,21 @@ def test_crossroads_content():
     xs = [g.x for r in net.roads for g in r.geometries]
     ys = [g.y for r in net.roads for g in r.geometries]
     assert 200 < max(xs) - min(xs) < 320 and 150 < max(ys) - min(ys) < 320
+
+
+def test_hills_content_and_generator(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = resolve_opendrive("builtin:hills.xodr")
+    net = read_opendrive(path)
+    assert [r.id for r in net.roads] == ["1", "2", "3", "4"] and not net.junctions
+    # a crest and a sag, two banked half circles
+    assert [len(r.elevations) for r in net.roads] == [2, 1, 2, 1]
+    assert all(min(p.a for p in r.superelevations) == pytest.approx(-0.12) for r in (net.roads[1], net.roads[3]))
+    # the shipped file is the generator's output
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "hills.xodr"
+    subprocess.run([sys.executable, str(root / "tools" / "make_hills.py"), str(out)], check=True, capture_output=True)
+    assert out.read_text() == path.read_text()

@@ -14,6 +14,7 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli import app
 from carlaocc.pipeline.scene_editing import SWAP_STAGE, compatible, swap_class
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
+from carlaocc.stages.geometry import pose_matrix, pose_to_list
 
 POSE = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
 cli = CliRunner()
@@ -37,8 +38,9 @@ ASSETS = [
 
 def _actor(f: int, inst: int, asset: AssetRecord, x: float) -> ActorStateRecord:
     l, w, h = asset.extent
+    pose = pose_to_list(pose_matrix(x, 0.0, 0.0, 0.0))
     return ActorStateRecord(sequence_id="town00_low_seq000", frame_index=f, instance_id=inst, asset_id=asset.asset_id,
-                            semantic_id=asset.category_id, pose=POSE, box_center=[x, 0.0, h / 2], box_size=[l, w, h],
+                            semantic_id=asset.category_id, pose=pose, box_center=[x, 0.0, h / 2], box_size=[l, w, h],
                             yaw=0.0, velocity=[5.0, 0, 0], angular_velocity=[0, 0, 0.1])
 
 

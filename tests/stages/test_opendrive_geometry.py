@@ -272,3 +272,22 @@ def test_town01_surface_has_plausible_extent():
     for vv, ff in driving:
         n = np.cross(vv[ff[:, 1]] - vv[ff[:, 0]], vv[ff[:, 2]] - vv[ff[:, 0]])
         assert np.all(n[:, 2] > 0)
+
+
+def test_surface_normals_tilt_with_grade_and_superelevation():
+    # a straight road heading 30 degrees, rising 10 % and banked by 0.1 rad (falling to the right)
+    h = math.radians(30.0)
+    r = road([geom(hdg=h, length=100.0)], 100.0, right=[lane(-1, [poly(a=3.5)])], elev=[poly(b=0.1)],
+             sup=[poly(a=0.1)])  # fmt: skip
+    s = np.array([0.0, 20.0, 50.0, 100.0])
+    n = od.surface_normal(r, s, np.full(4, -1.75))
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0)
+    # perpendicular to both surface directions: along the road (up the grade) and across it
+    along = np.array([np.cos(h), np.sin(h), 0.1])
+    across = np.array([-np.cos(0.1) * np.sin(h), np.cos(0.1) * np.cos(h), np.sin(0.1)])
+    np.testing.assert_allclose(n @ along, 0.0, atol=1e-9)
+    np.testing.assert_allclose(n @ across, 0.0, atol=1e-9)
+    assert (n[:, 2] > 0).all()
+    # a level road is exactly up
+    flat = road([geom(hdg=h, length=10.0)], 10.0, right=[lane(-1, [poly(a=3.5)])])
+    assert np.array_equal(od.surface_normal(flat, np.array([0.0, 5.0]), np.array([-1.0, -2.0]))[:, 2], [1.0, 1.0])

@@ -264,3 +264,20 @@ def test_phase_matcher_is_called_per_walker(lib):
 def test_traffic_module_constants_match_design():
     assert (traffic.MAX_VEHICLES, traffic.MAX_WALKERS) == (128, 64)
     assert [TRAFFIC_LEVELS[k].vehicles_per_km for k in ("none", "low", "medium", "high")] == [0, 4, 8, 16]
+
+
+def test_spawned_followers_start_slow_enough_to_stop_behind_their_leader(lib):
+    from carlaocc.stages.scenes.traffic import safe_start_speeds
+    from carlaocc.stages.scenes.traffic_vehicles import IDM_DECEL, Vehicle
+
+    car = next(a for a in lib.assets if a.category == "Car")
+    L = float(car.extent[0])
+    lead = Vehicle(car, 0, 50.0, 12.0, 1.0)
+    fast = Vehicle(car, 0, 50.0 - L - 6.0, 24.0, 1.0)  # 6 m bumper to bumper behind it
+    slow = Vehicle(car, 0, 10.0, 5.0, 1.0)  # far behind and slow: untouched
+    ego = Vehicle(car, 1, 50.0, 8.0, 1.0, v_fixed=8.0)
+    other = Vehicle(car, 1, 50.0 - L - 1.0, 20.0, 1.0)
+    safe_start_speeds([slow, fast, lead, ego, other])
+    assert fast.v == pytest.approx(math.sqrt(12.0**2 + 2 * IDM_DECEL * 6.0))
+    assert (lead.v, slow.v, ego.v) == (12.0, 5.0, 8.0)
+    assert other.v == pytest.approx(math.sqrt(8.0**2 + 2 * IDM_DECEL * 1.0))

@@ -659,3 +659,23 @@ def test_tile_thing_boxes_hold_every_voxel_of_their_instance(seed, tile):
             # every voxel of the instance in this tile is inside one of its boxes
             covered |= box & (t.instance == ident)
         assert (covered == (t.instance != 0)).all()
+
+
+def test_elevation_order_follows_the_worlds_up_in_a_tilted_grid():
+    # world: a road at z = 0 over x in [-20, 15], a car standing beyond it at x in [18, 20]
+    Vr, Fr = _plane(0.0, half=1.0)
+    Vr[:, 0] = np.interp(Vr[:, 0], [-1.0, 1.0], [-20.0, 15.0])
+    Vc, Fc = _box_mesh((18.0, -0.5, 0.0), (20.0, 0.5, 1.5))
+    # the grid frame is pitched by 0.2 rad (an ego on a slope): world -> grid rotation Q
+    th = 0.2
+    Q = np.array([[np.cos(th), 0.0, np.sin(th)], [0.0, 1.0, 0.0], [-np.sin(th), 0.0, np.cos(th)]])
+    road = _stuff(Vr @ Q.T, Fr, ROAD)
+    car = SceneMesh(Vc @ Q.T, Fc, semantic_id=CAR, instance_id=7, is_stuff=False, closed=True)
+    # along the grid's z the car's far end is lower than the road's: the road would be written last
+    assert elevation_order([road, car]) == [1, 0]
+    # along the world's up (Q e_z in the grid frame) both start at 0 and the car reaches higher
+    assert elevation_order([road, car], up=Q @ [0.0, 0.0, 1.0]) == [0, 1]
+    # the grid's own z given explicitly is the default; a zero vector is refused
+    assert elevation_order([road, car], up=(0.0, 0.0, 2.0)) == [1, 0]
+    with pytest.raises(ValueError, match="up"):
+        elevation_order([road, car], up=(0.0, 0.0, 0.0))
