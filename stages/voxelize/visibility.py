@@ -45,7 +45,9 @@ ending exactly on a face does not mark the voxel behind it.
 
 Algorithm 2: vertical fans (the rig's cameras and LiDAR)
 --------------------------------------------------------
-The cameras of the rig are level (yaw only, ``carlaocc.schemas.rig``), so the rays of one image column
+The cameras of the rig are level in the LiDAR frame (they turn only about its z,
+``carlaocc.schemas.rig``; an ego pitched or rolled on a slope tilts the LiDAR, the cameras and the
+grid together), so the rays of one image column
 lie in one vertical plane through the camera centre: they share the origin and the horizontal
 direction ``h`` and differ only in their slope ``m`` (rise per unit of horizontal distance ``r``).
 The LiDAR's channels at one azimuth form the same kind of fan. All rays of a fan cross the same

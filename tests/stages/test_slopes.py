@@ -16,7 +16,8 @@ from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import FrameRecord
 from carlaocc.schemas.taxonomy import by_name
-from carlaocc.stages.geometry import pose_from_list, pose_matrix, pose_to_list, rotation_matrix, transform_points
+from carlaocc.stages.geometry import (pose_from_list, pose_matrix, pose_to_list, rotation_matrix, transform_points,
+                                      yaw_pitch_roll)
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes import build_town, simulate_sequence
 from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame
@@ -110,8 +111,9 @@ def test_cars_pitch_and_roll_with_the_road(hills, lib):
     # the crest is at most 15 % steep, the banks 0.12 rad: the angles stay in that range
     assert max(abs(a.pitch) for a in pitched) < math.atan(0.16)
     assert max(abs(a.roll) for a in rolled) < 0.13
-    # the ego tilts too, and its LiDAR with it
+    # the ego tilts too (it starts on a banked curve), and its LiDAR with it
     ego = [pose_from_list(f.ego_pose) for f in res.frames]
+    assert abs(yaw_pitch_roll(ego[0])[2]) > TILT
     assert all(np.allclose(pose_from_list(f.lidar_pose)[:3, :3], T[:3, :3]) for f, T in zip(res.frames, ego))
 
 
@@ -180,6 +182,17 @@ def test_lane_normals_follow_the_hills_profile(hills):
     assert by_road["1"] == pytest.approx(math.atan(0.15), abs=2e-3)
     assert by_road["2"] == pytest.approx(0.12, abs=2e-3) and by_road["4"] == pytest.approx(0.12, abs=2e-3)
     assert by_road["3"] == pytest.approx(math.atan(1.5 * 3 / 80), abs=2e-3)
+    # the banks lean into their curves: the normal's horizontal part points to the curve's centre
+    # (the east one at (160, 45), the west one at (0, 45)); the crest's leans back uphill
+    for ln in town.network.lanes:
+        s = np.linspace(0.3, 0.7, 5) * ln.length
+        p, n = ln.at(s)[0], ln.up_at(s)
+        if ln.road in ("2", "4"):
+            centre = np.array([160.0, 45.0]) if ln.road == "2" else np.array([0.0, 45.0])
+            assert (np.einsum("ij,ij->i", n[:, :2], centre - p[:, :2]) > 0).all()
+    up_hill = [ln for ln in town.network.lanes if ln.road == "1" and ln.points[-1, 0] > ln.points[0, 0]]
+    s = np.array([0.25]) * up_hill[0].length  # climbing the crest: the normal leans against the travel (-x)
+    assert up_hill[0].up_at(s)[0, 0] < -0.05
     # both directions of both lanes of the loop are kept (four one-way circuits)
     assert len(town.network.lanes) == 16
     # a lane without normals is level; upside-down normals are refused
