@@ -33,19 +33,20 @@ class IngestConfig(StageConfig):
 class SourceIngestConfig(StageConfig):
     """Ingestion of one external mesh source (``carlaocc ingest KIND PATH``)."""
 
-    kind: Literal["folder", "shapenet", "buildingnet", "meshfleet", "carla"]
+    kind: Literal["folder", "shapenet", "buildingnet", "meshfleet", "carla", "carla-recording"]
     root: str = Field(description="the source's root directory (absolute)")
     category_map: str | None = Field(None, description="folder sources: CSV glob,category,subclass[,length_m]")
 
 
 TrafficLevelName = Literal["none", "low", "medium", "high"]
-TownStyle = Literal["downtown", "suburb", "arterial", "opendrive"]
+TownStyle = Literal["downtown", "suburb", "arterial", "opendrive", "carla-recording"]
 
 
 class TownSpec(StageConfig):
     """One town of the dataset: a procedural style built from the seed, or an OpenDRIVE file with
-    buildings and vegetation placed procedurally beside its network; and the traffic sequences
-    driven through it.
+    buildings and vegetation placed procedurally beside its network, and the traffic sequences
+    driven through it; or a CARLA recording (``carla-recording``: the town's exported meshes and
+    the recorded sequences, nothing simulated; ``traffic_levels`` and the layout fields are ignored).
 
     The layout fields (``blocks`` ... ``sidewalk_width``) override the style's defaults for the
     procedural styles and are ignored for OpenDRIVE towns.
@@ -54,6 +55,11 @@ class TownSpec(StageConfig):
     style: TownStyle = "downtown"
     opendrive: str | None = Field(
         None, description="opendrive style: path of the .xodr file, or builtin:<name> for a file shipped with carlaocc")
+    recording: str | None = Field(
+        None, description="carla-recording style: the recording's root (CarlaOcc release layout: calib/, SceneMeshes/, "
+        "<Town>_Opt_Seq<NN>/)")
+    map: str | None = Field(
+        None, description="carla-recording style: which town of the recording (e.g. Town01_Opt; default: its only one)")
     traffic_levels: tuple[TrafficLevelName, ...] = Field(("medium",), min_length=1)
     sequences_per_level: int = Field(1, ge=1, le=64)
     blocks: int | None = Field(None, ge=1, le=12, description="city blocks per side of the road grid")
@@ -65,6 +71,10 @@ class TownSpec(StageConfig):
     def _opendrive_file(self) -> TownSpec:
         if (self.style == "opendrive") != (self.opendrive is not None):
             raise ValueError("a town has an opendrive file exactly when its style is 'opendrive'")
+        if (self.style == "carla-recording") != (self.recording is not None):
+            raise ValueError("a town has a recording exactly when its style is 'carla-recording'")
+        if self.map is not None and self.style != "carla-recording":
+            raise ValueError("map names a town of a recording: only for the 'carla-recording' style")
         if len(set(self.traffic_levels)) != len(self.traffic_levels):
             raise ValueError(f"traffic_levels repeats a level: {list(self.traffic_levels)}")
         return self

@@ -125,8 +125,8 @@ class TownRecord(Record):
 
     TABLE: ClassVar[str] = "towns"
     town: str
-    style: Literal["downtown", "suburb", "arterial", "opendrive"]
-    source: str  # the OpenDRIVE file for opendrive towns, "" for procedural ones
+    style: Literal["downtown", "suburb", "arterial", "opendrive", "carla-recording"]
+    source: str  # the OpenDRIVE file of opendrive towns, the recording of recorded ones, "" for procedural ones
     seed: int
     road_length: float  # m of road centreline, each road once
     lane_count: int  # lanes of the traffic network (junction connectors included)

@@ -185,8 +185,11 @@ def walker_frame(phase: float, height=1.8):
     bones = {}
     for name, side, ang in (("crl_leg__L", 1.0, swing), ("crl_leg__R", -1.0, -swing)):
         hip = np.array([0.1 * side, 0.0, hip_z])
-        # the thigh turns about the lateral (x) axis; forward is -y
-        R = np.array([[1, 0, 0], [0, math.cos(ang), math.sin(ang)], [0, -math.sin(ang), math.cos(ang)]])
+        # the thigh turns about the lateral (x) axis (forward is -y) and the hip twists about z with
+        # the cycle's quarter-phase (so no two frames of the cycle have the same bones)
+        tw = 0.15 * side * math.cos(2 * math.pi * phase)
+        Rz = np.array([[math.cos(tw), -math.sin(tw), 0], [math.sin(tw), math.cos(tw), 0], [0, 0, 1]])
+        R = Rz @ np.array([[1, 0, 0], [0, math.cos(ang), math.sin(ang)], [0, -math.sin(ang), math.cos(ang)]])
         foot = hip + R @ np.array([0.0, 0.0, -leg])
         lo, hi = np.minimum(hip, foot) - 0.07, np.maximum(hip, foot) + 0.07
         parts.append(box(lo, hi))
@@ -195,6 +198,11 @@ def walker_frame(phase: float, height=1.8):
         bones[name] = T
     V, F = merge(parts)
     return V, F, bones
+
+
+def walker_phase(t: float) -> float:
+    """Walker 301's gait phase (0..1) at ``t`` s: the truth a phase matcher is measured against."""
+    return (0.3 + 1.4 * t) % 1.0
 
 
 # ------------------------------------------------------------------ encodings
@@ -299,7 +307,7 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
         ego = pose(-10.0 + 5.0 * t, -1.75, 0.0, 0.0)
         cars = {245: ("vehicle.lincoln.mkz", pose(4.0 + 6.0 * t, -1.75, 0.0, 0.0), [6.0, 0.0, 0.0]),
                 246: ("vehicle.mini.cooper", pose(25.0 - 7.0 * t, 1.75, 0.0, math.pi), [-7.0, 0.0, 0.0])}
-        phase = (0.3 + 1.4 * t / 1.0) % 1.0
+        phase = walker_phase(t)
         walker_T = pose(-6.0 + 1.4 * t, -8.5, 0.15 + 0.9, 0.0)  # CARLA walker origin: the box centre
         wV, wF, wbones = walker_frame(phase)
         # component frame -> actor: turn +90 deg about z (walk direction -y -> +x), feet to the box bottom

@@ -6,13 +6,14 @@ import inspect
 
 from carlaocc.catalog.sources.buildingnet import BuildingNetAdapter
 from carlaocc.catalog.sources.carla import CarlaAdapter
+from carlaocc.catalog.sources.carla_recording import CarlaRecordingAdapter
 from carlaocc.catalog.sources.folder import FolderAdapter
 from carlaocc.catalog.sources.meshfleet import MeshFleetAdapter
 from carlaocc.catalog.sources.shapenet import ShapeNetAdapter
 
 ADAPTERS: dict[str, type] = {
     cls.kind: cls
-    for cls in (FolderAdapter, ShapeNetAdapter, BuildingNetAdapter, MeshFleetAdapter, CarlaAdapter)
+    for cls in (FolderAdapter, ShapeNetAdapter, BuildingNetAdapter, MeshFleetAdapter, CarlaAdapter, CarlaRecordingAdapter)
 }
 
 

@@ -29,7 +29,7 @@ def run(
     """Build the dataset (or the selected stages) on the embedded default or a --config file."""
     from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
@@ -72,7 +72,7 @@ def run(
 
 @app.command()
 def ingest(
-    kind: Annotated[str, typer.Argument(help="source kind: folder, shapenet, buildingnet, meshfleet or carla")],
+    kind: Annotated[str, typer.Argument(help="source kind: folder, shapenet, buildingnet, meshfleet, carla (our UE export) or carla-recording (a CARLA recording in the CarlaOcc release layout: its vehicle models and walk cycle)")],
     path: Annotated[Path, typer.Argument(help="the source's root directory")],
     category_map: Annotated[Optional[Path], typer.Option("--category-map", help="folder sources: CSV with columns glob,category,subclass[,length_m]")] = None,
     root: RootOpt = "data",
@@ -118,6 +118,31 @@ def ingest(
                + "".join(f"; skipped the dataset root {d} inside the source" for d in s.excluded))
     if s.failed:
         raise typer.Exit(1)
+    if cfg.kind == "carla-recording":
+        _write_recording_config(store, root, cfg.root)
+
+
+def _write_recording_config(store, root: str, recording: str) -> None:
+    """Write (or extend) ``<root>/dataset.yaml`` so ``carlaocc run`` builds the recording."""
+    import yaml
+
+    from carlaocc.pipeline.cli.common import DATASET_CONFIG, root_config
+    from carlaocc.pipeline.tasks.recording import recording_config
+
+    if "://" in str(root):
+        typer.echo(f"the dataset root {root} is not a local directory: write the recording's config yourself "
+                   f"(towns of style carla-recording, see `carlaocc config`)", err=True)  # fmt: skip
+        return
+    existing = root_config(root)
+    try:
+        cfg = recording_config(recording, load_config(existing) if existing else None)
+    except StoreError as exc:
+        fail(str(exc))
+    path = Path(root) / DATASET_CONFIG
+    text = yaml.safe_dump(cfg.model_dump(mode="json", exclude_defaults=True), sort_keys=False)
+    path.write_text(text)
+    maps = ", ".join(t.map for t in cfg.scenes.towns if t.style == "carla-recording")
+    typer.echo(f"wrote {path}: towns {maps} from {recording}; `carlaocc run --root {root} --res 0.1` builds them")
 
 
 @app.command()
@@ -130,7 +155,7 @@ def status(
     """List what is stale and why (runs nothing, writes nothing)."""
     from carlaocc.pipeline.runner import status as plan_status
 
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     store = _store(root, writable=False)

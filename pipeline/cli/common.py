@@ -128,10 +128,25 @@ def _validation_message(source: str, exc: ValidationError) -> str:
     return f"{source}: {loc}: {err['msg']}"
 
 
-def load_config(path: Path | None) -> DatasetConfig:
-    """The dataset config from a YAML/JSON file, or the embedded default."""
+DATASET_CONFIG = "dataset.yaml"  # a dataset root's own config (``carlaocc ingest carla-recording`` writes it)
+
+
+def root_config(root: str | None) -> Path | None:
+    """``<root>/dataset.yaml`` when the (local) dataset root has one, else None."""
+    if not root or "://" in str(root):
+        return None
+    path = Path(root) / DATASET_CONFIG
+    return path if path.is_file() else None
+
+
+def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:
+    """The dataset config from a YAML/JSON file; without one, the root's own ``dataset.yaml``
+    when it has one (said on stderr), else the embedded default."""
     if path is None:
-        return DatasetConfig()
+        path = root_config(root)
+        if path is None:
+            return DatasetConfig()
+        typer.echo(f"config: {path} (the dataset root's own; --config overrides it)", err=True)
     if not path.is_file():
         fail(f"--config {path} " + ("is a directory, not a YAML or JSON file" if path.is_dir() else "does not exist"))
     try:

@@ -77,7 +77,7 @@ def export_cmd(
 
     if fmt not in FORMATS:
         fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     store = _store(root, writable=False)
     try:
         total = frame_count(store, cfg, res, sequence)
@@ -110,7 +110,7 @@ def compare_resolutions(
 
     from carlaocc.schemas.grid import resolution_key
 
-    load_config(config)  # a bad --config is refused like everywhere else
+    load_config(config, root)  # a bad --config is refused like everywhere else
     store = _store(root, writable=False)
     if not (fine > 0 and coarse > fine):
         fail(f"--coarse ({coarse}) must be larger than --fine ({fine}), both positive")

@@ -49,7 +49,7 @@ def scenes_frame_mesh(
     from carlaocc.pipeline.scene_editing import frame_mesh_glb
     from carlaocc.stages.scenes.assembly import region_of_grid
 
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     if range_m is None:
         region = region_of_grid(cfg.voxelize.grid(0.2))
     else:
@@ -78,7 +78,7 @@ def scenes_swap(
     `carlaocc run --stages voxelize,quality` voxelizes them."""
     from carlaocc.pipeline.scene_editing import swap_class
 
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     store = _store(root, writable=True)
     try:
         results = swap_class(store, class_name, seed, sequence or None, cfg.scenes.asset_sources)

@@ -120,7 +120,7 @@ def show_occupancy(
 
     if mode not in ("instance", "semantic", "height"):
         fail(f"--mode must be instance, semantic or height, got {mode!r}")
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     voxel_sizes = parse_voxel_sizes(res, cfg)
     store = _store(root, writable=False)
     if len(voxel_sizes) == 1:
@@ -187,7 +187,7 @@ def show_sensors(
     from carlaocc.catalog.sensors import SensorStore
     from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
-    cfg = load_config(config)
+    cfg = load_config(config, root)
     store = _store(root, writable=False)
     sensors = SensorStore(store)
     stored = sensors.cameras(seq)

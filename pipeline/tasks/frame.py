@@ -53,14 +53,16 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
     class and closedness) or, for ids not in the library, the town stuff mesh of the placement that
     references it (one class per stuff placement; closedness measured)."""
     assets = {a.asset_id: a for a in ParquetTable(store, AssetRecord).load()}
-    parts: dict[str, list[PartRecord]] = {}
+    # parts by asset, once each: two source items with the same standardized geometry (two
+    # identical files) are one asset whose parts both items' tables hold
+    parts: dict[str, dict[int, PartRecord]] = {}
     for p in ParquetTable(store, PartRecord).load():
-        parts.setdefault(p.asset_id, []).append(p)
+        parts.setdefault(p.asset_id, {}).setdefault(p.part_index, p)
     stuff = {pl.asset_id: pl for pl in placements if pl.asset_id not in assets}
     out: dict[str, AssetGeometry] = {}
     for aid in sorted(asset_ids):
         if aid in assets:
-            recs = tuple(sorted(parts.get(aid, []), key=lambda r: r.part_index))
+            recs = tuple(sorted(parts.get(aid, {}).values(), key=lambda r: r.part_index))
 
             def asset_geometry(arrays, aid=aid, recs=recs) -> AssetGeometry:
                 if len(arrays) != len(recs):

@@ -1,6 +1,7 @@
 """The scenes stage: one task per town builds the town (procedural styles or OpenDRIVE), places
 its static objects, simulates its traffic and ego sequences, and writes the town's stuff meshes,
-placements, town row, sequences, frames, sensor poses and actors.
+placements, town row, sequences, frames, sensor poses and actors. A recorded town
+(``carla-recording``) is read from its recording instead (:mod:`carlaocc.pipeline.tasks.recording`).
 """
 
 from __future__ import annotations
@@ -12,13 +13,18 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, town_key
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
-from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, SensorPoseRecord,
-                                      SequenceRecord, SkeletonRecord, TownRecord)
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, QuarantineRecord,
+                                      SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
 
 
 
 def _town_files(spec) -> tuple[str, ...]:
-    """Input files of a town (its OpenDRIVE file), fingerprinted with the partition."""
+    """Input files of a town (its OpenDRIVE file, its recording's poses and traffic),
+    fingerprinted with the partition."""
+    if spec.recording is not None:
+        from carlaocc.pipeline.tasks.recording import recording_files
+
+        return recording_files(spec)
     if spec.opendrive is None:
         return ()
     from carlaocc.catalog.towns import resolve_opendrive
@@ -34,7 +40,9 @@ def scenes_partitions(ctx: Context) -> list[Partition]:
     partition and every ingested item of the other sources) and its OpenDRIVE file."""
     sources = ctx.config.scenes.asset_sources
     needs = [("ingest", INGEST_PARTITION)] if "procedural" in sources else []
-    others = tuple(s for s in sources if s != "procedural")
+    # recorded towns place the models `carlaocc ingest carla-recording` made
+    recorded = ("carla-recording",) if any(t.style == "carla-recording" for t in ctx.config.scenes.towns) else ()
+    others = tuple(s for s in sources if s != "procedural") + tuple(r for r in recorded if r not in sources)
     if others:
         from carlaocc.catalog.lineage import LineageLog
 
@@ -90,9 +98,27 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
 
     index = part.params["town_index"]
     spec = cfg.towns[index]
-    assets = scene_assets(store, cfg)
-    town = build_town(spec, cfg, index, assets, read_town_network(spec), spec.opendrive or "")
     outputs: dict[str, str] = {}
+    t_quarantine = ParquetTable(store, QuarantineRecord)
+    if spec.style == "carla-recording":
+        from carlaocc.pipeline.tasks.recording import recorded_scenes
+
+        recorded = recorded_scenes(store, cfg, spec, index, town_key(index))
+        town = recorded.town
+        assets = ParquetTable(store, AssetRecord).load()
+        results = [(r.sequence, r.frames, r.sensor_poses, r.actors, r.skeletons) for r in recorded.sequences]
+        # what had to be left out, queryable: SELECT * FROM quarantine WHERE stage = 'scenes'
+        rows = [QuarantineRecord(stage="scenes", source="carla-recording", source_path=where, reason=why[:200],
+                                 hint=why) for where, why in recorded.skipped]  # fmt: skip
+        key = f"scenes-{town.name}"
+        if rows:
+            outputs[t_quarantine.path(key)] = t_quarantine.save(key, rows)
+        else:
+            store.remove(t_quarantine.path(key))
+    else:
+        assets = scene_assets(store, cfg)
+        town = build_town(spec, cfg, index, assets, read_town_network(spec), spec.opendrive or "")
+        results = None
     meshes = MeshStore(store)
     mesh_paths = {a.asset_id: a.mesh_path for a in assets}
     for stuff_id, geom in sorted(town.stuff.items()):
@@ -121,11 +147,14 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         "skeletons": ParquetTable(store, SkeletonRecord),
     }
     written = set()
-    for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases):
-        sid = seq.sequence.sequence_id
+    if results is None:
+        results = [(seq.sequence, seq.frames, seq.sensor_poses, seq.actors, sequence_skeletons(store, seq.actors, seq.frames))
+                   for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases)]  # fmt: skip
+    for sequence, frames, sensor_poses, actors, skeletons in results:
+        sid = sequence.sequence_id
         written.add(sid)
-        rows = {"sequence": [seq.sequence], "frames": seq.frames, "sensor_poses": seq.sensor_poses,
-                "actors": seq.actors, "skeletons": sequence_skeletons(store, seq.actors, seq.frames)}
+        rows = {"sequence": [sequence], "frames": frames, "sensor_poses": sensor_poses, "actors": actors,
+                "skeletons": skeletons}
         for name, table in tables.items():
             outputs[table.path(sid)] = table.save(sid, rows[name])
     # sequences this town no longer has (fewer levels or sequences) are removed, not left stale
@@ -152,7 +181,8 @@ SPEC = StageSpec(
     upstream=("ingest",),
     reads=("admesh/assets/", "admesh/parts/", "admesh/meshes/"),
     writes=("scenes/meshes/", "scenes/placements/", "scenes/towns/", "scenes/sequences/", "scenes/frames/",
-            "scenes/sensor_poses/", "scenes/actors/", "scenes/skeletons/"),
+            "scenes/sensor_poses/", "scenes/actors/", "scenes/skeletons/",
+            "admesh/quarantine/scenes-<town>.parquet (recorded towns: what was left out)"),
     partitions=scenes_partitions,
     task=scenes_task,
 )

@@ -9,7 +9,7 @@ from carlaocc.catalog.sources.registry import ADAPTERS, adapter
 
 
 def test_kinds():
-    assert set(ADAPTERS) == {"folder", "shapenet", "buildingnet", "meshfleet", "carla"}
+    assert set(ADAPTERS) == {"folder", "shapenet", "buildingnet", "meshfleet", "carla", "carla-recording"}
     for kind, cls in ADAPTERS.items():
         assert cls.kind == kind
         a = adapter(kind)
@@ -25,7 +25,7 @@ def test_options():
 
 
 def test_unknown_kind_names_valid_kinds():
-    with pytest.raises(ValueError, match="valid kinds: buildingnet, carla, folder, meshfleet, shapenet"):
+    with pytest.raises(ValueError, match="valid kinds: buildingnet, carla, carla-recording, folder, meshfleet, shapenet"):
         adapter("objaverse")
 
 

@@ -1,0 +1,223 @@
+"""The scenes stage on a recorded town (``style: carla-recording``): reads the recording through
+:mod:`carlaocc.catalog.carla_recording`, finds the ADMesh assets ``carlaocc ingest
+carla-recording`` made of its vehicle models and walk cycle, and returns the town and its
+sequences (:mod:`carlaocc.stages.scenes.recording`) with what had to be left out.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from carlaocc.catalog.store import StoreError
+from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.records import AssetRecord
+
+__all__ = ["RecordedTown", "recorded_scenes", "recording_files", "rig_from_calib"]
+
+
+@dataclass
+class RecordedTown:
+    town: object  # stages.scenes.network.Town
+    sequences: list  # stages.scenes.recording.RecordedSequence
+    skipped: list[tuple[str, str]] = field(default_factory=list)  # (file or item, reason)
+
+
+def _map_of(rec, spec: TownSpec) -> str:
+    towns = sorted({s.town for s in rec.sequences})
+    if spec.map is not None:
+        if spec.map not in towns:
+            raise StoreError(f"recording {spec.recording}: no sequences of map {spec.map!r} (it has {', '.join(towns)})")
+        return spec.map
+    if len(towns) > 1:
+        raise StoreError(f"recording {spec.recording} holds several towns ({', '.join(towns)}): give the town spec a "
+                         f"map (one town spec per map)")  # fmt: skip
+    return towns[0]
+
+
+def recording_files(spec: TownSpec) -> tuple[str, ...]:
+    """The files whose bytes define a recorded town (fingerprinted with its scenes partition):
+    calibration, actor list, pose files and traffic of its sequences (not the images)."""
+    from carlaocc.catalog.carla_recording import RecordingError, discover
+
+    try:
+        rec = discover(spec.recording)
+        town = _map_of(rec, spec)
+    except RecordingError as exc:
+        raise StoreError(f"town recording: {exc}") from None
+    files = [rec.calib]
+    if town in rec.scene_meshes:
+        files.append(rec.scene_meshes[town] / "actor_info.json")
+    for s in rec.sequences:
+        if s.town == town:
+            files += [s.path / "poses" / "lidar.txt", *sorted((s.path / "traffic_info").glob("*.yaml"))]
+    return tuple(str(f) for f in files if Path(f).is_file())
+
+
+def rig_from_calib(calib, base):
+    """The rig of a recording: the six cameras of its calibration (camera-to-LiDAR transforms,
+    size, fov) on the LiDAR of ``base`` (a RigConfig)."""
+    import math
+
+    from carlaocc.schemas.rig import CameraSpec
+
+    lidar_z = base.lidar.z
+    cams = []
+    for name, T in calib.cam_to_lidar.items():
+        yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+        cams.append(CameraSpec(name=name.replace("cam_", "camera_"), x=float(T[0, 3]), y=float(-T[1, 3]),
+                               z=float(T[2, 3] + lidar_z), yaw_deg=-yaw, width=calib.width, height=calib.height,
+                               hfov_deg=calib.fov_deg))  # fmt: skip
+    return base.model_copy(update={"cameras": tuple(cams)})
+
+
+def _check_rig(rig, calib, label: str) -> None:
+    """The config's rig must be the recording's (the voxelize masks and the sensors use it)."""
+    want = rig_from_calib(calib, rig)
+    mine = {c.name: c for c in rig.cameras}
+    for c in want.cameras:
+        have = mine.get(c.name)
+        differs = have is None or (have.width, have.height) != (c.width, c.height) or any(
+            abs(getattr(have, k) - getattr(c, k)) > 1e-3 for k in ("x", "y", "z", "yaw_deg", "hfov_deg"))
+        if differs:
+            raise StoreError(f"{label}: scenes.rig camera {c.name} differs from the recording's calib/calib.yaml "
+                             f"(x {c.x:.3f}, y {c.y:.3f}, z {c.z:.3f}, yaw {c.yaw_deg:.2f} deg, {c.width}x{c.height}, "
+                             f"fov {c.hfov_deg:.3f}): use the config `carlaocc ingest carla-recording` writes")  # fmt: skip
+
+
+def _walk_cycle(rec, assets: dict[str, AssetRecord], skipped) -> list:
+    from carlaocc.catalog.carla_recording import RecordingError, read_mesh
+    from carlaocc.catalog.sources.carla_recording import WALK_CYCLE, model_offset
+    from carlaocc.stages.scenes.recording import WalkFrame
+
+    folder = rec.root / "SceneMeshes" / "fg_actors" / WALK_CYCLE
+    cycle = []
+    rz90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for obj in sorted(folder.glob("frame_*.obj")) if folder.is_dir() else []:
+        key = f"fg_actors/{WALK_CYCLE}/{obj.name}"
+        asset = assets.get(key)
+        bones_file = obj.with_name(f"{obj.stem}_bones.json")
+        if asset is None:
+            skipped.append((str(obj), "walk-cycle frame not in ADMesh: run `carlaocc ingest carla-recording` first"))
+            continue
+        try:
+            V, _ = read_mesh(obj)
+            bones = {k: np.asarray(v, dtype=np.float64).reshape(4, 4)[:3, :3]
+                     for k, v in json.loads(bones_file.read_text()).items()}  # fmt: skip
+        except (RecordingError, OSError, ValueError, TypeError) as exc:
+            skipped.append((str(bones_file), f"walk-cycle frame unusable: {exc}"))
+            continue
+        cycle.append(WalkFrame(asset=asset, offset=model_offset(V @ rz90.T), bones=bones))
+    return cycle
+
+
+def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: str) -> RecordedTown:
+    """Town ``name`` and its sequences from the recording of ``spec`` (see the module docstring).
+    Items that cannot be read (a missing mesh, a bad pose line, an actor with a NaN transform, a
+    blueprint without a model) are left out and listed in ``skipped``; a recording without any
+    usable static mesh or frame raises StoreError naming it."""
+    from carlaocc.catalog.carla_recording import (RecordingError, discover, model_key, read_actor_info, read_calib,
+                                                  read_mesh, read_poses, read_traffic)
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.catalog.sources.carla_recording import model_offset
+    from carlaocc.stages.scenes.recording import RecordedAsset, RecordedFrame, recorded_sequence, recorded_town
+
+    label = f"town {name} (recording {spec.recording})"
+    try:
+        rec = discover(spec.recording)
+        town_name = _map_of(rec, spec)
+        calib = read_calib(rec.calib)
+        _check_rig(cfg.rig, calib, label)
+        if town_name not in rec.scene_meshes:
+            raise RecordingError(f"{rec.root / 'SceneMeshes' / town_name}: missing (the town's exported meshes)")
+        actors, skipped = read_actor_info(rec.scene_meshes[town_name])
+    except RecordingError as exc:
+        raise StoreError(f"{label}: {exc}") from None
+    statics = []
+    for a in actors:
+        try:
+            V, F = read_mesh(a.file)
+        except RecordingError as exc:
+            skipped.append((str(a.file), str(exc)))
+            continue
+        statics.append((a.name, a.semantic_id, V, F))
+    try:
+        town = recorded_town(name, index, str(rec.root), statics)
+    except ValueError as exc:
+        raise StoreError(f"{label}: {exc}") from None
+    # the ADMesh assets of the recording's models, by source path
+    assets = {a.source_path: a for a in ParquetTable(store, AssetRecord).load() if a.source == "carla-recording"}
+    models = {}
+    for bp, obj in rec.vehicle_models.items():
+        asset = assets.get(f"fg_actors/{obj.parent.name}/{obj.name}")
+        if asset is not None:
+            try:
+                models[bp] = RecordedAsset(asset=asset, offset=model_offset(read_mesh(obj)[0]))
+            except RecordingError as exc:
+                skipped.append((str(obj), str(exc)))
+    cycle = _walk_cycle(rec, assets, skipped)
+    sequences = []
+    for s in rec.sequences:
+        if s.town != town_name:
+            continue
+        try:
+            poses, bad = read_poses(s.path / "poses" / "lidar.txt")
+        except RecordingError as exc:
+            skipped.append((str(s.path), f"sequence left out: {exc}"))
+            continue
+        skipped += [(str(s.path / "poses" / "lidar.txt"), reason) for _, reason in bad]
+        frames = []
+        for n in sorted(poses):
+            path = s.path / "traffic_info" / f"{n:04d}.yaml"
+            try:
+                frames.append(RecordedFrame(number=n, lidar_pose=poses[n], traffic=read_traffic(path)))
+            except RecordingError as exc:
+                skipped.append((str(path), f"frame {n} left out: {exc}"))
+        if not frames:
+            skipped.append((str(s.path), "sequence left out: no frame has both a LiDAR pose and traffic"))
+            continue
+        types = {v.type for f in frames for v in f.traffic.vehicles} | {frames[0].traffic.ego.type}
+        by_type = {t: models[model_key(t)] for t in types if model_key(t) in models}
+        ego = by_type.get(frames[0].traffic.ego.type)
+        seq = recorded_sequence(f"{name}_{s.name}", town, s.index, frames, cfg.rig, by_type, cycle,
+                                ego.asset.asset_id if ego else "")  # fmt: skip
+        skipped += [(f"{s.name} frame {fr} actor {aid}", reason) for fr, aid, reason in seq.skipped]
+        sequences.append(seq)
+    if not sequences:
+        raise StoreError(f"{label}: no usable sequence of {town_name}"
+                         + (f" ({skipped[-1][1]})" if skipped else ""))  # fmt: skip
+    # paths relative to the recording's root (the town's source names it)
+    base = f"{rec.root}/"
+    skipped = [(where.replace(base, ""), why.replace(base, "")) for where, why in skipped]
+    return RecordedTown(town=town, sequences=sequences, skipped=skipped)
+
+
+def recording_config(recording: str, existing=None):
+    """The dataset config that builds a recording: one ``carla-recording`` town per map of it,
+    the rig of its calibration, the ADMesh source ``carla-recording``. ``existing`` (a
+    DatasetConfig) is extended: its towns of the same recording and map are replaced, other towns
+    kept; its rig must be the recording's (StoreError otherwise)."""
+    from carlaocc.catalog.carla_recording import RecordingError, discover, read_calib
+    from carlaocc.schemas.configs import DatasetConfig
+
+    try:
+        rec = discover(recording)
+        calib = read_calib(rec.calib)
+    except RecordingError as exc:
+        raise StoreError(f"recording {recording}: {exc}") from None
+    base = existing if existing is not None else DatasetConfig()
+    # one rig per dataset: recordings with different calibrations do not mix
+    if existing is not None and any(t.style == "carla-recording" for t in existing.scenes.towns):
+        _check_rig(existing.scenes.rig, calib, f"recording {recording} (the dataset already holds another recording)")
+    rig = rig_from_calib(calib, base.scenes.rig)
+    root = str(Path(recording).resolve())
+    maps = sorted({s.town for s in rec.sequences})
+    keep = [t for t in (existing.scenes.towns if existing is not None else ())
+            if not (t.style == "carla-recording" and t.recording == root and t.map in maps)]
+    towns = keep + [TownSpec(style="carla-recording", recording=root, map=m) for m in maps]
+    sources = tuple(dict.fromkeys([*(existing.scenes.asset_sources if existing is not None else ()), "carla-recording"]))
+    scenes = base.scenes.model_copy(update={"towns": tuple(towns), "rig": rig, "asset_sources": sources})
+    return base.model_copy(update={"scenes": scenes})

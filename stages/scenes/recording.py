@@ -1,0 +1,238 @@
+"""Recorded towns and sequences: a CARLA recording (read by
+:mod:`carlaocc.catalog.carla_recording`) on the town contract and as scenes records, the way the
+simulated ones are (:mod:`carlaocc.stages.scenes.traffic`). Pure compute on parsed objects.
+
+World frame: the recording's right-handed world (x forward, y left, z up, metres), kept as is.
+
+* **Town** (:func:`recorded_town`): every static actor's world-placed mesh becomes a town mesh
+  ``"<town>/<actor name>"`` placed at the identity pose, stuff or thing by its class (things are
+  numbered 1.. in actor order). No road network: the traffic is recorded, not simulated.
+* **Frames**: the LiDAR pose per frame is the recording's; the ego is the LiDAR pose moved down
+  by the rig's LiDAR mount; camera and LiDAR sensor poses follow from the rig (built from the
+  recording's calibration by the caller). Timestamps are the recorded frame numbers over the
+  rate (10 Hz); frames are renumbered 0.. in order (a recording may skip frames).
+* **Actors**: a stable instance id per CARLA actor id (numbered above the town's instances in id
+  order). Vehicles: the blueprint's model (an ADMesh asset) placed at ``actor pose @ T(offset)``
+  (``offset``: where standardization put the asset origin, in the actor frame), the recorded box
+  (centre ``actor @ box``, size twice the half extents), yaw / pitch / roll of the actor's
+  rotation, the recorded velocity. Walkers: the walk-cycle frame whose two leg bones are closest
+  to the recorded ones (the sum of the two bones' rotation angles between them) placed at
+  ``actor pose @ T(offset - (0, 0, half height))``; box centred on the actor origin; velocity by
+  central differences of its positions (the recording has none). Angular velocities from the
+  angles' central differences (:func:`carlaocc.stages.geometry.angular_velocity`).
+* **Skeletons**: the recorded leg bones' origins (the hips), in the world and the LiDAR frame.
+
+Not done: walkers are not scaled to their recorded height (the walk cycle's own size is used);
+actors whose blueprint has no model are left out and counted (``skipped``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from carlaocc.schemas.meshes import AssetGeometry, MeshPart
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord,
+                                      SkeletonRecord)
+from carlaocc.schemas.rig import RigConfig
+from carlaocc.stages.geometry import (angular_velocity, box_center, invert_pose, is_watertight, pose_to_list,
+                                      transform_points, yaw_pitch_roll)
+from carlaocc.stages.scenes.network import RoadNetwork, Town
+from carlaocc.stages.scenes.placing import Placer
+
+__all__ = ["RecordedAsset", "WalkFrame", "RecordedFrame", "RecordedSequence", "recorded_town", "recorded_sequence",
+           "traffic_level_of", "match_walk_frame", "translation"]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RecordedAsset:
+    """An ADMesh asset standing for a recorded model and its origin in the actor frame (m)."""
+
+    asset: AssetRecord
+    offset: np.ndarray
+
+
+@dataclass(frozen=True)
+class WalkFrame:
+    """One frame of the walk cycle: its asset, the asset origin in the actor frame with the feet
+    at z = 0 (m; the actor's origin is then half the walker's height above them) and its leg
+    bones' rotations (3x3, component frame), by bone name."""
+
+    asset: AssetRecord
+    offset: np.ndarray
+    bones: Mapping[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class RecordedFrame:
+    """A recorded frame: its number, LiDAR-to-world pose and traffic (catalog objects)."""
+
+    number: int
+    lidar_pose: np.ndarray
+    traffic: object  # catalog.carla_recording.TrafficFrame
+
+
+@dataclass
+class RecordedSequence:
+    sequence: SequenceRecord
+    frames: list[FrameRecord]
+    sensor_poses: list[SensorPoseRecord]
+    actors: list[ActorStateRecord]
+    skeletons: list[SkeletonRecord]
+    skipped: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, actor id, reason)
+    phase_frames: dict[int, list[int]] = field(default_factory=dict)  # walker id -> matched walk frame per frame
+
+
+def translation(x: float, y: float, z: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def traffic_level_of(index: int) -> str:
+    """The CarlaOcc collection's traffic level of sequence ``index``: 00 none, 01-03 low, 04-06
+    medium, 07 and above high."""
+    return "none" if index == 0 else "low" if index <= 3 else "medium" if index <= 6 else "high"
+
+
+def recorded_town(name: str, index: int, source: str, statics: Sequence[tuple[str, int, np.ndarray, np.ndarray]]) -> Town:
+    """The town of a recording: ``statics`` = (actor name, class id, world vertices, faces)."""
+    placer = Placer(name)
+    stuff: dict[str, AssetGeometry] = {}
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for actor, sem, V, F in statics:
+        key = f"{name}/{actor}"
+        geom = AssetGeometry(asset_id=key, parts=(MeshPart(name=actor, vertices=V, faces=F, semantic_id=int(sem)),),
+                             part_closed=(is_watertight(F),))  # fmt: skip
+        stuff[key] = geom
+        placer.add_stuff(geom)
+        lo, hi = np.minimum(lo, V[:, :2].min(axis=0)), np.maximum(hi, V[:, :2].max(axis=0))
+    if not stuff:
+        raise ValueError(f"{source}: no static actor could be read: the town has no geometry")
+    return Town(name=name, index=index, style="carla-recording", source=source, placements=placer.records,
+                stuff=stuff, network=RoadNetwork(lanes=(), walkways=(), road_length=0.0),
+                bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+                max_instance_id=placer.next_instance - 1)  # fmt: skip
+
+
+def _rotation_angle(A: np.ndarray, B: np.ndarray) -> float:
+    """Angle (rad) of the rotation taking ``B`` to ``A`` (3x3)."""
+    c = (np.trace(A[:3, :3] @ B[:3, :3].T) - 1.0) / 2.0
+    return float(math.acos(min(1.0, max(-1.0, c))))
+
+
+def match_walk_frame(bones: Mapping[str, np.ndarray], cycle: Sequence[WalkFrame]) -> int:
+    """The walk-cycle frame whose leg bones turn least from the recorded ``bones`` (the sum over
+    the bones both have of the angle between their rotations); 0 without bones."""
+    names = [b for b in bones if all(b in w.bones for w in cycle)]
+    if not names or not cycle:
+        return 0
+    cost = [sum(_rotation_angle(bones[b], w.bones[b]) for b in names) for w in cycle]
+    return int(np.argmin(cost))
+
+
+def _component_to_actor(extent_z: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    T[2, 3] = -float(extent_z)
+    return T
+
+
+def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence[RecordedFrame], rig: RigConfig,
+                      models: Mapping[str, RecordedAsset], cycle: Sequence[WalkFrame], ego_asset_id: str = "",
+                      rate_hz: float = 10.0) -> RecordedSequence:  # fmt: skip
+    """The scenes records of one recorded sequence (see the module docstring). ``models`` maps
+    each vehicle type (blueprint id) of the traffic to its asset; ``ego_asset_id`` is the ego's."""
+    if not frames:
+        raise ValueError(f"{sequence_id}: no frame has a LiDAR pose and traffic")
+    lidar_to_ego = np.asarray(rig.lidar.sensor_to_ego(), dtype=np.float64)
+    ego_from_lidar = invert_pose(lidar_to_ego)
+    cams = [(c.name, np.asarray(c.camera_to_ego(), dtype=np.float64)) for c in rig.cameras]
+    # 1. stable instance ids: every actor id of the sequence, in id order, above the town's
+    ids = sorted({a.id for f in frames for a in (*f.traffic.vehicles, *f.traffic.pedestrians)})
+    instance = {aid: town.max_instance_id + 1 + k for k, aid in enumerate(ids)}
+    out = RecordedSequence(
+        sequence=SequenceRecord(sequence_id=sequence_id, town=town.name, seed=0, frame_count=len(frames),
+                                rate_hz=rate_hz, traffic_level=traffic_level_of(index), ego_asset_id=ego_asset_id),
+        frames=[], sensor_poses=[], actors=[], skeletons=[])  # fmt: skip
+    # 2. per actor: its poses over the frames (for velocities and angle rates)
+    tracks: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for k, f in enumerate(frames):
+        for a in (*f.traffic.vehicles, *f.traffic.pedestrians):
+            tracks.setdefault(a.id, []).append((k, a.transform))
+    times = np.array([f.number / rate_hz for f in frames])
+    rates: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    for aid, track in tracks.items():
+        ks = np.array([k for k, _ in track])
+        pos = np.array([T[:3, 3] for _, T in track])
+        ang = np.unwrap(np.array([yaw_pitch_roll(T) for _, T in track]), axis=0)
+        if len(ks) >= 2:
+            vel = np.gradient(pos, times[ks], axis=0)
+            dang = np.gradient(ang, times[ks], axis=0)
+        else:
+            vel, dang = np.zeros_like(pos), np.zeros_like(ang)
+        omega = angular_velocity(ang[:, 0], ang[:, 1], ang[:, 2], dang[:, 0], dang[:, 1], dang[:, 2])
+        for j, k in enumerate(ks):
+            rates[(aid, int(k))] = (vel[j], omega[j])
+    # 3. records, frame by frame
+    for k, f in enumerate(frames):
+        lidar = np.asarray(f.lidar_pose, dtype=np.float64)
+        ego = lidar @ ego_from_lidar
+        world_to_lidar = invert_pose(lidar)
+        out.frames.append(FrameRecord(sequence_id=sequence_id, frame_index=k, timestamp=float(times[k]),
+                                      ego_pose=pose_to_list(ego), lidar_pose=pose_to_list(lidar)))  # fmt: skip
+        for name, T in cams:
+            out.sensor_poses.append(SensorPoseRecord(sequence_id=sequence_id, frame_index=k, sensor=name,
+                                                     pose=pose_to_list(ego @ T)))  # fmt: skip
+        out.sensor_poses.append(SensorPoseRecord(sequence_id=sequence_id, frame_index=k, sensor=rig.lidar.name,
+                                                 pose=pose_to_list(lidar)))  # fmt: skip
+        rows = []
+        for v in f.traffic.vehicles:
+            model = models.get(v.type)
+            if model is None:
+                out.skipped.append((f.number, v.id, f"no model for blueprint {v.type!r}"))
+                continue
+            pose = v.transform @ translation(*model.offset)
+            box = v.transform @ v.bbox_transform
+            yaw, pitch, roll = yaw_pitch_roll(v.transform)
+            rows.append(ActorStateRecord(
+                sequence_id=sequence_id, frame_index=k, instance_id=instance[v.id], asset_id=model.asset.asset_id,
+                semantic_id=model.asset.category_id, pose=pose_to_list(pose),
+                box_center=[float(c) for c in box[:3, 3]], box_size=[float(2 * e) for e in v.extent],
+                yaw=yaw, pitch=pitch, roll=roll, velocity=[float(c) for c in v.velocity],
+                angular_velocity=[float(c) for c in rates[(v.id, k)][1]],
+            ))  # fmt: skip
+        for p in f.traffic.pedestrians:
+            if not cycle:
+                out.skipped.append((f.number, p.id, "no walk cycle to pose the walker with"))
+                continue
+            j = match_walk_frame(p.bones, cycle)
+            out.phase_frames.setdefault(p.id, []).append(j)
+            to_actor = _component_to_actor(p.extent[2])
+            # the asset's axes are the actor's: its origin sits at the offset, the feet a half height down
+            off = cycle[j].offset
+            pose = p.transform @ translation(off[0], off[1], off[2] - p.extent[2])
+            yaw, pitch, roll = yaw_pitch_roll(p.transform)
+            vel, omega = rates[(p.id, k)]
+            rows.append(ActorStateRecord(
+                sequence_id=sequence_id, frame_index=k, instance_id=instance[p.id], asset_id=cycle[j].asset.asset_id,
+                semantic_id=cycle[j].asset.category_id, pose=pose_to_list(pose),
+                box_center=box_center(p.transform @ translation(0.0, 0.0, -p.extent[2]), 2 * p.extent[2]),
+                box_size=[float(2 * e) for e in p.extent], yaw=yaw, pitch=pitch, roll=roll,
+                velocity=[float(c) for c in vel], angular_velocity=[float(c) for c in omega],
+                gait_phase=j / len(cycle),
+            ))  # fmt: skip
+            for b, name in enumerate(sorted(p.bones)):
+                world = transform_points(p.transform @ to_actor, p.bones[name][None, :3, 3])[0]
+                out.skeletons.append(SkeletonRecord(
+                    sequence_id=sequence_id, frame_index=k, instance_id=instance[p.id], asset_id=cycle[j].asset.asset_id,
+                    joint_index=b, joint=name, world=[float(c) for c in world],
+                    lidar=[float(c) for c in transform_points(world_to_lidar, world[None])[0]],
+                ))  # fmt: skip
+        for aid, reason in f.traffic.skipped:
+            out.skipped.append((f.number, aid, reason))
+        out.actors.extend(sorted(rows, key=lambda r: r.instance_id))
+    return out
