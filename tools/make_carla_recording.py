@@ -24,7 +24,8 @@ lane, car 246 comes the other way in the left lane (so left must stay left); wal
 writes them: frame numbers ``%04d``; pose lines ``%04d`` then 16 ``%.6f`` (sensor-to-world,
 right-handed: CARLA's y, pitch and yaw negated); traffic YAML in the saver's key order with
 floats rounded to 6 decimals; RGB with the x1.2 gain; raw depth ``clip(d, 0, 80) / 80 * 65535``
-as uint16 (planar depth); raw semantics in CARLA's CityScapes palette; ASCII PLY with y negated.
+as uint16 (planar depth); raw semantics in CARLA's CityScapes palette, the terrain unlabelled (black)
+as CARLA's semantic pass leaves it; ASCII PLY with y negated.
 Meshes: OBJ in the export's mesh axes (x forward, y up, z right; world = (x, -z, y)), metres,
 background actors placed in the world, vehicles in their actor frame, the walk cycle's frames
 in the skeletal mesh's component frame (feet at the origin, walking along -y after the axis
@@ -348,7 +349,9 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
             depth = np.where(np.isfinite(dist), dist / n[:, 0], 1000.0)  # planar: along the optical axis
             png = (np.clip(depth, 0, 80) / 80 * 65535).astype(np.uint16).reshape(H, W)
             Image.fromarray(png).save(seq / "depth_carla" / f"image_{c}" / f"{f:04d}.png")
-            col = np.array([PALETTE[int(k)] for k in lab], dtype=np.uint8).reshape(H, W, 3)
+            # CARLA's semantic pass leaves the landscape unlabelled (None, black): the artefact the
+            # release's rectification repairs (its rectified semantics turn None into Terrain)
+            col = np.array([PALETTE[0 if int(k) == 10 else int(k)] for k in lab], dtype=np.uint8).reshape(H, W, 3)
             Image.fromarray(col).save(seq / "semantics_carla" / f"image_{c}" / f"{f:04d}.png")
             shade = np.clip(1.0 - np.where(np.isfinite(dist), dist, 80.0) / 120.0, 0.3, 1.0)[:, None]
             rgb = np.clip(np.array([PALETTE[int(k)] for k in lab]) * shade * 1.2, 0, 255).astype(np.uint8)

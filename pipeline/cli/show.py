@@ -180,8 +180,8 @@ def show_sensors(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Contact sheet of one frame's camera maps (no RGB: depth, normals, semantics, instances per
-    camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
+    """Contact sheet of one frame's camera maps (the recorded RGB of a recorded town, depth,
+    normals, semantics, instances per camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
     transparency region tinted red and of the omission region blue (epsilon from the config).
     With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""
     from carlaocc.catalog.sensors import SensorStore
@@ -215,7 +215,7 @@ def show_sensors(
         if read("normal") is None:
             fail(f"{seq}/{cam} has no normal map: run the sensors stage")
         view = CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
-                          read("depth_raw"), read("semantic_raw"))
+                          read("depth_raw"), read("semantic_raw"), read("rgb"))
         if joints is not None:
             view = _with_skeletons(view, joints, poses, cfg.scenes.rig, cam)
         views.append(view)

@@ -221,3 +221,75 @@ def recording_config(recording: str, existing=None):
     sources = tuple(dict.fromkeys([*(existing.scenes.asset_sources if existing is not None else ()), "carla-recording"]))
     scenes = base.scenes.model_copy(update={"towns": tuple(towns), "rig": rig, "asset_sources": sources})
     return base.model_copy(update={"scenes": scenes})
+
+
+# ------------------------------------------------------------------ camera images of recorded frames
+
+IMAGE_DIRS = {"depth": ("depth_carla", "depth"), "semantic": ("semantics_carla", "semantics"), "rgb": ("rgb",)}
+
+
+def recorded_frames(store, scenes: ScenesConfig, seq) -> list[dict] | None:
+    """For a sequence of a recorded town: per frame (in order) its recorded frame number and the
+    image files of each rig camera (``{"depth": path, "semantic": path, "rgb": path}``, the raw
+    ``depth_carla``/``semantics_carla`` preferred over the release's rectified ``depth``/
+    ``semantics``; files that do not exist left out). None for simulated sequences."""
+    from carlaocc.catalog.carla_recording import RecordingError, discover
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.pipeline.tasks.partitions import town_key
+    from carlaocc.schemas.records import FrameRecord
+
+    spec = next((t for i, t in enumerate(scenes.towns) if town_key(i) == seq.town and t.style == "carla-recording"), None)
+    if spec is None:
+        return None
+    try:
+        rec = discover(spec.recording)
+    except RecordingError as exc:
+        raise StoreError(f"town {seq.town}: {exc}") from None
+    name = seq.sequence_id[len(seq.town) + 1:]
+    folder = next((s.path for s in rec.sequences if s.name == name), None)
+    if folder is None:
+        raise StoreError(f"sequence {seq.sequence_id}: {rec.root / name} is not in the recording any more")
+    frames = sorted(ParquetTable(store, FrameRecord).load([seq.sequence_id]), key=lambda f: f.frame_index)
+    out = []
+    for f in frames:
+        number = int(round(f.timestamp * seq.rate_hz))
+        images = {}
+        for cam in scenes.rig.cameras:
+            sub = "image_" + cam.name.split("_")[-1]
+            files = {}
+            for kind, dirs in IMAGE_DIRS.items():
+                for d in dirs:
+                    path = folder / d / sub / f"{number:04d}.png"
+                    if path.is_file():
+                        files[kind] = str(path)
+                        break
+            images[cam.name] = files
+        out.append({"number": number, "images": images})
+    return out
+
+
+def read_frame_images(files: dict, cam):
+    """One camera's raw maps (``CameraMaps``: planar depth, 0 where the PNG saturates at 80 m;
+    semantic ids, unknown colours 0) and RGB (None without a file) from its recorded PNGs.
+    StoreError naming the camera when its depth or semantic image is missing or malformed."""
+    from PIL import Image
+
+    from carlaocc.catalog.carla_recording import DEPTH_RANGE, RecordingError, decode_depth, decode_semantics
+    from carlaocc.stages.sensors import CameraMaps
+
+    missing = [k for k in ("depth", "semantic") if k not in files]
+    if missing:
+        raise StoreError(f"{cam.name}: the recording has no {' or '.join(missing)} image for this frame "
+                         f"(depth_carla/ or depth/, semantics_carla/ or semantics/)")  # fmt: skip
+    try:
+        depth = decode_depth(np.asarray(Image.open(files["depth"])))
+        semantic, _ = decode_semantics(np.asarray(Image.open(files["semantic"]).convert("RGB")))
+        rgb = np.asarray(Image.open(files["rgb"]).convert("RGB")) if "rgb" in files else None
+    except (OSError, RecordingError) as exc:
+        raise StoreError(f"{cam.name}: unreadable recorded image ({exc})") from None
+    shape = (cam.height, cam.width)
+    for what, a in (("depth", depth), ("semantic", semantic), ("rgb", rgb)):
+        if a is not None and a.shape[:2] != shape:
+            raise StoreError(f"{files[what]}: {a.shape[1]}x{a.shape[0]} px, the camera is {cam.width}x{cam.height}")
+    depth = np.where(depth >= np.float32(DEPTH_RANGE), np.float32(0.0), depth)  # saturated: nothing within range
+    return CameraMaps(depth, semantic, None), rgb

@@ -27,17 +27,33 @@ def sensors_config(config: DatasetConfig) -> SensorsConfig:
     return config.sensors.model_copy(update={"rig": config.scenes.rig})
 
 
+RECORDED_ARRAYS = ("depth_raw", "semantic_raw", "rgb")  # what a recorded sequence's frames bring
+
+
 def sensors_partitions(ctx: Context) -> list[Partition]:
-    return [Partition(f"{seq.sequence_id}/{t:04d}", {"sequence_id": seq.sequence_id, "frame_index": t},
-                      needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town)))
-            for seq in sequences(ctx) for t in range(seq.frame_count)]
+    """One per (sequence, frame). A frame of a recorded town (``carla-recording``) also names the
+    recording's image files of that frame (fingerprinted: a changed image re-runs the frame)."""
+    from carlaocc.pipeline.tasks.recording import recorded_frames
+
+    out = []
+    for seq in sequences(ctx):
+        recorded = recorded_frames(ctx.store, ctx.config.scenes, seq)
+        for t in range(seq.frame_count):
+            params = {"sequence_id": seq.sequence_id, "frame_index": t}
+            files: tuple[str, ...] = ()
+            if recorded is not None:
+                params["recorded"] = recorded[t]
+                files = tuple(f for f in recorded[t]["images"].values() for f in f.values())
+            out.append(Partition(f"{seq.sequence_id}/{t:04d}", params, files=files,
+                                 needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town))))
+    return out
 
 
 def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
     """Create the camera arrays of every sequence about to be written (intrinsics and extrinsics
     in their attributes); a replaced array invalidates every frame of its sequence. The recorded
     path creates only the arrays it writes and leaves the recorder's ``*_raw`` arrays alone."""
-    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.catalog.sensors import CAMERA_MAPS, SensorStore
     from carlaocc.stages.sensors import camera_poses
 
     cfg = sensors_config(ctx.config)
@@ -46,15 +62,18 @@ def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
     sensors = SensorStore(ctx.store)
     to_lidar = camera_poses(rig)
     invalid: set[str] = set()
+    recorded = {p.params["sequence_id"] for p in to_run if "recorded" in p.params}
     for seq in sorted({p.params["sequence_id"] for p in to_run}):
         replaced = False
+        source = "recorded" if seq in recorded else cfg.source
+        names = CAMERA_MAPS + RECORDED_ARRAYS if seq in recorded else sensor_arrays(cfg)
         for cam in cfg.selected_cameras(rig):
             attrs = {"intrinsics": [list(r) for r in cam.intrinsics],
                      "camera_to_ego": [list(r) for r in cam.camera_to_ego()],
                      "camera_to_lidar": to_lidar[cam.name].tolist(),
-                     "camera_frame": "opencv: x right, y down, z forward", "source": cfg.source}
-            replaced |= sensors.create(seq, cam.name, cam.width, cam.height, frames[seq], sensor_arrays(cfg),
-                                       extra_attrs=attrs, keep_others=cfg.source == "recorded")
+                     "camera_frame": "opencv: x right, y down, z forward", "source": source}
+            replaced |= sensors.create(seq, cam.name, cam.width, cam.height, frames[seq], names, extra_attrs=attrs,
+                                       keep_others=cfg.source == "recorded" and seq not in recorded)
         if replaced:
             invalid |= {p.key for p in partitions if p.params["sequence_id"] == seq}
     return invalid
@@ -74,6 +93,14 @@ def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
 
     raw = ("depth_raw", "semantic_raw", "instance_raw") if cfg.source == "raycast" else ()
     return CAMERA_MAPS + raw
+
+
+def _recording_raw(recorded: dict, cam) -> tuple["CameraMaps", np.ndarray | None]:
+    """One camera's raw maps and RGB of a recorded frame, read from the recording's PNGs (the
+    raw ``depth_carla``/``semantics_carla``, else the release's ``depth``/``semantics``)."""
+    from carlaocc.pipeline.tasks.recording import read_frame_images
+
+    return read_frame_images(recorded["images"].get(cam.name, {}), cam)
 
 
 def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
@@ -113,7 +140,20 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     sensors = SensorStore(store)
     cams = cfg.selected_cameras(rig)
     outputs: dict[str, str] = {}
-    if cfg.source == "raycast":
+    recorded = part.params.get("recorded")
+    rgb: dict[str, np.ndarray] = {}
+    source = "recorded" if recorded is not None else cfg.source
+    if recorded is not None:
+        # a recorded town's frame: the recording's raw maps (and RGB), rectified with its meshes
+        raw = {}
+        for cam in cams:
+            raw[cam.name], image = _recording_raw(recorded, cam)
+            if image is not None:
+                rgb[cam.name] = image
+        rect = rectify_cameras(inputs.scene, rig, cfg, raw, nthreads=kernel_threads())
+        per_camera = {name: (r, n, raw[name], recorded_stats(name, r, raw[name])) for name, (r, n) in rect.items()}
+        frame = None
+    elif cfg.source == "raycast":
         frame = simulate_frame(inputs.scene, rig, cfg, nthreads=kernel_threads())
         per_camera = {name: (cf.rectification, cf.normal, cf.raw, cf.stats) for name, cf in frame.cameras.items()}
     else:
@@ -127,12 +167,16 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
         images = {"depth": rect.maps.depth, "semantic": rect.maps.semantic, "normal": normal.astype(np.float16)}
         if rect.maps.instance is not None:
             images["instance"] = rect.maps.instance
-        if cfg.source == "raycast":
+        if recorded is not None:
+            images.update(depth_raw=raw.depth, semantic_raw=raw.semantic)
+            if cam.name in rgb:
+                images["rgb"] = rgb[cam.name]
+        elif cfg.source == "raycast":
             images.update(depth_raw=raw.depth, semantic_raw=raw.semantic, instance_raw=raw.instance)
         for name, data in images.items():
             sensors.write_image(seq_id, cam.name, frame_index, name, data)
         outputs.update(sensors.fingerprints(seq_id, cam.name, frame_index, tuple(images)))
-        records.append(RectificationRecord(sequence_id=seq_id, frame_index=frame_index, source=cfg.source,
+        records.append(RectificationRecord(sequence_id=seq_id, frame_index=frame_index, source=source,
                                            **dataclasses.asdict(stats)))
     if frame is not None and frame.lidar is not None:
         lidar = LidarStore(store)
@@ -149,8 +193,10 @@ SPEC = StageSpec(
     name="sensors",
     description="ray-cast camera maps and LiDAR, simulator artifacts, instance-guided rectification, normals",
     upstream=("ingest", "scenes"),
-    reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)"),
-    writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "lidar/<seq>/",
+    reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)",
+           "a recorded town's camera PNGs (depth_carla, semantics_carla, rgb)"),
+    writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "sensors.zarr/<seq>/<cam>/rgb",
+            "lidar/<seq>/",
             "metrics/rectification/"),
     partitions=sensors_partitions,
     task=sensors_task,

@@ -85,6 +85,7 @@ class CameraView:
     normal: np.ndarray
     depth_raw: np.ndarray | None = None
     semantic_raw: np.ndarray | None = None
+    rgb: np.ndarray | None = None  # (H, W, 3) uint8, recorded sequences
     # walkers' skeletons to draw over the semantic and instance maps: (W, J, 2) pixel coordinates
     # (u right, v down, pixel centres at i + 0.5; NaN behind the camera) and (W, J) visibility
     skeleton_uv: np.ndarray | None = None
@@ -167,14 +168,17 @@ def _skeletons(image: np.ndarray, view: CameraView, step: int) -> np.ndarray:
 
 
 def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int = 2) -> np.ndarray:
-    """The contact sheet of a frame: a column per camera, rows depth, normals, semantics,
-    instances and, where raw maps exist, raw depth / rectified depth / raw semantics / rectified
+    """The contact sheet of a frame: a column per camera, rows (the recorded RGB when every view
+    has it,) depth, normals, semantics, instances and, where raw maps exist, raw depth / rectified depth / raw semantics / rectified
     semantics with the repaired pixels highlighted; skeletons (when the views carry them) over the
     semantic and instance maps. Images are subsampled by ``step``."""
     if not views:
         raise ValueError("no camera maps to draw")
     s = slice(None, None, max(int(step), 1))
-    rows: list[tuple[str, list[np.ndarray]]] = [
+    rows: list[tuple[str, list[np.ndarray]]] = []
+    if all(v.rgb is not None for v in views):
+        rows.append(("rgb", [np.ascontiguousarray(v.rgb[s, s, :3]) for v in views]))
+    rows += [
         ("depth", [depth_image(v.depth[s, s]) for v in views]),
         ("normal", [normal_image(v.normal[s, s]) for v in views]),
         ("semantic", [_skeletons(semantic_image(v.semantic[s, s]), v, step) for v in views]),

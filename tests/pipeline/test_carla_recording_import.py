@@ -46,12 +46,13 @@ def recording(tmp_path_factory) -> Path:
     return out
 
 
-def _ingest_and_run(recording: Path, root: Path, stages: str = "ingest,scenes,voxelize") -> Store:
+def _ingest_and_run(recording: Path, root: Path, stages: str | None = None) -> Store:
     r = cli.invoke(app, ["ingest", "carla-recording", str(recording), "--root", str(root), "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     assert "wrote" in r.output and (root / "dataset.yaml").is_file()
-    # no --config: the root's own dataset.yaml is the config
-    r = cli.invoke(app, ["run", "--root", str(root), "--res", str(RES), "--stages", stages, "--scheduler", "synchronous"])
+    # no --config: the root's own dataset.yaml is the config; every stage by default
+    r = cli.invoke(app, ["run", "--root", str(root), "--res", str(RES), "--scheduler", "synchronous"]
+                   + (["--stages", stages] if stages else []))  # fmt: skip
     assert r.exit_code == 0, r.output
     return Store(str(root))
 
@@ -71,6 +72,16 @@ def _frame(store: Store, seq: str, f: int):
 
 def _centres(grid, ijk: np.ndarray) -> np.ndarray:
     return np.asarray(grid.origin) + (ijk + 0.5) * grid.voxel_size
+
+
+def test_every_stage_runs_on_the_recording(built):
+    seq = f"town00_{SEQ}"
+    grid, _, _ = _frame(built, seq, 0)
+    _, metrics = query(built, f"SELECT DISTINCT metric FROM quality WHERE sequence_id = '{seq}' ORDER BY 1")
+    assert {m for (m,) in metrics} >= {"spatial_continuity", "temporal_consistency"}
+    flow = OccupancyStore(built).read_frame(seq, grid, 3, ("flow", "mask_camera", "mask_lidar"))
+    # the cars move at 6 and 7 m/s: occupancy flow; the masks from the recording's rig
+    assert np.abs(flow["flow"]).max() > 1.0 and flow["mask_camera"].any() and flow["mask_lidar"].any()
 
 
 def test_the_recording_becomes_a_town_and_a_sequence(built):
@@ -164,3 +175,41 @@ def test_a_missing_recording_is_a_clear_error(tmp_path):
     r = cli.invoke(app, ["ingest", "carla-recording", str(tmp_path / "nope"), "--root", str(tmp_path / "d"),
                          "--scheduler", "synchronous"])  # fmt: skip
     assert r.exit_code != 0 and "nope" in r.output
+
+
+def test_recorded_camera_maps_are_stored_and_rectified(built, recording):
+    from PIL import Image
+
+    from carlaocc.catalog.sensors import SensorStore
+
+    seq = f"town00_{SEQ}"
+    sensors = SensorStore(built)
+    assert sensors.cameras(seq) == [f"camera_0{i}" for i in range(6)]
+    # the recorded RGB and raw maps as the PNGs hold them (saturated depth: no surface)
+    png = np.asarray(Image.open(recording / SEQ / "rgb" / "image_03" / "0004.png").convert("RGB"))
+    assert np.array_equal(sensors.read_image(seq, "camera_03", 4, "rgb"), png)
+    depth = cr.decode_depth(np.asarray(Image.open(recording / SEQ / "depth_carla" / "image_03" / "0004.png")))
+    assert np.array_equal(sensors.read_image(seq, "camera_03", 4, "depth_raw"), np.where(depth >= 80, 0, depth))
+    # CARLA left the terrain unlabelled; the rectification labels it from the recorded meshes
+    raw = sensors.read_image(seq, "camera_03", 4, "semantic_raw")
+    rect = sensors.read_image(seq, "camera_03", 4, "semantic")
+    hole = raw == 0
+    assert hole.sum() > 100 and (rect[hole] == 10).mean() > 0.95
+    assert np.array_equal(rect[~hole], raw[~hole])
+    _, rows = query(built, f"SELECT source, omission, relabelled FROM rectification WHERE sequence_id = '{seq}'")
+    assert len(rows) == 36 and {r[0] for r in rows} == {"recorded"} and all(o > 0 and r == o for _, o, r in rows)
+
+
+def test_show_sensors_puts_the_recorded_rgb_first(built, tmp_path):
+    out = tmp_path / "sheet.png"
+    r = cli.invoke(app, ["show", "sensors", "--root", built.root, "--seq", f"town00_{SEQ}", "--frame", "2", "--step", "1",
+                         "--out", str(out)])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    from PIL import Image
+
+    from carlaocc.catalog.sensors import SensorStore
+
+    sheet = np.asarray(Image.open(out).convert("RGB"))
+    rgb = SensorStore(built).read_image(f"town00_{SEQ}", "camera_00", 2, "rgb")
+    # the sheet's top-left tile is camera_00's recorded RGB
+    assert np.array_equal(sheet[: rgb.shape[0], : rgb.shape[1]], rgb)
