@@ -29,11 +29,12 @@ CARLA's sensor-frame points with y negated by the saver -- already ours; **camer
 x-forward bodies, so the OpenCV optical frame is ``pose @ [[0,0,1],[-1,0,0],[0,-1,0]]``. The ego
 has no transform of its own: ``ego = lidar_pose @ inv(T(0, 0, 1.73))`` (the LiDAR mount).
 
-Pedestrian bones are the two leg bones ``crl_leg__L`` / ``crl_leg__R`` as 4x4 matrices in the
-skeletal mesh's component frame (metres, right-handed): feet at the origin, walking along -y.
-That frame sits in the walker's actor frame turned +90 degrees about z and lowered by the box's
-half height (CARLA's walker origin is the box centre): ``actor <- component = T(0, 0, -e_z)
-Rz(90 deg)`` (:func:`component_to_actor`).
+Pedestrian bones are the two lower-leg bones ``crl_leg__L`` / ``crl_leg__R`` (their origins are
+the knees) as 4x4 socket transforms in the walker's actor frame (CARLA's ``GetBonesTransform``:
+``RTS_Actor``; x forward, origin at the box centre; metres, right-handed after the saver's flip).
+The walk cycle's bone files hold the same bones in the export's mesh axes (walking along +z),
+in centimetres; its meshes are in the skeletal mesh's component frame, which is the actor's
+turned -90 degrees about z with the feet at the origin.
 
 What is ignored: ``bg_actor_occ/``, ``fg_actor_occ/`` (precomputed voxels: we voxelize the
 meshes exactly), ``occupancy/``, ``normal/``, the FBX files, ``rgb/image_bev`` and every absolute
@@ -57,7 +58,7 @@ __all__ = [
     "RecordingError", "Calib", "EgoState", "VehicleState", "PedestrianState", "TrafficFrame", "StaticActor",
     "SequenceDir", "Recording", "LIDAR_HEIGHT", "DEPTH_RANGE", "MESH_TO_WORLD", "OPTICAL_FROM_BODY",
     "discover", "model_key", "frames_of", "timestamp", "read_calib", "read_poses", "read_traffic", "read_actor_info", "read_mesh", "read_ply",
-    "decode_depth", "decode_semantics", "component_to_actor", "palette_lookup",
+    "decode_depth", "decode_semantics", "palette_lookup",
 ]  # fmt: skip
 
 LIDAR_HEIGHT = 1.73  # m: the LiDAR above the ego's origin (the authors' sensor config)
@@ -112,7 +113,7 @@ class PedestrianState:
     type: str
     transform: np.ndarray  # 4x4 actor-to-world; the actor origin is the box centre
     extent: np.ndarray  # half extents, m
-    bones: dict[str, np.ndarray]  # crl_leg__L / crl_leg__R: 4x4 in the component frame, metres
+    bones: dict[str, np.ndarray]  # crl_leg__L / crl_leg__R: 4x4 in the actor frame, metres (origins: the knees)
 
 
 @dataclass(frozen=True)
@@ -182,7 +183,8 @@ def discover(root) -> Recording:
         raise RecordingError(f"{calib}: missing (the release's calib/calib.yaml: camera size, fov, intrinsics, "
                              f"camera-to-LiDAR transforms)")  # fmt: skip
     meshes = base / "SceneMeshes"
-    towns = {p.name: p for p in sorted(meshes.iterdir()) if p.is_dir() and p.name != "fg_actors"} if meshes.is_dir() else {}
+    towns = ({p.name: p for p in sorted(meshes.iterdir()) if p.is_dir() and not p.name.startswith("fg_actor")}
+             if meshes.is_dir() else {})  # fmt: skip
     models = {}
     fg = meshes / "fg_actors"
     if fg.is_dir():
@@ -292,6 +294,14 @@ def read_poses(path) -> tuple[dict[int, np.ndarray], list[tuple[int, str]]]:
     return poses, bad
 
 
+def _id_of(item) -> int:
+    """An actor entry's id for a skip record (-1 when it has no usable one)."""
+    try:
+        return int(item["id"])
+    except (KeyError, TypeError, ValueError):
+        return -1
+
+
 def _state_common(item: dict, where: str) -> tuple[int, str, np.ndarray]:
     try:
         ident, kind = int(item["id"]), str(item["type"])
@@ -332,7 +342,7 @@ def read_traffic(path) -> TrafficFrame:
                                       f"{where}: bbox.transform"),
             ))  # fmt: skip
         except RecordingError as exc:
-            skipped.append((int(item.get("id", -1)) if isinstance(item, dict) else -1, str(exc)))
+            skipped.append((_id_of(item), str(exc)))
     for k, item in enumerate(data.get("pedestrians") or []):
         where = f"{path}: pedestrians[{k}]"
         try:
@@ -343,7 +353,7 @@ def read_traffic(path) -> TrafficFrame:
                 bones={b: _matrix(bones[b], f"{where}: bones.{b}") for b in BONES if b in bones},
             ))  # fmt: skip
         except RecordingError as exc:
-            skipped.append((int(item.get("id", -1)) if isinstance(item, dict) else -1, str(exc)))
+            skipped.append((_id_of(item), str(exc)))
     return TrafficFrame(ego=ego, vehicles=tuple(vehicles), pedestrians=tuple(pedestrians), skipped=tuple(skipped))
 
 
@@ -363,6 +373,10 @@ def read_actor_info(scene_dir) -> tuple[list[StaticActor], list[tuple[str, str]]
     for k, a in enumerate(actors):
         name = str(a.get("name", f"actors[{k}]")) if isinstance(a, dict) else f"actors[{k}]"
         try:
+            if "crosswalk" in name.lower():
+                # the export's crosswalk decals: the authors leave them out of the occupancy too
+                skipped.append((name, f"{path}: actor {name!r}: a crosswalk decal, left out"))
+                continue
             label = str(a["semantic_label"])
             try:
                 sem = by_name(label).id
@@ -465,15 +479,6 @@ def decode_semantics(rgb: np.ndarray) -> tuple[np.ndarray, int]:
     known = codes[order][pos] == key
     out = np.where(known, ids[order][pos], 0).astype(np.uint8)
     return out, int((~known).sum())
-
-
-def component_to_actor(extent_z: float) -> np.ndarray:
-    """4x4 from a walker's skeletal-mesh component frame (feet at the origin, walking along -y)
-    to its actor frame (origin at the box centre, walking along +x): ``T(0, 0, -extent_z) Rz(90 deg)``."""
-    T = np.eye(4)
-    T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
-    T[2, 3] = -float(extent_z)
-    return T
 
 
 def frame_number(path: Path) -> int | None:

@@ -18,9 +18,10 @@ Usage: ``python tools/make_carla_recording.py OUT [--frames 6] [--size 176x48]``
 
 The scene (right-handed world, x forward, y left, z up, metres): a 14 m road along x with a
 centre line, raised sidewalks both sides, a building and a pole on the left, a split terrain
-landscape; the ego drives +x in the right lane at 5 m/s; car 245 drives ahead of it in the same
-lane, car 246 comes the other way in the left lane (so left must stay left); walker 301 walks
-+x on the right sidewalk, its two leg bones swinging with its gait. Encodings as the saver
+landscape; the ego drives +x in the right lane at 5 m/s, turning slightly; car 245 drives ahead of
+it in the same lane, car 246 comes the other way in the left lane (so left must stay left);
+walker 301 walks +x on the right sidewalk, its legs swinging with its gait (phase
+:func:`walker_phase`). Encodings as the saver
 writes them: frame numbers ``%04d``; pose lines ``%04d`` then 16 ``%.6f`` (sensor-to-world,
 right-handed: CARLA's y, pitch and yaw negated); traffic YAML in the saver's key order with
 floats rounded to 6 decimals; RGB with the x1.2 gain; raw depth ``clip(d, 0, 80) / 80 * 65535``
@@ -28,8 +29,10 @@ as uint16 (planar depth); raw semantics in CARLA's CityScapes palette, the terra
 as CARLA's semantic pass leaves it; ASCII PLY with y negated.
 Meshes: OBJ in the export's mesh axes (x forward, y up, z right; world = (x, -z, y)), metres,
 background actors placed in the world, vehicles in their actor frame, the walk cycle's frames
-in the skeletal mesh's component frame (feet at the origin, walking along -y after the axis
-change) with bones in centimetres.
+in the skeletal mesh's component frame (feet at the origin, walking along +z of the mesh axes)
+with their bone files in the mesh axes in centimetres. The recorded leg bones (``crl_leg__L/R``,
+the lower legs: origins at the knees) are socket transforms in the walker's actor frame (x
+forward, origin the box centre), metres, as CARLA's ``GetBonesTransform`` gives them.
 """
 
 from __future__ import annotations
@@ -177,26 +180,32 @@ def car_model(length=4.8, width=2.0, height=1.5):
     return merge([body, cabin, *wheels])
 
 
-def walker_frame(phase: float, height=1.8):
-    """The walk cycle at ``phase`` (0..1) in the component frame: feet at z = 0, walking along -y,
-    left = +x. Returns (vertices, faces, bones {name: 4x4 in cm})."""
-    hip_z, leg = 0.5 * height, 0.5 * height
-    swing = 0.45 * math.sin(2 * math.pi * phase)  # rad, the left thigh forward when positive
-    parts = [box((-0.18, -0.12, hip_z), (0.18, 0.12, height - 0.25)), box((-0.1, -0.1, height - 0.25), (0.1, 0.1, height))]
+def _ry(a: float) -> np.ndarray:
+    """Rotation by ``a`` rad about +y (right-handed)."""
+    return np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+
+
+RZ90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +90 deg about z
+
+
+def walker_pose(phase: float, height=1.8):
+    """The walker at gait ``phase`` (0..1) in its actor axes (x forward, y left, z up) with the
+    feet at z = 0: (vertices, faces, {bone: (knee position, lower-leg rotation)}). The thighs swing
+    +-0.45 rad opposite each other (the left forward first), the knees bend in the swing phase;
+    CARLA's ``crl_leg__L/R`` are the lower legs, their origins the knees."""
+    leg = 0.5 * height
+    parts = [box((-0.12, -0.18, leg), (0.12, 0.18, height - 0.25)), box((-0.1, -0.1, height - 0.25), (0.1, 0.1, height))]
     bones = {}
-    for name, side, ang in (("crl_leg__L", 1.0, swing), ("crl_leg__R", -1.0, -swing)):
-        hip = np.array([0.1 * side, 0.0, hip_z])
-        # the thigh turns about the lateral (x) axis (forward is -y) and the hip twists about z with
-        # the cycle's quarter-phase (so no two frames of the cycle have the same bones)
-        tw = 0.15 * side * math.cos(2 * math.pi * phase)
-        Rz = np.array([[math.cos(tw), -math.sin(tw), 0], [math.sin(tw), math.cos(tw), 0], [0, 0, 1]])
-        R = Rz @ np.array([[1, 0, 0], [0, math.cos(ang), math.sin(ang)], [0, -math.sin(ang), math.cos(ang)]])
-        foot = hip + R @ np.array([0.0, 0.0, -leg])
-        lo, hi = np.minimum(hip, foot) - 0.07, np.maximum(hip, foot) + 0.07
-        parts.append(box(lo, hi))
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, hip * 100.0  # centimetres, as the walk cycle's bone files
-        bones[name] = T
+    for name, side, sign in (("crl_leg__L", 1.0, 1.0), ("crl_leg__R", -1.0, -1.0)):
+        thigh = sign * 0.45 * math.sin(2 * math.pi * phase)  # rad, foot forward when positive
+        bend = 0.25 * (1.0 + math.sin(2 * math.pi * phase * sign + math.pi / 2 * sign))  # knee flexion
+        hip = np.array([0.0, 0.1 * side, leg])
+        R_thigh, R_shin = _ry(-thigh), _ry(-(thigh - bend))
+        knee = hip + R_thigh @ np.array([0.0, 0.0, -leg / 2])
+        foot = knee + R_shin @ np.array([0.0, 0.0, -leg / 2])
+        for a, b in ((hip, knee), (knee, foot)):
+            parts.append(box(np.minimum(a, b) - 0.06, np.maximum(a, b) + 0.06))
+        bones[name] = (knee, R_shin)
     V, F = merge(parts)
     return V, F, bones
 
@@ -288,10 +297,18 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
     walk.mkdir(parents=True, exist_ok=True)
     (fg / "Pedestrians" / "frame_info.json").write_text(json.dumps({"AS_walking04_G3": 36}, indent=4))
     for i in range(36):
-        V, F, bones = walker_frame(i / 36)
-        # the walk cycle frames come out of Blender at scale 1 in the mesh axes
-        write_obj(walk / f"frame_{i:02d}.obj", V, F)
-        (walk / f"frame_{i:02d}_bones.json").write_text(json.dumps({k: v.tolist() for k, v in bones.items()}))
+        V, F, bones = walker_pose(i / 36)
+        # the walk cycle's frames: the component frame is the actor's turned -90 deg (walking
+        # along -y), written in the mesh axes (walking along +z) at scale 1; the bone files hold
+        # the same bones in the mesh axes in centimetres (the animation's units)
+        write_obj(walk / f"frame_{i:02d}.obj", V @ RZ90, F)
+        to_mesh = OBJ_TO_WORLD.T @ RZ90.T  # actor axes -> mesh axes
+        cycle_bones = {}
+        for k, (knee, R) in bones.items():
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = to_mesh @ R @ to_mesh.T, to_mesh @ knee * 100.0
+            cycle_bones[k] = T.tolist()
+        (walk / f"frame_{i:02d}_bones.json").write_text(json.dumps(cycle_bones))
 
     # the sequence: world geometry with labels for the sensors
     seq = out / SEQUENCE
@@ -305,18 +322,17 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
     ego_bbox = (np.array([2.4, 1.0, 0.75]), pose(0.1, 0.0, 0.75, 0.0))
     for f in range(frames):
         t = f / FPS
-        ego = pose(-10.0 + 5.0 * t, -1.75, 0.0, 0.0)
-        cars = {245: ("vehicle.lincoln.mkz", pose(4.0 + 6.0 * t, -1.75, 0.0, 0.0), [6.0, 0.0, 0.0]),
-                246: ("vehicle.mini.cooper", pose(25.0 - 7.0 * t, 1.75, 0.0, math.pi), [-7.0, 0.0, 0.0])}
+        # the ego and the cars turn a little (no rotation here is its own transpose)
+        ego = pose(-10.0 + 5.0 * t, -1.75 + 0.05 * t, 0.0, 0.01 + 0.02 * t)
+        cars = {245: ("vehicle.lincoln.mkz", pose(4.0 + 6.0 * t, -1.75, 0.0, 0.05), [6.0, 0.3, 0.0]),
+                246: ("vehicle.mini.cooper", pose(25.0 - 7.0 * t, 1.75, 0.0, math.pi - 0.08), [-7.0, 0.56, 0.0])}
         phase = walker_phase(t)
-        walker_T = pose(-6.0 + 1.4 * t, -8.5, 0.15 + 0.9, 0.0)  # CARLA walker origin: the box centre
-        wV, wF, wbones = walker_frame(phase)
-        # component frame -> actor: turn +90 deg about z (walk direction -y -> +x), feet to the box bottom
-        comp_to_actor = pose(0.0, 0.0, -0.9, math.pi / 2)
+        walker_T = pose(-6.0 + 1.4 * t, -8.5 + 0.04 * t, 0.15 + 0.9, 0.03)  # CARLA walker origin: the box centre
+        wV, wF, wbones = walker_pose(phase)
         parts = list(static_parts)
         for _, T, _ in cars.values():
             parts.append((transform(T, car_V), car_F, 14))
-        parts.append((transform(walker_T @ comp_to_actor, wV), wF, 12))
+        parts.append((transform(walker_T @ pose(0.0, 0.0, -0.9, 0.0), wV), wF, 12))
         tris = np.concatenate([V[F] for V, F, _ in parts])
         labels = np.concatenate([np.full(len(F), lab) for _, F, lab in parts])
         lidar = ego @ pose(0.0, 0.0, LIDAR_Z, 0.0)
@@ -332,7 +348,12 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
             info["vehicles"].append({"id": cid, "type": bp, "transform": T.tolist(),
                                      "distance_to_ego": float(np.linalg.norm(T[:3, 3] - ego[:3, 3])), "velocity": vel,
                                      "bbox": {"extent": ego_bbox[0].tolist(), "transform": ego_bbox[1].tolist()}})
-        bones_m = {k: np.vstack([np.hstack([v[:3, :3], v[:3, 3:] / 100.0]), [0, 0, 0, 1]]) for k, v in wbones.items()}
+        # the recorded leg bones: socket transforms in the actor frame (origin the box centre), metres
+        bones_m = {}
+        for k, (knee, R) in wbones.items():
+            T = np.eye(4)
+            T[:3, :3], T[:3, 3] = R, knee - [0.0, 0.0, 0.9]
+            bones_m[k] = T
         info["pedestrians"].append({"id": 301, "type": "walker.pedestrian.0012", "transform": walker_T.tolist(),
                                     "distance_to_ego": float(np.linalg.norm(walker_T[:3, 3] - ego[:3, 3])),
                                     "bbox_extent": [0.25, 0.25, 0.9], "bones": {k: v.tolist() for k, v in bones_m.items()}})

@@ -9,8 +9,9 @@ Items, keyed by their path under ``SceneMeshes/fg_actors/``:
 * **the walk cycle** ``Pedestrians/standard_walking/frame_XX.obj``: CARLA's walker posed at each
   of the cycle's frames, class Pedestrian, sub-class ``adult``.
 
-Declared frames: the export's mesh axes, y up; vehicles face +x, the walk cycle walks along +z
-(our -y in the component frame); metres. Standardization turns them into the asset frame, so
+Declared frames: the export's mesh axes, y up; vehicles face +x (metres), the walk cycle walks
+along +z (units undeclared: the export converted it at scale 1 from an animation in centimetres,
+so standardization infers them from the walker's size). Standardization turns them into the asset frame, so
 the importer places an asset with ``actor pose @ T(offset)``, the offset being the bottom centre
 of the mesh's bounds in the actor frame (see :func:`model_offset`). The walk cycle's bone files
 are read by the importer, not ingested. Anything else under ``fg_actors/`` (FBX, ``frame_info``)
@@ -96,7 +97,7 @@ class CarlaRecordingAdapter:
         if meta["kind"] == "walk":
             return SourceAsset(source=self.kind, source_path=f"fg_actors/{item.key}", licence=LICENCE,
                                category="Pedestrian", subclass="adult", parts=parts, up="+y", forward="+z",
-                               units="m")  # fmt: skip
+                               units="unknown")  # fmt: skip
         try:
             cls = semantic_class(meta["category"])
         except KeyError:

@@ -191,8 +191,10 @@ def list_stages() -> None:
 
 
 @app.command("config")
-def show_config(config: ConfigOpt = None) -> None:
-    """Print the effective dataset config as YAML (a starting point for --config files)."""
+def show_config(config: ConfigOpt = None, root: Annotated[Optional[str], typer.Option(
+        "--root", help="a dataset root: its own dataset.yaml when it has one")] = None) -> None:
+    """Print the effective dataset config as YAML (a starting point for --config files): the
+    --config file, else the root's dataset.yaml, else the embedded default."""
     import yaml
 
-    typer.echo(yaml.safe_dump(load_config(config).model_dump(mode="json"), sort_keys=False))
+    typer.echo(yaml.safe_dump(load_config(config, root).model_dump(mode="json"), sort_keys=False))

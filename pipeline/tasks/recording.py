@@ -7,6 +7,7 @@ sequences (:mod:`carlaocc.stages.scenes.recording`) with what had to be left out
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,7 +41,8 @@ def _map_of(rec, spec: TownSpec) -> str:
 
 def recording_files(spec: TownSpec) -> tuple[str, ...]:
     """The files whose bytes define a recorded town (fingerprinted with its scenes partition):
-    calibration, actor list, pose files and traffic of its sequences (not the images)."""
+    calibration, actor list and meshes, vehicle models and the walk cycle, pose files and traffic
+    of its sequences (not the images: the sensors stage's frames name those)."""
     from carlaocc.catalog.carla_recording import RecordingError, discover
 
     try:
@@ -50,26 +52,39 @@ def recording_files(spec: TownSpec) -> tuple[str, ...]:
         raise StoreError(f"town recording: {exc}") from None
     files = [rec.calib]
     if town in rec.scene_meshes:
-        files.append(rec.scene_meshes[town] / "actor_info.json")
+        scene = rec.scene_meshes[town]
+        files += [scene / "actor_info.json", *sorted((scene / "bg_actors").glob("*.obj"))]
+    fg = rec.root / "SceneMeshes" / "fg_actors"
+    if fg.is_dir():  # the models' offsets and the walk cycle's bones come from these
+        files += sorted(fg.rglob("*.obj")) + sorted(fg.rglob("*_bones.json"))
     for s in rec.sequences:
         if s.town == town:
             files += [s.path / "poses" / "lidar.txt", *sorted((s.path / "traffic_info").glob("*.yaml"))]
     return tuple(str(f) for f in files if Path(f).is_file())
 
 
+def _wrap180(deg: float) -> float:
+    """An angle in degrees in (-180, 180]; within 1e-6 of -180 counts as +180."""
+    w = math.remainder(deg, 360.0)
+    return 180.0 if w <= -180.0 + 1e-6 else w + 0.0
+
+
 def rig_from_calib(calib, base):
     """The rig of a recording: the six cameras of its calibration (camera-to-LiDAR transforms,
-    size, fov) on the LiDAR of ``base`` (a RigConfig)."""
-    import math
-
+    size, fov) on the LiDAR of ``base`` (a RigConfig, its LiDAR at (0, 0, z) on the ego, unturned,
+    as the recording's; camera pitch and roll are not representable and must be 0)."""
     from carlaocc.schemas.rig import CameraSpec
 
     lidar_z = base.lidar.z
     cams = []
     for name, T in calib.cam_to_lidar.items():
-        yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+        if abs(T[2, 2] - 1.0) > 1e-3:
+            raise StoreError(f"calibration camera {name} is pitched or rolled against the LiDAR: the rig has level "
+                             f"cameras only")  # fmt: skip
+        # CARLA's yaw turns right: the negated heading, in (-180, 180] (a rear camera is +180)
+        yaw = _wrap180(-math.degrees(math.atan2(T[1, 0], T[0, 0])))
         cams.append(CameraSpec(name=name.replace("cam_", "camera_"), x=float(T[0, 3]), y=float(-T[1, 3]),
-                               z=float(T[2, 3] + lidar_z), yaw_deg=-yaw, width=calib.width, height=calib.height,
+                               z=float(T[2, 3] + lidar_z), yaw_deg=yaw, width=calib.width, height=calib.height,
                                hfov_deg=calib.fov_deg))  # fmt: skip
     return base.model_copy(update={"cameras": tuple(cams)})
 
@@ -81,7 +96,8 @@ def _check_rig(rig, calib, label: str) -> None:
     for c in want.cameras:
         have = mine.get(c.name)
         differs = have is None or (have.width, have.height) != (c.width, c.height) or any(
-            abs(getattr(have, k) - getattr(c, k)) > 1e-3 for k in ("x", "y", "z", "yaw_deg", "hfov_deg"))
+            abs(getattr(have, k) - getattr(c, k)) > 1e-3 for k in ("x", "y", "z", "hfov_deg")) or abs(
+            math.remainder(have.yaw_deg - c.yaw_deg, 360.0)) > 1e-3
         if differs:
             raise StoreError(f"{label}: scenes.rig camera {c.name} differs from the recording's calib/calib.yaml "
                              f"(x {c.x:.3f}, y {c.y:.3f}, z {c.z:.3f}, yaw {c.yaw_deg:.2f} deg, {c.width}x{c.height}, "
@@ -105,13 +121,27 @@ def _walk_cycle(rec, assets: dict[str, AssetRecord], skipped) -> list:
             continue
         try:
             V, _ = read_mesh(obj)
-            bones = {k: np.asarray(v, dtype=np.float64).reshape(4, 4)[:3, :3]
-                     for k, v in json.loads(bones_file.read_text()).items()}  # fmt: skip
-        except (RecordingError, OSError, ValueError, TypeError) as exc:
-            skipped.append((str(bones_file), f"walk-cycle frame unusable: {exc}"))
+            bones = {k: np.asarray(v, dtype=np.float64).reshape(4, 4) for k, v in json.loads(bones_file.read_text()).items()}
+            # the gait signal: how far the left knee is ahead of the right; the mesh axes walk along +z
+            stride = float(bones["crl_leg__L"][2, 3] - bones["crl_leg__R"][2, 3])
+        except (RecordingError, OSError, ValueError, TypeError, KeyError) as exc:
+            skipped.append((str(bones_file), f"walk-cycle frame unusable: {exc!r}"))
             continue
-        cycle.append(WalkFrame(asset=asset, offset=model_offset(V @ rz90.T), bones=bones))
+        # the component frame is the actor's turned -90 deg; the asset origin in the actor frame,
+        # in metres whatever the frame's units were (standardization's scale)
+        cycle.append(WalkFrame(asset=asset, offset=model_offset(V @ rz90.T) * asset.scale_applied, stride=stride))
     return cycle
+
+
+def _frames_text(frames: list[int]) -> str:
+    """``[0, 1, 2, 5]`` -> ``"0-2, 5"``."""
+    runs, out = [], sorted(set(frames))
+    for f in out:
+        if runs and f == runs[-1][1] + 1:
+            runs[-1][1] = f
+        else:
+            runs.append([f, f])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
 
 
 def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: str) -> RecordedTown:
@@ -155,7 +185,7 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
         asset = assets.get(f"fg_actors/{obj.parent.name}/{obj.name}")
         if asset is not None:
             try:
-                models[bp] = RecordedAsset(asset=asset, offset=model_offset(read_mesh(obj)[0]))
+                models[bp] = RecordedAsset(asset=asset, offset=model_offset(read_mesh(obj)[0]) * asset.scale_applied)
             except RecordingError as exc:
                 skipped.append((str(obj), str(exc)))
     cycle = _walk_cycle(rec, assets, skipped)
@@ -184,7 +214,12 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
         ego = by_type.get(frames[0].traffic.ego.type)
         seq = recorded_sequence(f"{name}_{s.name}", town, s.index, frames, cfg.rig, by_type, cycle,
                                 ego.asset.asset_id if ego else "")  # fmt: skip
-        skipped += [(f"{s.name} frame {fr} actor {aid}", reason) for fr, aid, reason in seq.skipped]
+        # one row per (actor, reason) with the frames it covers, not one per frame
+        grouped: dict[tuple[int, str], list[int]] = {}
+        for fr, aid, reason in seq.skipped:
+            grouped.setdefault((aid, reason), []).append(fr)
+        skipped += [(f"{s.name} actor {aid}", f"{reason} (frames {_frames_text(frs)})")
+                    for (aid, reason), frs in sorted(grouped.items())]  # fmt: skip
         sequences.append(seq)
     if not sequences:
         raise StoreError(f"{label}: no usable sequence of {town_name}"
@@ -196,10 +231,11 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
 
 
 def recording_config(recording: str, existing=None):
-    """The dataset config that builds a recording: one ``carla-recording`` town per map of it,
-    the rig of its calibration, the ADMesh source ``carla-recording``. ``existing`` (a
-    DatasetConfig) is extended: its towns of the same recording and map are replaced, other towns
-    kept; its rig must be the recording's (StoreError otherwise)."""
+    """The dataset config that builds a recording: one ``carla-recording`` town per map of it and
+    the rig of its calibration (the scenes stage adds the ``carla-recording`` ADMesh source for
+    recorded towns; simulated towns keep drawing from ``asset_sources``). ``existing`` (a
+    DatasetConfig) is extended: its towns of the same recording and map are replaced in place,
+    others kept, new ones appended; its rig must be the recording's (StoreError otherwise)."""
     from carlaocc.catalog.carla_recording import RecordingError, discover, read_calib
     from carlaocc.schemas.configs import DatasetConfig
 
@@ -209,17 +245,21 @@ def recording_config(recording: str, existing=None):
     except RecordingError as exc:
         raise StoreError(f"recording {recording}: {exc}") from None
     base = existing if existing is not None else DatasetConfig()
-    # one rig per dataset: recordings with different calibrations do not mix
-    if existing is not None and any(t.style == "carla-recording" for t in existing.scenes.towns):
-        _check_rig(existing.scenes.rig, calib, f"recording {recording} (the dataset already holds another recording)")
     rig = rig_from_calib(calib, base.scenes.rig)
+    # one rig per dataset: a recording joins a dataset only when its calibration is the dataset's
+    if existing is not None:
+        _check_rig(existing.scenes.rig, calib, f"recording {recording} (the dataset's scenes.rig)")
     root = str(Path(recording).resolve())
     maps = sorted({s.town for s in rec.sequences})
-    keep = [t for t in (existing.scenes.towns if existing is not None else ())
-            if not (t.style == "carla-recording" and t.recording == root and t.map in maps)]
-    towns = keep + [TownSpec(style="carla-recording", recording=root, map=m) for m in maps]
-    sources = tuple(dict.fromkeys([*(existing.scenes.asset_sources if existing is not None else ()), "carla-recording"]))
-    scenes = base.scenes.model_copy(update={"towns": tuple(towns), "rig": rig, "asset_sources": sources})
+    new = {m: TownSpec(style="carla-recording", recording=root, map=m) for m in maps}
+    towns = []
+    for t in (existing.scenes.towns if existing is not None else ()):
+        if t.style == "carla-recording" and t.recording == root and t.map in new:
+            towns.append(new.pop(t.map))  # in place: town keys are positions
+        else:
+            towns.append(t)
+    towns += list(new.values())
+    scenes = base.scenes.model_copy(update={"towns": tuple(towns), "rig": rig})
     return base.model_copy(update={"scenes": scenes})
 
 

@@ -128,9 +128,11 @@ def draw_skeletons(image: np.ndarray, uv: np.ndarray, visible: np.ndarray, bones
         ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
         out[r[ok], c[ok]] = colour
 
+    J = q.shape[1]
     for s in range(q.shape[0]):
         for a, b in bones:
-            if not (np.isfinite(q[s, a]).all() and np.isfinite(q[s, b]).all()):
+            # a skeleton with fewer joints (a recording's two knees) draws the bones it has
+            if a >= J or b >= J or not (np.isfinite(q[s, a]).all() and np.isfinite(q[s, b]).all()):
                 continue
             # sample the segment at least once per pixel
             n = int(max(abs(q[s, b, 0] - q[s, a, 0]), abs(q[s, b, 1] - q[s, a, 1]), 1.0)) + 1

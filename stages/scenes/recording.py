@@ -15,12 +15,14 @@ World frame: the recording's right-handed world (x forward, y left, z up, metres
   order). Vehicles: the blueprint's model (an ADMesh asset) placed at ``actor pose @ T(offset)``
   (``offset``: where standardization put the asset origin, in the actor frame), the recorded box
   (centre ``actor @ box``, size twice the half extents), yaw / pitch / roll of the actor's
-  rotation, the recorded velocity. Walkers: the walk-cycle frame whose two leg bones are closest
-  to the recorded ones (the sum of the two bones' rotation angles between them) placed at
-  ``actor pose @ T(offset - (0, 0, half height))``; box centred on the actor origin; velocity by
-  central differences of its positions (the recording has none). Angular velocities from the
-  angles' central differences (:func:`carlaocc.stages.geometry.angular_velocity`).
-* **Skeletons**: the recorded leg bones' origins (the hips), in the world and the LiDAR frame.
+  rotation, the recorded velocity (moved to the pose origin). Walkers: the walk-cycle frame
+  matched from the gait signal (how far the left knee is ahead of the right, from the recorded
+  lower-leg bones; :func:`match_walk_frames`) placed at ``actor pose @ T(offset - (0, 0, half
+  height))``; box centred on the actor origin; velocity by central differences of its positions
+  (the recording has none). Angular velocities from the angles' central differences
+  (:func:`carlaocc.stages.geometry.angular_velocity`).
+* **Skeletons**: the recorded lower-leg bones' origins (the knees: CARLA's ``crl_leg__L/R`` are
+  socket transforms in the walker's actor frame), in the world and the LiDAR frame.
 
 Not done: walkers are not scaled to their recorded height (the walk cycle's own size is used);
 actors whose blueprint has no model are left out and counted (``skipped``).
@@ -44,7 +46,7 @@ from carlaocc.stages.scenes.network import RoadNetwork, Town
 from carlaocc.stages.scenes.placing import Placer
 
 __all__ = ["RecordedAsset", "WalkFrame", "RecordedFrame", "RecordedSequence", "recorded_town", "recorded_sequence",
-           "traffic_level_of", "match_walk_frame", "translation"]  # fmt: skip
+           "traffic_level_of", "match_walk_frames", "translation"]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -58,12 +60,12 @@ class RecordedAsset:
 @dataclass(frozen=True)
 class WalkFrame:
     """One frame of the walk cycle: its asset, the asset origin in the actor frame with the feet
-    at z = 0 (m; the actor's origin is then half the walker's height above them) and its leg
-    bones' rotations (3x3, component frame), by bone name."""
+    at z = 0 (m; the actor's origin is then half the walker's height above them) and its gait
+    signal: how far the left knee is ahead of the right one (any unit: the matcher normalizes)."""
 
     asset: AssetRecord
     offset: np.ndarray
-    bones: Mapping[str, np.ndarray]
+    stride: float
 
 
 @dataclass(frozen=True)
@@ -118,27 +120,63 @@ def recorded_town(name: str, index: int, source: str, statics: Sequence[tuple[st
                 max_instance_id=placer.next_instance - 1)  # fmt: skip
 
 
-def _rotation_angle(A: np.ndarray, B: np.ndarray) -> float:
-    """Angle (rad) of the rotation taking ``B`` to ``A`` (3x3)."""
-    c = (np.trace(A[:3, :3] @ B[:3, :3].T) - 1.0) / 2.0
-    return float(math.acos(min(1.0, max(-1.0, c))))
+LEFT, RIGHT = "crl_leg__L", "crl_leg__R"  # CARLA's lower-leg bones: their origins are the knees
 
 
-def match_walk_frame(bones: Mapping[str, np.ndarray], cycle: Sequence[WalkFrame]) -> int:
-    """The walk-cycle frame whose leg bones turn least from the recorded ``bones`` (the sum over
-    the bones both have of the angle between their rotations); 0 without bones."""
-    names = [b for b in bones if all(b in w.bones for w in cycle)]
-    if not names or not cycle:
-        return 0
-    cost = [sum(_rotation_angle(bones[b], w.bones[b]) for b in names) for w in cycle]
-    return int(np.argmin(cost))
+WALK_WINDOW = 25  # recorded frames a gait fit looks at (the CarlaOcc authors' matching window)
+WALK_HOP = 8  # frames between the centres of consecutive fits
+GAIT_RATES = np.linspace(0.3, 3.0, 55)  # gait cycles per second tried (a slow stroll to a run)
 
 
-def _component_to_actor(extent_z: float) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
-    T[2, 3] = -float(extent_z)
-    return T
+def match_walk_frames(stride: np.ndarray, times: np.ndarray, cycle: Sequence[float]) -> np.ndarray:
+    """The walk-cycle frame of each recorded frame of one walker. ``stride`` (T,) is how far its
+    left knee is ahead of the right one (m, from the recorded bones) at ``times`` (T,) s;
+    ``cycle`` (K,) the same signal over the walk cycle's frames (any unit, any scale).
+
+    The CarlaOcc authors match this one-dimensional gait signal over a 25-frame window; here, over
+    windows of :data:`WALK_WINDOW` frames every :data:`WALK_HOP` frames, the phase at the window's
+    centre and the gait rate (cycles/s, :data:`GAIT_RATES`) are chosen so the cycle's signal,
+    linearly interpolated at the implied phases and scaled by its least-squares gain (>= 0),
+    best fits the recorded one; the frames near the centre take the phase the fit gives them.
+    The value alone could not tell a leg swinging forward from one swinging back; the fit over
+    time can."""
+    r = np.asarray(stride, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
+    c = np.asarray(cycle, dtype=np.float64)
+    K, T = len(c), len(r)
+    out = np.zeros(T, dtype=np.int64)
+    if K == 0 or T == 0:
+        return out
+    phases = np.arange(4 * K) / (4 * K)  # candidate phases at the window centre
+
+    def signal(ph: np.ndarray) -> np.ndarray:
+        # the cycle's signal at fractional phases (circular linear interpolation)
+        x = np.mod(ph, 1.0) * K
+        i = np.floor(x).astype(np.int64) % K
+        w = x - np.floor(x)
+        return c[i] * (1.0 - w) + c[(i + 1) % K] * w
+
+    for centre in range(0, T, WALK_HOP):
+        lo, hi = max(0, centre - WALK_WINDOW // 2), min(T, centre + WALK_WINDOW // 2 + 1)
+        dt = t[lo:hi] - t[centre]
+        # 1. the cycle's signal for every (phase, rate) over the window: (P, R, W)
+        pred = signal(phases[:, None, None] + GAIT_RATES[None, :, None] * dt[None, None, :])
+        # 2. the least-squares gain (>= 0) and the residual of each candidate
+        obs = r[lo:hi]
+        gain = np.maximum(np.einsum("prw,w->pr", pred, obs) / np.maximum(np.einsum("prw,prw->pr", pred, pred), 1e-12), 0)
+        err = np.einsum("prw,prw->pr", obs - gain[..., None] * pred, obs - gain[..., None] * pred)
+        p, q = np.unravel_index(int(np.argmin(err)), err.shape)
+        # 3. the frames nearest this centre take the fitted phase, as cycle frames
+        a, b = max(0, centre - WALK_HOP // 2), min(T, centre + (WALK_HOP + 1) // 2) if centre + WALK_HOP < T else T
+        ph = phases[p] + GAIT_RATES[q] * (t[a:b] - t[centre])
+        out[a:b] = np.rint(np.mod(ph, 1.0) * K).astype(np.int64) % K
+    return out
+
+
+def _at(velocity: np.ndarray, omega: np.ndarray, actor: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """The velocity of the pose origin (flow turns a body about it) from the actor origin's:
+    ``v + omega x (p_pose - p_actor)``."""
+    return np.asarray(velocity, dtype=np.float64) + np.cross(omega, pose[:3, 3] - actor[:3, 3])
 
 
 def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence[RecordedFrame], rig: RigConfig,
@@ -177,6 +215,21 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
         omega = angular_velocity(ang[:, 0], ang[:, 1], ang[:, 2], dang[:, 0], dang[:, 1], dang[:, 2])
         for j, k in enumerate(ks):
             rates[(aid, int(k))] = (vel[j], omega[j])
+    # the walk-cycle frame of every walker frame, matched over the walker's whole track
+    phase: dict[tuple[int, int], int] = {}
+    if cycle:
+        signal = np.array([w.stride for w in cycle])
+        strides: dict[int, list[tuple[int, float]]] = {}
+        for k, f in enumerate(frames):
+            for p in f.traffic.pedestrians:
+                if LEFT in p.bones and RIGHT in p.bones:
+                    strides.setdefault(p.id, []).append((k, float(p.bones[LEFT][0, 3] - p.bones[RIGHT][0, 3])))
+                else:
+                    phase[(p.id, k)] = 0
+        for aid, track in strides.items():
+            ks = [k for k, _ in track]
+            for k, j in zip(ks, match_walk_frames(np.array([d for _, d in track]), times[ks], signal)):
+                phase[(aid, k)] = int(j)
     # 3. records, frame by frame
     for k, f in enumerate(frames):
         lidar = np.asarray(f.lidar_pose, dtype=np.float64)
@@ -202,16 +255,16 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
                 sequence_id=sequence_id, frame_index=k, instance_id=instance[v.id], asset_id=model.asset.asset_id,
                 semantic_id=model.asset.category_id, pose=pose_to_list(pose),
                 box_center=[float(c) for c in box[:3, 3]], box_size=[float(2 * e) for e in v.extent],
-                yaw=yaw, pitch=pitch, roll=roll, velocity=[float(c) for c in v.velocity],
+                yaw=yaw, pitch=pitch, roll=roll,
+                velocity=[float(c) for c in _at(v.velocity, rates[(v.id, k)][1], v.transform, pose)],
                 angular_velocity=[float(c) for c in rates[(v.id, k)][1]],
             ))  # fmt: skip
         for p in f.traffic.pedestrians:
             if not cycle:
                 out.skipped.append((f.number, p.id, "no walk cycle to pose the walker with"))
                 continue
-            j = match_walk_frame(p.bones, cycle)
+            j = int(phase[(p.id, k)])
             out.phase_frames.setdefault(p.id, []).append(j)
-            to_actor = _component_to_actor(p.extent[2])
             # the asset's axes are the actor's: its origin sits at the offset, the feet a half height down
             off = cycle[j].offset
             pose = p.transform @ translation(off[0], off[1], off[2] - p.extent[2])
@@ -220,13 +273,13 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
             rows.append(ActorStateRecord(
                 sequence_id=sequence_id, frame_index=k, instance_id=instance[p.id], asset_id=cycle[j].asset.asset_id,
                 semantic_id=cycle[j].asset.category_id, pose=pose_to_list(pose),
-                box_center=box_center(p.transform @ translation(0.0, 0.0, -p.extent[2]), 2 * p.extent[2]),
-                box_size=[float(2 * e) for e in p.extent], yaw=yaw, pitch=pitch, roll=roll,
-                velocity=[float(c) for c in vel], angular_velocity=[float(c) for c in omega],
-                gait_phase=j / len(cycle),
+                box_center=[float(c) for c in p.transform[:3, 3]], box_size=[float(2 * e) for e in p.extent],
+                yaw=yaw, pitch=pitch, roll=roll, velocity=[float(c) for c in _at(vel, omega, p.transform, pose)],
+                angular_velocity=[float(c) for c in omega], gait_phase=j / len(cycle),
             ))  # fmt: skip
+            # the recorded bones: socket transforms in the actor frame; their origins the knees
             for b, name in enumerate(sorted(p.bones)):
-                world = transform_points(p.transform @ to_actor, p.bones[name][None, :3, 3])[0]
+                world = transform_points(p.transform, p.bones[name][None, :3, 3])[0]
                 out.skeletons.append(SkeletonRecord(
                     sequence_id=sequence_id, frame_index=k, instance_id=instance[p.id], asset_id=cycle[j].asset.asset_id,
                     joint_index=b, joint=name, world=[float(c) for c in world],

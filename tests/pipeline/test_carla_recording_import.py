@@ -120,7 +120,7 @@ def test_vehicle_voxels_lie_in_their_recorded_boxes(built, recording):
         assert len(seen) == 2
 
 
-def test_leg_bones_on_the_walkers_voxels_and_phase_matched(built, recording):
+def test_knees_on_the_walkers_voxels_and_phase_matched(built, recording):
     seq = f"town00_{SEQ}"
     tool = _tool()
     poses, _ = cr.read_poses(recording / SEQ / "poses" / "lidar.txt")
@@ -130,25 +130,53 @@ def test_leg_bones_on_the_walkers_voxels_and_phase_matched(built, recording):
     for f, inst, phase in rows:
         grid, _, instance = _frame(built, seq, f)
         (ped,) = cr.read_traffic(recording / SEQ / "traffic_info" / f"{f:04d}.yaml").pedestrians
-        hips = transform_points(ped.transform @ cr.component_to_actor(ped.extent[2]),
-                                np.array([b[:3, 3] for b in ped.bones.values()]))  # fmt: skip
-        hips_lidar = transform_points(invert_pose(poses[f]), hips)
+        # the recorded lower-leg bones' origins (the knees), actor frame -> world -> LiDAR
+        knees = transform_points(ped.transform, np.array([b[:3, 3] for b in ped.bones.values()]))
+        knees_lidar = transform_points(invert_pose(poses[f]), knees)
         vox = _centres(grid, np.argwhere(instance == inst))
-        gap = np.linalg.norm(vox[None] - hips_lidar[:, None], axis=2).min(axis=1)
-        assert (gap <= RES).all(), f"frame {f}: a hip is {gap.max():.3f} m from the walker's voxels"
+        gap = np.linalg.norm(vox[None] - knees_lidar[:, None], axis=2).min(axis=1)
+        assert (gap <= RES).all(), f"frame {f}: a knee is {gap.max():.3f} m from the walker's voxels"
         true = tool.walker_phase(f / 10.0)
         errors.append(abs((phase - true + 0.5) % 1.0 - 0.5))
-    # the matched walk-cycle frame is the true phase to within half a frame of the 36
-    assert max(errors) <= 0.5 / 36 + 1e-9
+    # the matched walk-cycle frame (the cycle's bones are in the mesh axes and centimetres, the
+    # recording's in the actor frame and metres) is the true phase to within one frame of the 36
+    assert max(errors) <= 1.0 / 36 + 1e-9, errors
 
 
-def test_skeletons_are_the_recorded_hips(built):
+def test_skeletons_are_the_recorded_knees(built, recording):
     _, rows = query(built, "SELECT joint, world FROM skeletons WHERE frame_index = 0 ORDER BY joint")
     assert [j for j, _ in rows] == ["crl_leg__L", "crl_leg__R"]
+    (ped,) = cr.read_traffic(recording / SEQ / "traffic_info" / "0000.yaml").pedestrians
+    want = transform_points(ped.transform, np.array([ped.bones[b][:3, 3] for b in ("crl_leg__L", "crl_leg__R")]))
+    assert np.allclose([w for _, w in rows], want)
+    # the walker heads +x: its left knee on +y, about knee height above the sidewalk
     (lw, rw) = (np.asarray(w) for _, w in rows)
-    # the walker heads +x: its left hip is on +y, 0.2 m apart, at hip height above the sidewalk
-    assert lw[1] > rw[1] and np.linalg.norm(lw - rw) == pytest.approx(0.2, abs=0.03)
-    assert lw[2] == pytest.approx(0.15 + 0.9, abs=0.05)
+    assert lw[1] > rw[1] and 0.15 + 0.3 < lw[2] < 0.15 + 0.6
+
+
+def test_rotations_are_the_recorded_ones(built, recording):
+    from carlaocc.stages.geometry import yaw_pitch_roll
+
+    seq = f"town00_{SEQ}"
+    _, rows = query(built, f"SELECT frame_index, box_center, yaw, pitch, roll FROM actors WHERE sequence_id = '{seq}'")
+    poses, _ = cr.read_poses(recording / SEQ / "poses" / "lidar.txt")
+    _, frames = query(built, f"SELECT frame_index, lidar_pose FROM frames WHERE sequence_id = '{seq}'")
+    for f, lidar in frames:
+        assert np.allclose(np.asarray(lidar).reshape(4, 4), poses[f], atol=1e-6)
+    for f, centre, yaw, pitch, roll in rows:
+        tf = cr.read_traffic(recording / SEQ / "traffic_info" / f"{f:04d}.yaml")
+        actors = [(v.transform @ v.bbox_transform, v.transform) for v in tf.vehicles] + [
+            (p.transform, p.transform) for p in tf.pedestrians]
+        box, T = next((b, T) for b, T in actors if np.allclose(b[:3, 3], centre, atol=1e-6))
+        assert np.allclose((yaw, pitch, roll), yaw_pitch_roll(T), atol=1e-9)
+    assert {round(y, 2) for _, _, y, _, _ in rows} >= {0.05, round(np.pi - 0.08, 2), 0.03}
+
+
+def test_show_skeletons_draws_the_recorded_knees(built, tmp_path):
+    out = tmp_path / "sk.png"
+    r = cli.invoke(app, ["show", "sensors", "--root", built.root, "--seq", f"town00_{SEQ}", "--frame", "2",
+                         "--skeletons", "--out", str(out)])  # fmt: skip
+    assert r.exit_code == 0, r.output
 
 
 def test_odd_recordings_are_quarantined_not_fatal(recording, tmp_path):
@@ -213,3 +241,64 @@ def test_show_sensors_puts_the_recorded_rgb_first(built, tmp_path):
     rgb = SensorStore(built).read_image(f"town00_{SEQ}", "camera_00", 2, "rgb")
     # the sheet's top-left tile is camera_00's recorded RGB
     assert np.array_equal(sheet[: rgb.shape[0], : rgb.shape[1]], rgb)
+
+
+def test_rig_from_calib_and_the_rear_cameras():
+    from carlaocc.catalog.store import StoreError
+    from carlaocc.pipeline.tasks.recording import _check_rig, rig_from_calib
+    from carlaocc.schemas.rig import RigConfig
+
+    rig = RigConfig()
+    lidar = np.asarray(rig.lidar.sensor_to_ego())
+    # the reference rig's cameras as a calibration would hold them: body-to-LiDAR, exact matrices
+    # (a rear camera's rotation has -0.0 or 1e-16 entries: either way it is yaw 180)
+    cams = {}
+    for c in rig.cameras:
+        T = invert_pose(lidar) @ np.asarray(c.sensor_to_ego())
+        T[np.abs(T) < 1e-12] = -0.0
+        cams[c.name.replace("camera_", "cam_")] = T
+    calib = cr.Calib(width=1408, height=376, fov_deg=103.744808, intrinsics=np.eye(3), cam_to_lidar=cams)
+    rebuilt = rig_from_calib(calib, rig)
+    for a, b in zip(rebuilt.cameras, rig.cameras):
+        assert a.name == b.name and (a.x, a.y, a.z) == pytest.approx((b.x, b.y, b.z)) and a.yaw_deg == pytest.approx(b.yaw_deg)
+    _check_rig(rig, calib, "test")  # the default rig is the calibration's
+    turned = dict(cams, cam_00=cams["cam_00"] @ np.asarray(rig.cameras[0].model_copy(update={"yaw_deg": 5.0, "x": 0, "y": 0, "z": 0}).sensor_to_ego()))
+    with pytest.raises(StoreError, match="camera_00 differs"):
+        _check_rig(rig, cr.Calib(1408, 376, 103.744808, np.eye(3), turned), "test")
+
+
+def test_dataset_config_merge_keeps_town_positions(recording, tmp_path):
+    from carlaocc.catalog.store import StoreError
+    from carlaocc.pipeline.tasks.recording import recording_config
+
+    cfg = recording_config(str(recording))
+    assert [t.style for t in cfg.scenes.towns] == ["carla-recording"] and cfg.scenes.rig.cameras[0].width == 176
+    # a dataset with the recording first and a simulated town after it: re-ingesting keeps both in place
+    both = cfg.model_copy(update={"scenes": cfg.scenes.model_copy(update={"towns": cfg.scenes.towns + (
+        cfg.scenes.towns[0].model_copy(update={"style": "downtown", "recording": None, "map": None}),)})})
+    again = recording_config(str(recording), both)
+    assert [t.style for t in again.scenes.towns] == ["carla-recording", "downtown"]
+    assert again.scenes.asset_sources == both.scenes.asset_sources
+    # a recording with another calibration does not join
+    other = tmp_path / "rec"
+    shutil.copytree(recording, other, ignore=shutil.ignore_patterns("rgb", "depth_carla", "semantics_carla", "*lidar"))
+    calib = other / "calib" / "calib.yaml"
+    calib.write_text(calib.read_text().replace("width: 176", "width: 352"))
+    with pytest.raises(StoreError, match="differs from the recording"):
+        recording_config(str(other), cfg)
+
+
+def test_a_release_layout_without_the_raw_maps(recording, tmp_path):
+    """The release ships the rectified depth/ and semantics/ (no *_carla folders): those are read."""
+    from carlaocc.catalog.sensors import SensorStore
+
+    rel = tmp_path / "rec"
+    shutil.copytree(recording, rel)
+    for raw, release in (("depth_carla", "depth"), ("semantics_carla", "semantics")):
+        (rel / SEQ / raw).rename(rel / SEQ / release)
+    store = _ingest_and_run(rel, tmp_path / "data", stages="ingest,scenes,sensors")
+    from PIL import Image
+
+    depth = cr.decode_depth(np.asarray(Image.open(rel / SEQ / "depth" / "image_00" / "0001.png")))
+    got = SensorStore(store).read_image(f"town00_{SEQ}", "camera_00", 1, "depth_raw")
+    assert np.array_equal(got, np.where(depth >= 80, 0, depth))
