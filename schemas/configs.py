@@ -61,7 +61,14 @@ class TownSpec(StageConfig):
     map: str | None = Field(
         None, description="carla-recording style: which town of the recording (e.g. Town01_Opt; default: its only one)")
     traffic_levels: tuple[TrafficLevelName, ...] = Field(("medium",), min_length=1)
-    sequences_per_level: int = Field(1, ge=1, le=64)
+    sequences_per_level: int | dict[TrafficLevelName, int] = Field(
+        1, description="sequences per traffic level: one number for every level, or a number per level "
+        "(e.g. {none: 1, low: 3, medium: 3, high: 6}, the CarlaOcc collection's plan)")
+
+    def sequences_of(self, level: str) -> int:
+        """How many sequences of ``level`` the town drives."""
+        n = self.sequences_per_level
+        return int(n) if isinstance(n, int) else int(n.get(level, 0))
     blocks: int | None = Field(None, ge=1, le=12, description="city blocks per side of the road grid")
     block_size: float | None = Field(None, gt=10.0, le=500.0, description="block edge, m, kerb to kerb")
     road_width: float | None = Field(None, gt=3.0, le=40.0, description="carriageway width, m")
@@ -77,6 +84,16 @@ class TownSpec(StageConfig):
             raise ValueError("map names a town of a recording: only for the 'carla-recording' style")
         if len(set(self.traffic_levels)) != len(self.traffic_levels):
             raise ValueError(f"traffic_levels repeats a level: {list(self.traffic_levels)}")
+        counts = ([self.sequences_per_level] if isinstance(self.sequences_per_level, int)
+                  else list(self.sequences_per_level.values()))  # fmt: skip
+        if any(not 1 <= c <= 64 for c in counts):
+            raise ValueError(f"sequences_per_level must be 1..64 per level, got {self.sequences_per_level}")
+        if isinstance(self.sequences_per_level, dict):
+            extra = sorted(set(self.sequences_per_level) - set(self.traffic_levels))
+            missing = sorted(set(self.traffic_levels) - set(self.sequences_per_level))
+            if extra or missing:
+                raise ValueError(f"sequences_per_level names levels {sorted(self.sequences_per_level)}, "
+                                 f"traffic_levels are {list(self.traffic_levels)}: they must be the same")
         return self
 
 

@@ -105,7 +105,7 @@ def test_catalog_tables_and_metrics(built):
     n_assets, n_categories = rows[0]
     assert n_assets >= 50 and n_categories >= 9
     scenes = E2E.scenes
-    n_seq = sum(len(t.traffic_levels) * t.sequences_per_level for t in scenes.towns)
+    n_seq = sum(t.sequences_of(level) for t in scenes.towns for level in t.traffic_levels)
     _, rows = query(built, "SELECT count(*) FROM frames")
     assert rows[0][0] == scenes.frame_count * n_seq
     _, rows = query(built, "SELECT value FROM quality WHERE frame_index IS NULL AND metric = 'spatial_continuity'")

@@ -55,6 +55,8 @@ def test_wheel_holds_every_module_and_the_towns(wheel):
     assert not missing, f"modules left out of the wheel (add their package to pyproject.toml): {missing[:5]}"
     xodr = {p.name for p in (ROOT / "catalog" / "towns").glob("*.xodr")}
     assert xodr and {f"carlaocc/catalog/towns/{x}" for x in xodr} <= names
+    presets = {p.name for p in (ROOT / "catalog" / "presets").glob("*.yaml")}
+    assert presets and {f"carlaocc/catalog/presets/{x}" for x in presets} <= names
 
 
 def test_entry_point_names_the_namespace(wheel):

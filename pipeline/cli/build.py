@@ -13,7 +13,8 @@ from pydantic import ValidationError
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, _RichProgress, parse_voxel_sizes, _store,
-                                         _validation_message, check_towns, fail, load_config)
+                                         _validation_message, check_towns, fail, load_config,
+                                         plan_config, PresetOpt, MapsOpt, LimitFramesOpt)
 
 
 @app.command()
@@ -25,11 +26,15 @@ def run(
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous' for debugging (default: $DASK_SCHEDULER_ADDRESS, else a LocalCluster)")] = None,
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
     force: Annotated[bool, typer.Option("--force", help="re-run the selected stages even when up to date")] = False,
+    preset: PresetOpt = None,
+    maps: MapsOpt = None,
+    limit_frames: LimitFramesOpt = None,
 ) -> None:
-    """Build the dataset (or the selected stages) on the embedded default or a --config file."""
+    """Build the dataset (or the selected stages) on the embedded default, a --config file or a
+    --preset plan (--maps and --limit-frames pick the towns and a slice of it)."""
     from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
-    cfg = load_config(config, root)
+    cfg = plan_config(config, root, preset, maps, limit_frames)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
@@ -192,9 +197,16 @@ def list_stages() -> None:
 
 @app.command("config")
 def show_config(config: ConfigOpt = None, root: Annotated[Optional[str], typer.Option(
-        "--root", help="a dataset root: its own dataset.yaml when it has one")] = None) -> None:
+        "--root", help="a dataset root: its own dataset.yaml when it has one")] = None,
+        preset: PresetOpt = None, maps: MapsOpt = None, limit_frames: LimitFramesOpt = None) -> None:
     """Print the effective dataset config as YAML (a starting point for --config files): the
-    --config file, else the root's dataset.yaml, else the embedded default."""
+    --config file or --preset plan, else the root's dataset.yaml, else the embedded default; with
+    a summary of the plan (towns, sequences, frames) on stderr."""
     import yaml
 
-    typer.echo(yaml.safe_dump(load_config(config, root).model_dump(mode="json"), sort_keys=False))
+    cfg = plan_config(config, root, preset, maps, limit_frames)
+    typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+    towns = cfg.scenes.towns
+    seqs = sum(t.sequences_of(level) for t in towns for level in t.traffic_levels if t.style != "carla-recording")
+    typer.echo(f"plan: {len(towns)} towns, {seqs} simulated sequences x {cfg.scenes.frame_count} frames at "
+               f"{cfg.scenes.rate_hz:g} Hz", err=True)

@@ -27,6 +27,9 @@ VoxelSizeOpt = Annotated[str, typer.Option("--voxel-size", "--res", help="voxel 
 
 
 ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="YAML or JSON dataset config (see `carlaocc config`)")]
+PresetOpt = Annotated[Optional[str], typer.Option("--preset", help="a shipped dataset plan instead of --config: paper (the CarlaOcc paper's 104 sequences x 1,000 frames)")]
+MapsOpt = Annotated[Optional[Path], typer.Option("--maps", help="a folder of OpenDRIVE maps (e.g. CARLA's Town01..Town10HD .xodr): they replace the plan's towns, one town each, with the first town's traffic levels and sequence counts")]
+LimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan)")]
 
 
 DEBUG_ENV = "CARLAOCC_DEBUG"
@@ -137,6 +140,37 @@ def root_config(root: str | None) -> Path | None:
         return None
     path = Path(root) / DATASET_CONFIG
     return path if path.is_file() else None
+
+
+def plan_config(path: Path | None, root: str | None, preset: str | None, maps: Path | None = None,
+                limit_frames: int | None = None) -> DatasetConfig:
+    """:func:`load_config` of ``--config`` or ``--preset`` (not both), then ``--maps`` (the
+    folder's .xodr files as the towns) and ``--limit-frames`` applied."""
+    if preset is not None:
+        from carlaocc.catalog.presets import preset_path
+
+        if path is not None:
+            fail("give --config or --preset, not both")
+        try:
+            path = preset_path(preset)
+        except ValueError as exc:
+            fail(f"--preset: {exc}")
+    cfg = load_config(path, root)
+    scenes = cfg.scenes
+    if maps is not None:
+        files = sorted(maps.glob("*.xodr")) if maps.is_dir() else []
+        if not files:
+            fail(f"--maps {maps}: " + ("no .xodr files in it" if maps.is_dir() else "is not a folder"))
+        first = scenes.towns[0]
+        towns = tuple(first.model_copy(update={"style": "opendrive", "opendrive": str(f.resolve()), "recording": None,
+                                               "map": None}) for f in files)  # fmt: skip
+        scenes = scenes.model_copy(update={"towns": towns})
+    if limit_frames is not None:
+        scenes = scenes.model_copy(update={"frame_count": min(int(limit_frames), scenes.frame_count)})
+    try:
+        return DatasetConfig.model_validate(cfg.model_copy(update={"scenes": scenes}).model_dump())
+    except ValidationError as exc:
+        fail(_validation_message("config", exc))
 
 
 def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:

@@ -425,13 +425,13 @@ def _records(scenes, sequence_id, times, pos, yaw, up, phase, vehicles: list[Veh
 def simulate_town(
     scenes: ScenesConfig, spec: TownSpec, town: Town, assets: Sequence[AssetRecord], match_phases=None
 ) -> list[SequenceResult]:
-    """Every sequence of a town: ``spec.sequences_per_level`` per traffic level, the egos' start
+    """Every sequence of a town: ``spec.sequences_of(level)`` per traffic level, the egos' start
     lanes spread over the town by farthest-point sampling (in level order). Needs a Car asset
     (the ego) and, when a level has walkers, a Pedestrian asset."""
     if not _assets_of(assets, "Car"):
         cats = sorted({a.category for a in assets})
         raise ValueError(f"traffic needs at least one asset of category Car for the ego; got categories {cats}")
-    jobs = [(level, k) for level in spec.traffic_levels for k in range(spec.sequences_per_level)]
+    jobs = [(level, k) for level in spec.traffic_levels for k in range(spec.sequences_of(level))]
     starts = ego_starts(town, len(jobs), scenes.seed)
     return [simulate_sequence(scenes, town, assets, level, k, lane, match_phases)
             for (level, k), lane in zip(jobs, starts)]  # fmt: skip
