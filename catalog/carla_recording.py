@@ -57,7 +57,7 @@ from carlaocc.schemas.taxonomy import by_id, by_name
 __all__ = [
     "RecordingError", "Calib", "EgoState", "VehicleState", "PedestrianState", "TrafficFrame", "StaticActor",
     "SequenceDir", "Recording", "LIDAR_HEIGHT", "DEPTH_RANGE", "MESH_TO_WORLD", "OPTICAL_FROM_BODY",
-    "discover", "model_key", "frames_of", "timestamp", "read_calib", "read_poses", "read_traffic", "read_actor_info", "read_mesh", "read_ply",
+    "discover", "model_key", "read_calib", "read_poses", "read_traffic", "read_actor_info", "read_mesh", "read_ply",
     "decode_depth", "decode_semantics", "palette_lookup",
 ]  # fmt: skip
 
@@ -329,31 +329,32 @@ def read_traffic(path) -> TrafficFrame:
                                                 f"{path}: ego_vehicles.angular_velocity"))  # fmt: skip
     except (KeyError, TypeError, ValueError):
         raise RecordingError(f"{path}: ego_vehicles needs an id and a type") from None
-    vehicles, pedestrians, skipped = [], [], []
-    for k, item in enumerate(data.get("vehicles") or []):
-        where = f"{path}: vehicles[{k}]"
-        try:
-            ident, kind, T = _state_common(item, where)
-            box = item.get("bbox") or {}
-            vehicles.append(VehicleState(
-                id=ident, type=kind, transform=T, velocity=_vector(item.get("velocity"), f"{where}: velocity"),
-                extent=_vector(box.get("extent"), f"{where}: bbox.extent"),
-                bbox_transform=_rigid(_matrix(box.get("transform", np.eye(4).tolist()), f"{where}: bbox.transform"),
-                                      f"{where}: bbox.transform"),
-            ))  # fmt: skip
-        except RecordingError as exc:
-            skipped.append((_id_of(item), str(exc)))
-    for k, item in enumerate(data.get("pedestrians") or []):
-        where = f"{path}: pedestrians[{k}]"
-        try:
-            ident, kind, T = _state_common(item, where)
-            bones = item.get("bones") or {}
-            pedestrians.append(PedestrianState(
-                id=ident, type=kind, transform=T, extent=_vector(item.get("bbox_extent"), f"{where}: bbox_extent"),
-                bones={b: _matrix(bones[b], f"{where}: bones.{b}") for b in BONES if b in bones},
-            ))  # fmt: skip
-        except RecordingError as exc:
-            skipped.append((_id_of(item), str(exc)))
+    def vehicle(item, where: str, ident: int, kind: str, T: np.ndarray) -> VehicleState:
+        box = item.get("bbox") or {}
+        return VehicleState(
+            id=ident, type=kind, transform=T, velocity=_vector(item.get("velocity"), f"{where}: velocity"),
+            extent=_vector(box.get("extent"), f"{where}: bbox.extent"),
+            bbox_transform=_rigid(_matrix(box.get("transform", np.eye(4).tolist()), f"{where}: bbox.transform"),
+                                  f"{where}: bbox.transform"),
+        )  # fmt: skip
+
+    def pedestrian(item, where: str, ident: int, kind: str, T: np.ndarray) -> PedestrianState:
+        bones = item.get("bones") or {}
+        return PedestrianState(
+            id=ident, type=kind, transform=T, extent=_vector(item.get("bbox_extent"), f"{where}: bbox_extent"),
+            bones={b: _matrix(bones[b], f"{where}: bones.{b}") for b in BONES if b in bones},
+        )  # fmt: skip
+
+    found: dict[str, list] = {"vehicles": [], "pedestrians": []}
+    skipped = []
+    for key, build in (("vehicles", vehicle), ("pedestrians", pedestrian)):
+        for k, item in enumerate(data.get(key) or []):
+            where = f"{path}: {key}[{k}]"
+            try:
+                found[key].append(build(item, where, *_state_common(item, where)))
+            except RecordingError as exc:
+                skipped.append((_id_of(item), str(exc)))
+    vehicles, pedestrians = found["vehicles"], found["pedestrians"]
     return TrafficFrame(ego=ego, vehicles=tuple(vehicles), pedestrians=tuple(pedestrians), skipped=tuple(skipped))
 
 
@@ -479,21 +480,3 @@ def decode_semantics(rgb: np.ndarray) -> tuple[np.ndarray, int]:
     known = codes[order][pos] == key
     out = np.where(known, ids[order][pos], 0).astype(np.uint8)
     return out, int((~known).sum())
-
-
-def frame_number(path: Path) -> int | None:
-    """The frame of a ``%04d`` file name, or None."""
-    return int(path.stem) if path.stem.isdigit() else None
-
-
-def frames_of(directory: Path, suffix: str) -> list[int]:
-    """Frame numbers of the ``%04d<suffix>`` files of a directory (sorted; none if it is missing)."""
-    if not directory.is_dir():
-        return []
-    return sorted(n for p in directory.glob(f"*{suffix}") if (n := frame_number(p)) is not None)
-
-
-def timestamp(frame: int, rate_hz: float = 10.0) -> float:
-    """Seconds since the sequence start of a recorded frame (the collection runs at 10 Hz)."""
-    return frame / rate_hz
-

@@ -95,14 +95,6 @@ def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
     return CAMERA_MAPS + raw
 
 
-def _recording_raw(recorded: dict, cam) -> tuple["CameraMaps", np.ndarray | None]:
-    """One camera's raw maps and RGB of a recorded frame, read from the recording's PNGs (the
-    raw ``depth_carla``/``semantics_carla``, else the release's ``depth``/``semantics``)."""
-    from carlaocc.pipeline.tasks.recording import read_frame_images
-
-    return read_frame_images(recorded["images"].get(cam.name, {}), cam)
-
-
 def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
     """The raw maps a recorder wrote for one camera and frame (depth_raw and semantic_raw are
     required, instance_raw optional), with a clear error naming what is missing."""
@@ -140,6 +132,8 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     sensors = SensorStore(store)
     cams = cfg.selected_cameras(rig)
     outputs: dict[str, str] = {}
+    from carlaocc.pipeline.tasks.recording import read_frame_images
+
     recorded = part.params.get("recorded")
     rgb: dict[str, np.ndarray] = {}
     source = "recorded" if recorded is not None else cfg.source
@@ -147,7 +141,7 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
         # a recorded town's frame: the recording's raw maps (and RGB), rectified with its meshes
         raw = {}
         for cam in cams:
-            raw[cam.name], image = _recording_raw(recorded, cam)
+            raw[cam.name], image = read_frame_images(recorded["images"].get(cam.name, {}), cam)
             if image is not None:
                 rgb[cam.name] = image
         rect = rectify_cameras(inputs.scene, rig, cfg, raw, nthreads=kernel_threads())
