@@ -2,7 +2,7 @@
 
 Every table of the store is loaded (it is small metadata: assets, parts, placements, sequences,
 frames, actors, runs, quality...) and registered as a DuckDB view, plus ``classes`` (the taxonomy
-table). Then external access is switched off and the configuration locked, so a query can read
+table the dataset was built under) and ``label_tables`` (every label table). Then external access is switched off and the configuration locked, so a query can read
 those views and nothing else. Before running, each statement's type is checked: anything but a
 query (INSERT, UPDATE, DELETE, COPY, CREATE, DROP, ATTACH, INSTALL, LOAD, SET, writing PRAGMAs...)
 is refused with :class:`QueryRefused`; a syntax error raises :class:`QueryError` with DuckDB's
@@ -44,8 +44,12 @@ def catalog_tables(store: Store) -> dict[str, pa.Table]:
     out = {name: ParquetTable(store, model).load_arrow() for name, model in _model_tables().items()}
     out["assets"] = to_table(records.AssetRecord, dedupe_assets(from_table(records.AssetRecord, out["assets"])))
     out["parts"] = to_table(records.PartRecord, dedupe_parts(from_table(records.PartRecord, out["parts"])))
-    rows = taxonomy.table_rows()
-    out["classes"] = pa.Table.from_pylist(rows)
+    # classes: the dataset's label table (the one its towns were built under; the default before
+    # any town), label_tables: every table, long form, to compare them
+    built = set(out["towns"].column("label_table").to_pylist()) if out["towns"].num_rows else set()
+    out["classes"] = pa.Table.from_pylist(taxonomy.table_rows(built.pop() if len(built) == 1 else None))
+    out["label_tables"] = pa.Table.from_pylist([{"label_table": name, **row} for name in taxonomy.LABEL_TABLES
+                                                for row in taxonomy.table_rows(name)])
     return out
 
 

@@ -15,10 +15,18 @@ Layouts written under ``OUT``:
   200 x 200 x 16 grid at 0.5 m (LiDAR frame, [-50, -50, -5, 50, 50, 3] m), Occ3D/nuScenes
   class ids 0-16.
 * ``carlaocc-npz``: ``<sequence>/<frame:06d>.npz`` -- our own grid at ``--res``, rows
-  (x, y, z, sem << 11 | inst) with the published id layout, stable across the sequence: static
-  things numbered 1..999 in id order, simulated actors at 1000 + (id mod 1000)
-  (``<sequence>/instances.json`` maps them back). More than 999 static things, two actors equal
-  modulo 1000, or a class id above 31 is refused (clear error) rather than wrapped.
+  (x, y, z, label) with the label ``semantic << 11 | instance`` as the release's code writes and
+  reads it (``--label-encoding decimal``: ``semantic * 1000 + instance``, the release's
+  documentation), instance ids stable across the sequence and unique within a class (placed
+  objects 1..999, moving ones ``1000 + id % 1000``, renumbered in id order where those would
+  collide; ``<sequence>/instances.json`` maps ``"class:id"`` back to ours). More instances than the
+  encoding holds is refused (clear error) rather than wrapped.
+* ``carlaocc-release``: the official CarlaOcc release's folder layout
+  (:mod:`carlaocc.pipeline.export_release`).
+
+Every export writes ``splits/{train,val,test}.txt`` beside its files: the dataset's splits
+(``<root>/splits/``) restricted to the exported sequences, one sequence id per line (the release
+layout: one frame per line, in its own numbering).
 
 The grids of the other datasets are filled from ours by class-priority binning
 (:func:`carlaocc.stages.voxelize.resample.resample`); export from the finest resolution you built.
@@ -42,7 +50,7 @@ from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import SequenceRecord
 from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
 
-FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz")
+FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz", "carlaocc-release")
 
 SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
                                 SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
@@ -69,14 +77,12 @@ def _coverage(target: TargetGrid, grid: GridSpec, grid_to_target: np.ndarray) ->
     return inside.reshape(target.shape)
 
 
-def _actor_ids(store: Store, seq: str) -> np.ndarray:
+def _actor_ids(store: Store, seq: str) -> set[int]:
     """Instance ids of the sequence's simulated actors (the actors table)."""
     from carlaocc.schemas.records import ActorStateRecord
 
     t = ParquetTable(store, ActorStateRecord)
-    if not t.exists(seq):
-        return np.zeros(0, dtype=np.uint32)
-    return np.unique(np.asarray(t.load_arrow([seq])["instance_id"].to_numpy(), dtype=np.uint32))
+    return set(t.load_arrow([seq])["instance_id"].to_pylist()) if t.exists(seq) else set()
 
 
 def voxelized_sequences(store: Store, voxel_size: float, sequences: list[str] | None) -> Iterator[tuple[str, GridSpec, int]]:
@@ -104,24 +110,35 @@ def voxelized_sequences(store: Store, voxel_size: float, sequences: list[str] | 
 
 
 def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out: Path,
-           sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> ExportSummary:
+           sequences: list[str] | None = None, progress: Callable[[int], None] | None = None,
+           encoding: str = "bits") -> ExportSummary:
     """Write every frame of every voxelized sequence (or ``sequences``) at ``resolution`` in
-    ``fmt`` under ``out``. Files are written atomically, one frame at a time."""
+    ``fmt`` under ``out`` (CarlaOcc labels in ``encoding``: ``bits`` or ``decimal``). Files are
+    written atomically, one frame at a time."""
     from carlaocc.catalog.formats import (
         Occ3DFrame,
         SemanticKittiVoxels,
         dense_to_surroundocc,
-        published_instance_ids,
-        remap_instances,
         save_carlaocc_npz,
         save_occ3d,
         save_semantickitti,
         save_surroundocc,
         to_raw,
     )
+    from carlaocc.catalog.formats.carlaocc_release import instance_lookup
+    from carlaocc.catalog.formats.carlaocc_release import remap_instances as remap_release
+    from carlaocc.catalog.splits import SPLIT_NAMES
 
     if fmt not in FORMATS:
         raise ValueError(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
+    from carlaocc.catalog.formats.carlaocc_npz import check_encoding
+
+    check_encoding(encoding)
+    if fmt == "carlaocc-release":
+        from carlaocc.pipeline.export_release import export_release
+
+        n_seq, n_frames, n_files = export_release(store, config, out, resolution, sequences, progress, encoding)
+        return ExportSummary(fmt, n_seq, n_frames, n_files, out)
     from carlaocc.schemas.grid import resolution_key
 
     occ = OccupancyStore(store)
@@ -130,6 +147,13 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
     if not todo:
         key = resolution_key(resolution)
         raise StoreError(f"no voxelized sequence at {key} m in {store.url}: run `carlaocc run --res {key}` first")
+    splits = sequence_splits(store, [s for s, _, _ in todo], required=False)
+    scenes_tables = scenes_label_tables(store)
+    tables = {seq: built_label_table(occ, seq, grid, scenes_tables[seq]) for seq, grid, _ in todo}
+    if len(set(tables.values())) > 1:
+        raise StoreError(f"the sequences to export were built under different label tables "
+                         f"({', '.join(sorted(set(tables.values())))}): export them apart, or rebuild them under one "
+                         f"taxonomy")
     for seq, grid, frame_count in todo:
         n_seq += 1
         # the LiDAR mount the sequence was recorded with (older arrays: the configured rig)
@@ -139,16 +163,16 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         if fmt == "carlaocc-npz":
             # the published id layout, stable across the sequence (a first pass collects the ids
             # frame by frame: one dense frame in memory at a time)
-            inst, sem = occ.open(seq, grid, "instance"), occ.open(seq, grid, "semantic")
-            present = [np.unique(f[f != 0]) for f in (inst[t] for t in range(frame_count))]
-            ids = np.unique(np.concatenate(present)) if present else np.zeros(0, np.uint32)
-            new = published_instance_ids(ids, _actor_ids(store, seq), seq)
-            table = {int(o): int(n) for o, n in zip(ids.tolist(), new.tolist())}
-            atomic_write(out / seq / "instances.json",
-                         lambda fh: fh.write(json.dumps({str(k): v for k, v in table.items()}, indent=1).encode()))
+            table = sequence_release_ids(occ, seq, grid, frame_count, _actor_ids(store, seq), encoding)
+            keys, vals = instance_lookup(table)
+            atomic_write(out / seq / "instances.json", lambda fh: fh.write(json.dumps(
+                {"encoding": encoding, "instances": {f"{c}:{i}": v for (c, i), v in sorted(table.items())}},
+                indent=1).encode()))
             for t in range(frame_count):
-                compact = remap_instances(inst[t], ids, new)
-                save_carlaocc_npz(out / seq / f"{t:06d}.npz", sem[t], compact, grid.voxel_size, grid.origin)
+                data = occ.read_frame(seq, grid, t, ("semantic", "instance"))
+                compact = remap_release(data["semantic"], data["instance"], keys, vals)
+                save_carlaocc_npz(out / seq / f"{t:06d}.npz", data["semantic"], compact, grid.voxel_size, grid.origin,
+                                  encoding)
                 n_files += 1
                 n_frames += 1
                 if progress:
@@ -162,7 +186,8 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         coverage = None if has_masks or fmt == "surroundocc" else _coverage(target, grid, to_target)
         for t in range(frame_count):
             data = occ.read_frame(seq, grid, t, names)
-            labels, m = resample(data["semantic"], grid, target, to_target, {k: data[k] for k in names[1:]})
+            labels, m = resample(data["semantic"], grid, target, to_target, {k: data[k] for k in names[1:]},
+                                 label_table=tables[seq])
             if coverage is not None:
                 m = dict.fromkeys(("mask_lidar", "mask_camera"), coverage)
             if fmt == "occ3d":
@@ -181,7 +206,69 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
             n_frames += 1
             if progress:
                 progress(1)
+    # the dataset's splits, restricted to what was exported (none for a dataset built before splits)
+    for split in SPLIT_NAMES if splits else ():
+        ids = sorted(s for s, _, _ in todo if splits.get(s) == split)
+        atomic_write(out / "splits" / f"{split}.txt", lambda fh, b="".join(f"{s}\n" for s in ids).encode(): fh.write(b))
+        n_files += 1
     return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+
+
+def sequence_release_ids(occ: OccupancyStore, seq: str, grid: GridSpec, frame_count: int, moving=(),
+                         encoding: str = "bits") -> dict[tuple[int, int], int]:
+    """The exported instance id of every (class, instance) of a sequence's frames
+    (:func:`carlaocc.catalog.formats.carlaocc_release.release_instance_ids`; ``moving``: the
+    actors' ids), read one frame at a time."""
+    from carlaocc.catalog.formats.carlaocc_release import release_instance_ids
+
+    pairs: set[tuple[int, int]] = set()
+    for t in range(frame_count):
+        data = occ.read_frame(seq, grid, t, ("semantic", "instance"))
+        nz = data["instance"] != 0
+        if nz.any():
+            keys = np.unique((data["semantic"][nz].astype(np.int64) << 32) | data["instance"][nz].astype(np.int64))
+            pairs |= {(int(k >> 32), int(k & 0xFFFFFFFF)) for k in keys.tolist()}
+    if not pairs:
+        return {}
+    arr = np.array(sorted(pairs), dtype=np.int64)
+    try:
+        return release_instance_ids(arr[:, 0], arr[:, 1], moving, encoding, seq)
+    except ValueError as exc:
+        raise StoreError(str(exc)) from None
+
+
+def sequence_splits(store: Store, sequences: list[str], required: bool = True) -> dict[str, str]:
+    """The dataset's split of each of ``sequences``; StoreError when one is in none (the splits
+    were written before it existed: re-run). Not ``required``: ``{}`` for a dataset built before
+    splits existed."""
+    from carlaocc.catalog.splits import SplitStore
+
+    if not required and not SplitStore(store).exists():
+        return {}
+    splits = SplitStore(store).load()
+    missing = [s for s in sequences if s not in splits]
+    if missing:
+        raise StoreError(f"{missing[0]} is in no split of {store.url}/splits: re-run `carlaocc run` (the splits stage)")
+    return {s: splits[s] for s in sequences}
+
+
+def built_label_table(occ: OccupancyStore, seq: str, grid: GridSpec, scenes_table: str) -> str:
+    """The label table a sequence's arrays were built under (arrays from before the table was
+    recorded: ``carlaocc-v1``); StoreError when it is not ``scenes_table``, the one its town's
+    scenes (instance ids) were last built under: a dataset never mixes two tables."""
+    built = occ.attrs(seq, grid).get("label_table") or "carlaocc-v1"
+    if built != scenes_table:
+        raise StoreError(f"{seq} at {grid.key} m was voxelized under label table {built!r} but its scenes were rebuilt "
+                         f"under {scenes_table!r}: re-run `carlaocc run --res {grid.key}` with that taxonomy")
+    return built
+
+
+def scenes_label_tables(store: Store) -> dict[str, str]:
+    """``{sequence id: label table}``: the table each sequence's town was built under."""
+    from carlaocc.schemas.records import TownRecord
+
+    towns = {t.town: t.label_table for t in ParquetTable(store, TownRecord).load()}
+    return {s.sequence_id: towns.get(s.town, "carlaocc-v1") for s in ParquetTable(store, SequenceRecord).load()}
 
 
 def frame_count(store: Store, config: DatasetConfig, resolution: float, sequences: list[str] | None) -> int:

@@ -25,7 +25,7 @@ from carlaocc.catalog.parquet import parquet_problem
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.zarrio import frame_fingerprint, is_damaged, parse_frame_key
 from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
-from carlaocc.pipeline.spec import Context, Partition, StageSpec, UpstreamMissing, cache_key
+from carlaocc.pipeline.spec import Context, Partition, SelectionError, StageSpec, UpstreamMissing, cache_key
 from carlaocc.schemas.configs import DatasetConfig, StageConfig
 from carlaocc.schemas.records import RunRecord
 
@@ -385,6 +385,8 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
     except UpstreamMissing as exc:
         plan.blocked = str(exc)
         return plan
+    except SelectionError as exc:  # a usage error, before anything runs
+        raise PlanError(str(exc)) from None
     except StoreError as exc:  # an upstream output it partitions by is damaged: the upstream re-runs
         plan.blocked = str(exc)
         return plan
@@ -440,9 +442,11 @@ def stage_order(names: list[str] | None, registry: dict[str, StageSpec] | None =
     return [s for s in registry.values() if not names or s.name in names]
 
 
-def status(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...]) -> list[StagePlan]:
-    """Plan every stage without running anything (what is stale and why)."""
-    ctx, lineage = Context(store, config, voxel_sizes), LineageLog(store)
+def status(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
+           sequences: tuple[str, ...] = ()) -> list[StagePlan]:
+    """Plan every stage without running anything (what is stale and why), for the sequences
+    matching ``sequences`` (fnmatch patterns; empty: all)."""
+    ctx, lineage = Context(store, config, voxel_sizes, tuple(sequences)), LineageLog(store)
     plans, stale = [], {}
     for spec in stage_order(None):
         plan = plan_stage(spec, ctx, lineage, False, stale)
@@ -474,12 +478,13 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
         stages: list[str] | None = None, scheduler: str | None = None, force: bool = False,
         progress: Progress | None = None, workers: int | None = None,
         log: Callable[[str], None] = lambda s: None,
-        registry: dict[str, StageSpec] | None = None) -> list[StageOutcome]:
+        registry: dict[str, StageSpec] | None = None, sequences: tuple[str, ...] = ()) -> list[StageOutcome]:
     """Run the selected stages (all by default) of ``registry`` (the registered stages by
-    default) in order; stops after a stage with failures."""
+    default) in order, the per-sequence ones for the sequences matching ``sequences`` (fnmatch
+    patterns on sequence ids; empty: all); stops after a stage with failures."""
     progress = progress or Progress()
     selected = stage_order(stages, registry)
-    ctx, lineage = Context(store, config, voxel_sizes), LineageLog(store)
+    ctx, lineage = Context(store, config, voxel_sizes, tuple(sequences)), LineageLog(store)
     scheduler = resolve_scheduler(scheduler)
     # stages not selected but upstream of a selected one: what of theirs is stale blocks the run
     stale: dict[str, set[str]] = {}

@@ -49,15 +49,27 @@ def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
         raise StoreError(f"town {town!r} is not in {store.url} (towns: {', '.join(towns) or 'none; run the scenes stage'})")
     placements = t_place.load([f"town={town}"])
     geometry = load_geometry(store, {p.asset_id for p in placements}, placements)
-    mesh = town_mesh(placements, geometry)
+    mesh = town_mesh(placements, geometry, frozenset(taxonomy.thing_ids(town_label_table(store, town))))
     return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces), len(placements)
+
+
+def town_label_table(store: Store, town: str) -> str:
+    """The label table a town was built under (its ``towns`` row; ``carlaocc-v1`` before the
+    column existed)."""
+    from carlaocc.schemas.records import TownRecord
+
+    t = ParquetTable(store, TownRecord)
+    rows = t.load([f"town={town}"]) if t.exists(f"town={town}") else []
+    return rows[0].label_table if rows else "carlaocc-v1"
 
 
 def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> tuple[bytes, int]:
     """One frame's panoptic scene (LiDAR frame) cut to ``region`` as GLB; returns (bytes, triangles)."""
     from carlaocc.stages.scenes.assembly import flatten
 
-    mesh = flatten(frame_scene(store, sequence_id, frame_index, region))
+    seqs = ParquetTable(store, SequenceRecord)
+    town = seqs.load([sequence_id])[0].town if seqs.exists(sequence_id) else ""
+    mesh = flatten(frame_scene(store, sequence_id, frame_index, region, town_label_table(store, town)))
     return panoptic_glb_bytes(*mesh.arrays()), len(mesh.faces)
 
 

@@ -33,12 +33,18 @@ class Partition:
 
 @dataclass(frozen=True)
 class Context:
-    """What partitioning a stage may look at: the store, the config and the requested voxel
-    sizes (metres)."""
+    """What partitioning a stage may look at: the store, the config, the requested voxel
+    sizes (metres) and the sequence selection (``fnmatch`` patterns on sequence ids; empty:
+    every sequence)."""
 
     store: Store
     config: DatasetConfig
     voxel_sizes: tuple[float, ...]
+    sequence_patterns: tuple[str, ...] = ()
+
+
+class SelectionError(ValueError):
+    """A sequence selection (``--sequences``) that matches no sequence of the dataset."""
 
 
 class UpstreamMissing(Exception):

@@ -15,6 +15,9 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, field_validator
 
 from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
 from carlaocc.schemas.rig import RigConfig
+from carlaocc.schemas.taxonomy import DEFAULT_LABEL_TABLE, LabelTableName
+
+_SET_BY_PIPELINE = "the label table (which classes carry instance ids); the pipeline sets it from the dataset's taxonomy"
 
 
 class StageConfig(BaseModel):
@@ -115,6 +118,7 @@ class ScenesConfig(StageConfig):
     ego_speed: float = Field(8.0, ge=0.0, le=40.0, description="ego target speed, m/s")
     actor_range: float = Field(80.0, gt=0.0, le=1000.0, description="actors within this many m of the ego are recorded")
     rig: RigConfig = Field(default_factory=RigConfig)
+    taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE)
     asset_sources: tuple[str, ...] = Field(
         ("procedural",), min_length=1,
         description="ADMesh sources whose assets towns and traffic draw from (e.g. procedural, folder)")
@@ -140,6 +144,7 @@ class VoxelizeConfig(StageConfig):
     flow: bool = Field(True, description="compute the occupancy flow of dynamic instances")
     rig: RigConfig | None = Field(
         None, description="the ego rig for the masks; the pipeline sets it from scenes.rig")
+    taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE)
 
     @field_validator("camera_ray_stride", mode="before")
     @classmethod
@@ -201,6 +206,7 @@ class SensorsConfig(StageConfig):
     normals: Literal["d2nt_basic", "d2nt_v2", "d2nt_v3"] = Field(
         "d2nt_v2", description="D2NT version for the normal maps (v3 adds MRF refinement at 3x the cost)")
     rig: RigConfig | None = Field(None, description="the ego rig; the pipeline sets it from scenes.rig")
+    taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE)
 
     def selected_cameras(self, rig: RigConfig) -> tuple:
         """The rig's CameraSpecs to render, in rig order; unknown names are an error naming them."""
@@ -217,17 +223,49 @@ class QualityConfig(StageConfig):
     """Dataset-quality scores (spatial continuity, temporal consistency) and the report."""
 
     neighbourhood: Literal[6] = 6
+    taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE + " (the report)")
+
+
+class SplitsConfig(StageConfig):
+    """Train / val / test by sequence (edited sequences follow their parent)."""
+
+    seed: int = Field(0, description="seed of the permutation that deals sequences to the splits")
+    val_fraction: float = Field(0.15, ge=0.0, lt=1.0, description="share of sequences in val (at least one when > 0)")
+    test_fraction: float = Field(0.15, ge=0.0, lt=1.0, description="share of sequences in test (at least one when > 0)")
+
+    @model_validator(mode="after")
+    def _fractions(self) -> SplitsConfig:
+        if self.val_fraction + self.test_fraction >= 1.0:
+            raise ValueError(f"splits: val_fraction + test_fraction must stay below 1 (train keeps a sequence), got "
+                             f"{self.val_fraction} + {self.test_fraction}")
+        return self
 
 
 class DatasetConfig(StageConfig):
     """Everything a dataset build is configured by; the optional ``--config`` YAML/JSON file."""
 
+    taxonomy: LabelTableName = Field(
+        DEFAULT_LABEL_TABLE, description="the label table: 'release' (the official CarlaOcc release's utils/labels.py: "
+        "Pole, TrafficLight, TrafficSign and the road users carry instance ids, Building does not; its Occ3D and "
+        "KITTI-360 ids) or 'carlaocc-v1' (Building a thing, poles, lights and signs stuff). Recorded with every "
+        "array; changing it re-runs every stage after ingest")
     ingest: IngestConfig = IngestConfig()
     scenes: ScenesConfig = ScenesConfig()
+    splits: SplitsConfig = SplitsConfig()
     voxelize: VoxelizeConfig = VoxelizeConfig()
     sensors: SensorsConfig = SensorsConfig()
     # ``metrics`` is the section's earlier name, still read
     quality: QualityConfig = Field(QualityConfig(), validation_alias=AliasChoices("quality", "metrics"))
+
+    @model_validator(mode="after")
+    def _one_taxonomy(self) -> DatasetConfig:
+        # the stages' taxonomy fields are the pipeline's copies of the top-level one
+        for name in ("scenes", "voxelize", "sensors", "quality"):
+            own = getattr(self, name).taxonomy
+            if own is not None and own != self.taxonomy:
+                raise ValueError(f"{name}.taxonomy is {own!r} but the dataset's taxonomy is {self.taxonomy!r}: set the "
+                                 f"top-level 'taxonomy' key (every stage uses it)")
+        return self
 
     @model_validator(mode="after")
     def _region_is_valid(self) -> DatasetConfig:
@@ -268,6 +306,7 @@ __all__ = [
     "QualityConfig",
     "ScenesConfig",
     "SourceIngestConfig",
+    "SplitsConfig",
     "StageConfig",
     "TownSpec",
     "VoxelizeConfig",

@@ -135,6 +135,9 @@ class TownRecord(Record):
     crosswalk_count: int
     placement_count: int
     bounds: list[float]  # xmin, ymin, xmax, ymax of the town ground, m
+    # the label table its placements' instance ids follow (towns written before the column: the
+    # first table, carlaocc-v1)
+    label_table: str = "carlaocc-v1"
 
 
 class SequenceRecord(Record):

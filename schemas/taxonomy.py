@@ -10,11 +10,25 @@ fine sub-class vocabulary and its id in four target label sets:
   the paper's column order (Road = 0 ... Other = 14). It has no free/empty class: classes that
   never occupy a voxel map to :data:`IGNORE` (255), which evaluation skips.
 
+Label tables: which classes carry instance ids (things) and the Occ3D-nuScenes and KITTI-360 ids
+depend on the *label table*, a named option recorded with every dataset:
+
+* ``release`` (the default): the official CarlaOcc release's table, ``utils/labels.py`` of
+  fengyi233/carlaocc (:data:`RELEASE_LABELS` transcribes its ``is_instance``, ``nuscenes_id`` and
+  ``kitti360_id`` columns). Things are Pole, TrafficLight, TrafficSign and the eight road users;
+  Building is stuff. Fence and GuardRail -> Occ3D barrier; TrafficLight, TrafficSign and Static
+  -> others; Ground -> terrain; Train -> trailer.
+* ``carlaocc-v1``: this project's first table (the rows below as written): Building is a thing,
+  Pole/TrafficLight/TrafficSign stuff, and the Occ3D ids of the notes below.
+
+The release has no SemanticKITTI or 15-class columns: those are this project's in both tables,
+and so are colours (equal to the release's), motion and sub-classes.
+
 Empty space: class 0 (``None``) is the empty label of the grid, so a voxel of class 0 is free; it
 maps to free/unlabeled in every target (``IGNORE`` in benchmark15). ``Sky`` never occupies a voxel
 (CARLA has no sky mesh inside the region) and maps the same way.
 
-Mapping decisions worth knowing (KITTI means both SSCBench-KITTI-360 and SemanticKITTI):
+Mapping decisions of ``carlaocc-v1`` worth knowing (KITTI means both SSCBench-KITTI-360 and SemanticKITTI):
 
 * ``RoadLine`` -> driveable_surface / road (KITTI lane-marking is folded into road).
 * ``Ground`` (shared spaces, flat islands), ``Water`` and ``RailTrack`` -> other_flat /
@@ -105,7 +119,8 @@ class SemanticClass(BaseModel):
 # Column order: id, name, colour (CARLA UE5 CityScapesPalette.h), kind, motion,
 #               occ3d_nuscenes, sscbench_kitti360, semantickitti, benchmark15, subclasses.
 #
-# Things (instance ids) are the eight road users, as in the Cityscapes and SemanticKITTI /
+# These rows are the ``carlaocc-v1`` label table. Its things (instance ids) are the eight road
+# users, as in the Cityscapes and SemanticKITTI /
 # KITTI-360 panoptic conventions (PaSCo) that CarlaOcc is compared against, plus Building: the
 # paper counts buildings among its annotated instances ("vehicles and buildings constitute the
 # majority of annotated instances"), so each building is a static thing. Pole, TrafficLight and
@@ -132,7 +147,7 @@ def _row(
 
 # One row per class, one line each (deliberately wider than the usual line length).
 # fmt: off
-CLASSES: tuple[SemanticClass, ...] = (
+CARLAOCC_V1_CLASSES: tuple[SemanticClass, ...] = (
     _row(0,  "None",         (0, 0, 0),       _S, _ST, 17,  0,  0, _X, ()),
     _row(1,  "Road",         (128, 64, 128),  _S, _ST, 11,  7,  9,  0, ("lane", "intersection", "crosswalk", "parking", "driveway", "roundabout")),
     _row(2,  "Sidewalk",     (244, 35, 232),  _S, _ST, 13,  9, 11,  1, ("walkway", "curb", "traffic_island", "plaza", "ramp")),
@@ -166,6 +181,134 @@ CLASSES: tuple[SemanticClass, ...] = (
 )
 # fmt: on
 
+# The official release's label table, transcribed from ``utils/labels.py`` of fengyi233/carlaocc
+# (commit de6a21c): name, id, is_instance, colour, nuscenes_id (Occ3D-nuScenes, 0-17),
+# kitti360_id (SSCBench-KITTI-360, 0-18). Facts only; the other columns are ours.
+# fmt: off
+RELEASE_LABELS: tuple[tuple[str, int, bool, RGB, int, int], ...] = (
+    ("None",         0,  False, (0, 0, 0),       17,  0),
+    ("Road",         1,  False, (128, 64, 128),  11,  7),
+    ("Sidewalk",     2,  False, (244, 35, 232),  13,  9),
+    ("Building",     3,  False, (70, 70, 70),    15, 11),
+    ("Wall",         4,  False, (102, 102, 156), 15, 17),
+    ("Fence",        5,  False, (190, 153, 153),  1, 12),
+    ("Pole",         6,  True,  (153, 153, 153), 15, 15),
+    ("TrafficLight", 7,  True,  (250, 170, 30),   0, 16),
+    ("TrafficSign",  8,  True,  (220, 220, 0),    0, 16),
+    ("Vegetation",   9,  False, (107, 142, 35),  16, 13),
+    ("Terrain",      10, False, (152, 251, 152), 14, 14),
+    ("Sky",          11, False, (70, 130, 180),  17,  0),
+    ("Pedestrian",   12, True,  (220, 20, 60),    7,  6),
+    ("Rider",        13, True,  (255, 0, 0),      7,  6),
+    ("Car",          14, True,  (0, 0, 142),      4,  1),
+    ("Truck",        15, True,  (0, 0, 70),      10,  4),
+    ("Bus",          16, True,  (0, 60, 100),     3,  5),
+    ("Train",        17, True,  (0, 80, 100),     9,  5),
+    ("Motorcycle",   18, True,  (0, 0, 230),      6,  3),
+    ("Bicycle",      19, True,  (119, 11, 32),    2,  2),
+    ("Static",       20, False, (110, 190, 160),  0, 18),
+    ("Dynamic",      21, False, (170, 120, 50),   0, 18),
+    ("Other",        22, False, (55, 90, 80),     0, 18),
+    ("Water",        23, False, (45, 60, 150),   12, 10),
+    ("RoadLine",     24, False, (157, 234, 50),  11,  7),
+    ("Ground",       25, False, (81, 0, 81),     14, 10),
+    ("Bridge",       26, False, (150, 100, 100), 15, 17),
+    ("RailTrack",    27, False, (230, 150, 140), 12, 10),
+    ("GuardRail",    28, False, (180, 165, 180),  1, 12),
+    ("Rock",         29, False, (180, 130, 70),  14, 14),
+)
+# fmt: on
+
+
+def _release_classes() -> tuple[SemanticClass, ...]:
+    """The ``carlaocc-v1`` rows with the release's kind and Occ3D / KITTI-360 ids."""
+    out = []
+    for c, (name, i, is_instance, color, nus, k360) in zip(CARLAOCC_V1_CLASSES, RELEASE_LABELS, strict=True):
+        if (name, i, color) != (c.name, c.id, c.color):
+            raise RuntimeError(f"release label row {i} ({name}) does not line up with the class table")
+        out.append(c.model_copy(update={"kind": _T if is_instance else _S, "occ3d_nuscenes": nus,
+                                        "sscbench_kitti360": k360}))
+    return tuple(out)
+
+
+RELEASE_CLASSES: tuple[SemanticClass, ...] = _release_classes()
+
+LabelTableName = Literal["release", "carlaocc-v1"]
+DEFAULT_LABEL_TABLE: str = "release"
+
+
+class LabelTable(BaseModel):
+    """A named label table: the 30 classes with one choice of things and target ids.
+
+    Which table a dataset was built with is recorded with it (``label_table`` in every occupancy
+    and sensor array's attributes, ``taxonomy`` in the config): exports, evaluation and the
+    statistics read that table, never a default.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    source: str
+    classes: tuple[SemanticClass, ...]
+
+    @property
+    def version(self) -> str:
+        """Class ids and this table: ``carla-ue5-0.10/1+release``."""
+        return f"{TAXONOMY_VERSION}+{self.name}"
+
+    def by_id(self, i: int) -> SemanticClass:
+        """The class with id ``i`` (0-29) in this table; ``KeyError`` otherwise."""
+        return self.classes[by_id(i).id]
+
+    def thing_ids(self) -> tuple[int, ...]:
+        """Ids of the classes that carry instance ids in this table."""
+        return tuple(c.id for c in self.classes if c.kind == "thing")
+
+    def stuff_ids(self) -> tuple[int, ...]:
+        """Ids of the classes whose voxels have instance 0 in this table."""
+        return tuple(c.id for c in self.classes if c.kind == "stuff")
+
+    def mapping(self, target: str) -> tuple[int, ...]:
+        """Lookup table of length 30: class id -> ``target`` id (see :data:`TARGETS`)."""
+        if target not in TARGETS:
+            raise ValueError(f"unknown target {target!r}; valid targets: {', '.join(TARGETS)}")
+        return tuple(getattr(c, target) for c in self.classes)
+
+    def table_rows(self) -> list[dict[str, object]]:
+        """The table as plain dicts (tuples as lists) for Parquet or printing, in id order."""
+        rows: list[dict[str, object]] = []
+        for c in self.classes:
+            row = c.model_dump()
+            row["color"] = list(c.color)
+            row["subclasses"] = list(c.subclasses)
+            rows.append(row)
+        return rows
+
+
+LABEL_TABLES: dict[str, LabelTable] = {
+    "release": LabelTable(name="release", classes=RELEASE_CLASSES,
+                          source="the official CarlaOcc release, utils/labels.py of fengyi233/carlaocc"),
+    "carlaocc-v1": LabelTable(name="carlaocc-v1", classes=CARLAOCC_V1_CLASSES,
+                              source="carlaocc's first table: Building a thing; Pole, TrafficLight, TrafficSign stuff"),
+}
+
+
+def label_table(name: str | LabelTable | None = None) -> LabelTable:
+    """The label table called ``name`` (None: :data:`DEFAULT_LABEL_TABLE`); ``ValueError`` naming
+    the valid ones otherwise. A :class:`LabelTable` is returned as it is."""
+    if isinstance(name, LabelTable):
+        return name
+    try:
+        return LABEL_TABLES[DEFAULT_LABEL_TABLE if name is None else str(name)]
+    except KeyError:
+        raise ValueError(f"unknown label table {name!r}; valid: {', '.join(LABEL_TABLES)}") from None
+
+
+CLASSES: tuple[SemanticClass, ...] = RELEASE_CLASSES
+"""The classes of the default table. Names, colours, motion, sub-classes, SemanticKITTI and
+benchmark15 ids are the same in every table; kind and the Occ3D / KITTI-360 ids are not: ask
+:func:`label_table` for those."""
+
 # Other spellings accepted by by_name: CARLA's Python enum names (carla.CityObjectLabel).
 _ALIASES: dict[str, int] = {
     "unlabeled": 0, "roads": 1, "sidewalks": 2, "buildings": 3, "walls": 4, "fences": 5,
@@ -178,40 +321,39 @@ def _key(name: str) -> str:
     return re.sub(r"[^0-9a-z]", "", name.lower())
 
 
-def _check_table() -> None:
-    """Fail at import if the table is inconsistent (order, uniqueness, target ranges)."""
-    if [c.id for c in CLASSES] != list(range(30)):
+def _check_table(classes: tuple[SemanticClass, ...]) -> None:
+    """Fail at import if a table is inconsistent (order, uniqueness, target ranges)."""
+    if [c.id for c in classes] != list(range(30)):
         raise RuntimeError("taxonomy ids must be 0..29 in order")
-    if len({_key(c.name) for c in CLASSES}) != len(CLASSES):
+    if len({_key(c.name) for c in classes}) != len(classes):
         raise RuntimeError("taxonomy names must be unique")
-    if len({c.color for c in CLASSES}) != len(CLASSES):
+    if len({c.color for c in classes}) != len(classes):
         raise RuntimeError("taxonomy colours must be unique")
-    for c in CLASSES:
+    for c in classes:
         if not all(0 <= v <= 255 for v in c.color):
             raise RuntimeError(f"{c.name}: colour out of range")
         if not (0 <= c.benchmark15 < len(BENCHMARK15_NAMES) or c.benchmark15 == IGNORE):
             raise RuntimeError(f"{c.name}: benchmark15 id out of range")
 
 
-_check_table()
+for _table in LABEL_TABLES.values():
+    _check_table(_table.classes)
 
 _BY_KEY: dict[str, SemanticClass] = {_key(c.name): c for c in CLASSES} | {
     k: CLASSES[i] for k, i in _ALIASES.items()
 }
-_MAPPINGS: dict[str, tuple[int, ...]] = {
-    target: tuple(getattr(c, target) for c in CLASSES) for target in TARGETS
-}
 
 
 def by_id(i: int) -> SemanticClass:
-    """The class with id ``i`` (0-29); ``KeyError`` otherwise."""
+    """The class with id ``i`` (0-29) in the default table; ``KeyError`` otherwise."""
     if isinstance(i, bool) or not 0 <= int(i) < len(CLASSES):
         raise KeyError(f"no semantic class with id {i!r}; ids are 0..{len(CLASSES) - 1}")
     return CLASSES[int(i)]
 
 
 def by_name(name: str) -> SemanticClass:
-    """The class called ``name``, case- and separator-insensitive (CARLA enum spellings too)."""
+    """The class called ``name``, case- and separator-insensitive (CARLA enum spellings too),
+    in the default table."""
     found = _BY_KEY.get(_key(name))
     if found is None:
         valid = ", ".join(c.name for c in CLASSES)
@@ -219,29 +361,25 @@ def by_name(name: str) -> SemanticClass:
     return found
 
 
-def thing_ids() -> tuple[int, ...]:
-    """Ids of the thing classes (they carry instance ids)."""
-    return tuple(c.id for c in CLASSES if c.kind == "thing")
+def thing_ids(table: str | LabelTable | None = None) -> tuple[int, ...]:
+    """Ids of the thing classes (they carry instance ids) of ``table`` (None: the default)."""
+    return label_table(table).thing_ids()
 
 
-def stuff_ids() -> tuple[int, ...]:
-    """Ids of the stuff classes (instance id 0)."""
-    return tuple(c.id for c in CLASSES if c.kind == "stuff")
+def stuff_ids(table: str | LabelTable | None = None) -> tuple[int, ...]:
+    """Ids of the stuff classes (instance id 0) of ``table`` (None: the default)."""
+    return label_table(table).stuff_ids()
 
 
 def dynamic_ids() -> tuple[int, ...]:
-    """Ids of the classes that move (the road users)."""
+    """Ids of the classes that move (the road users; the same in every table)."""
     return tuple(c.id for c in CLASSES if c.motion == "dynamic")
 
 
-def mapping(target: str) -> tuple[int, ...]:
-    """Lookup table of length 30: CarlaOcc class id -> ``target`` id (see :data:`TARGETS`)."""
-    try:
-        return _MAPPINGS[target]
-    except KeyError:
-        raise ValueError(
-            f"unknown target {target!r}; valid targets: {', '.join(TARGETS)}"
-        ) from None
+def mapping(target: str, table: str | LabelTable | None = None) -> tuple[int, ...]:
+    """Lookup table of length 30: class id -> ``target`` id (see :data:`TARGETS`) in ``table``
+    (None: the default)."""
+    return label_table(table).mapping(target)
 
 
 def palette() -> tuple[RGB, ...]:
@@ -249,12 +387,6 @@ def palette() -> tuple[RGB, ...]:
     return tuple(c.color for c in CLASSES)
 
 
-def table_rows() -> list[dict[str, object]]:
+def table_rows(table: str | LabelTable | None = None) -> list[dict[str, object]]:
     """The table as plain dicts (tuples as lists) for Parquet or printing, in id order."""
-    rows: list[dict[str, object]] = []
-    for c in CLASSES:
-        row = c.model_dump()
-        row["color"] = list(c.color)
-        row["subclasses"] = list(c.subclasses)
-        rows.append(row)
-    return rows
+    return label_table(table).table_rows()

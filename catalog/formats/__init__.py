@@ -8,7 +8,8 @@ scores, and its ``*_FORMAT`` layout (file ending, sequences, class names; :data:
 * :mod:`carlaocc.catalog.formats.semantickitti` -- SemanticKITTI SSC voxels (``.bin/.invalid/.occluded``
   bit-packed grids, ``.label`` uint16), LiDAR frame.
 * :mod:`carlaocc.catalog.formats.surroundocc` -- SurroundOcc sparse ``(N, 4)`` voxel rows, LiDAR frame.
-* :mod:`carlaocc.catalog.formats.carlaocc_npz` -- the published CarlaOcc ``.npz`` (``sem << 11 | inst``).
+* :mod:`carlaocc.catalog.formats.carlaocc_npz` -- a CarlaOcc ``.npz`` per frame on our grid (``semantic * 1000 + instance``).
+* :mod:`carlaocc.catalog.formats.carlaocc_release` -- the official release's folder layout (grids, calib, poses, splits, images).
 
 Shared by the audit of these datasets:
 
@@ -108,8 +109,6 @@ from carlaocc.catalog.formats.carlaocc_npz import (
     CARLAOCC_NPZ_FORMAT,
     CarlaOccFrame,
     load_carlaocc_npz,
-    published_instance_ids,
-    remap_instances,
     save_carlaocc_npz,
 )
 from carlaocc.catalog.formats.layout import DatasetFormat, LabelGrid
@@ -161,9 +160,7 @@ __all__ = [
     "load_occ3d",
     "load_semantickitti",
     "load_surroundocc",
-    "published_instance_ids",
     "read_npz",
-    "remap_instances",
     "save_carlaocc_npz",
     "save_occ3d",
     "save_semantickitti",

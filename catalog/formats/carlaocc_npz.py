@@ -1,23 +1,33 @@
-"""The published CarlaOcc occupancy ``.npz`` (the layout of the released dataset).
+"""The CarlaOcc occupancy ``.npz`` of one frame: the one place that writes and reads it.
 
-Written with ``np.savez_compressed``; keys:
+Keys (the official release's, fengyi233/carlaocc ``docs/source/occ_generation.rst``):
 
-* ``occupancy``: ``(N, 4)`` **uint16** rows ``(x, y, z, sem << 11 | inst)``, one per occupied
-  voxel (semantic id != 0, class 0 ``None`` being free), in C order of ``(x, y, z)``. The packed
-  id gives the semantic class 5 bits (0-31) and the instance id 11 bits (0-2047); indices are
-  16 bits (0-65535).
+* ``occupancy``: ``(N, 4)`` **uint16** rows ``(x, y, z, label)``, one per occupied voxel
+  (semantic id != 0, class 0 ``None`` being free), in C order of ``(x, y, z)``; indices 0-65535.
 * ``voxel_size``: 0-d float64, metres.
-* ``voxel_origin``: ``(3,)`` float64, minimum corner of voxel (0, 0, 0), metres, LiDAR frame.
-* ``volume_size``: ``(3,)`` int64, the grid shape ``(X, Y, Z)``.
+* ``voxel_origin``: ``(3,)``, minimum corner of voxel (0, 0, 0), metres, LiDAR frame.
+* ``volume_size``: ``(3,)`` integers, the grid shape ``(X, Y, Z)``.
 
-(The scalar dtypes of ``voxel_size`` / ``voxel_origin`` / ``volume_size`` are this module's
+Two label encodings (:data:`LABEL_ENCODINGS`):
+
+* ``bits`` (the default): ``semantic << 11 | instance`` -- semantic 0-31 in the high 5 bits,
+  instance 0-2047 in the low 11. This is what the release's code writes and reads
+  (``utils/data_converter.py`` ``encode_combined_id`` / ``decode_combined_id``, used by
+  ``occupancy_generation/generators/gen_pano_occ.py`` and by ``utils/load_utils.py``
+  ``load_pano_occ``, the reader of ``tutorials/dataset.py``), with moving objects at
+  ``1000 + id % 1000`` (``get_fg_instance_id``).
+* ``decimal``: ``semantic * 1000 + instance`` -- semantic 0-64, instance 0-999: the formula of
+  the release's documentation (``occ_generation.rst``), which its code does not follow. A file
+  written so carries a fifth key, ``label_encoding`` = ``"decimal"``, so it is never misread;
+  files without the key are ``bits``.
+
+(The scalar dtypes of ``voxel_size`` / ``voxel_origin`` / ``volume_size`` are the writer's
 choice; :func:`load_carlaocc_npz` accepts any real/integer dtype for them.)
 
-Internally instances are uint32 and never wrap (DESIGN.md); the 11-bit cap is an export concern:
-:func:`save_carlaocc_npz` **refuses** ids that do not fit rather than wrapping them, and
-:func:`published_instance_ids` gives a sequence's instances the published ids (static things
-1..999, actors 1000 + id mod 1000), stable across its frames, applied with
-:func:`remap_instances`.
+Internally instances are uint32 and never wrap (DESIGN.md); the ranges above are an export
+concern: :func:`save_carlaocc_npz` **refuses** ids that do not fit rather than wrapping them, and
+:func:`carlaocc.catalog.formats.carlaocc_release.release_instance_ids` gives a sequence's
+instances ids that fit, stable across its frames.
 """
 
 from __future__ import annotations
@@ -25,7 +35,8 @@ from __future__ import annotations
 import io
 import math
 import os
-from collections.abc import Sequence
+import zipfile
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,25 +49,32 @@ from carlaocc.schemas import taxonomy
 __all__ = [
     "CARLAOCC_KEYS",
     "CARLAOCC_NPZ_FORMAT",
-    "INSTANCE_BITS",
+    "LABEL_ENCODINGS",
+    "LABEL_LIMITS",
     "MAX_INDEX",
-    "MAX_INSTANCE",
-    "MAX_SEMANTIC",
     "CarlaOccFrame",
     "load_carlaocc_grid",
     "load_carlaocc_npz",
+    "npz_bytes",
     "pack_ids",
-    "published_instance_ids",
-    "remap_instances",
     "save_carlaocc_npz",
     "unpack_ids",
 ]
 
+LABEL_ENCODINGS: tuple[str, ...] = ("bits", "decimal")
+LABEL_LIMITS: dict[str, tuple[int, int]] = {"bits": (31, 2047), "decimal": (64, 999)}
+"""Largest semantic and instance id of each encoding."""
 INSTANCE_BITS: int = 11
-MAX_SEMANTIC: int = (1 << (16 - INSTANCE_BITS)) - 1  # 31
-MAX_INSTANCE: int = (1 << INSTANCE_BITS) - 1  # 2047
 MAX_INDEX: int = 0xFFFF
 CARLAOCC_KEYS: tuple[str, ...] = ("occupancy", "voxel_size", "voxel_origin", "volume_size")
+ENCODING_KEY = "label_encoding"
+
+
+def check_encoding(encoding: str) -> str:
+    """``encoding`` when it is one of :data:`LABEL_ENCODINGS`; ``ValueError`` naming them otherwise."""
+    if encoding not in LABEL_ENCODINGS:
+        raise ValueError(f"label encoding must be one of {', '.join(LABEL_ENCODINGS)}, got {encoding!r}")
+    return encoding
 
 
 @dataclass(frozen=True)
@@ -73,15 +91,22 @@ class CarlaOccFrame:
     voxel_origin: tuple[float, float, float]
 
 
-def pack_ids(semantic: np.ndarray, instance: np.ndarray) -> np.ndarray:
-    """``sem << 11 | inst`` as uint16; caller guarantees ``sem <= 31`` and ``inst <= 2047``."""
-    return (semantic.astype(np.uint16) << INSTANCE_BITS) | instance.astype(np.uint16)
+def pack_ids(semantic: np.ndarray, instance: np.ndarray, encoding: str = "bits") -> np.ndarray:
+    """The uint16 labels of ``encoding``: ``semantic << 11 | instance`` (bits) or
+    ``semantic * 1000 + instance`` (decimal); the caller guarantees the ids fit
+    (:data:`LABEL_LIMITS`)."""
+    s, i = np.asarray(semantic).astype(np.uint16), np.asarray(instance).astype(np.uint16)
+    if check_encoding(encoding) == "bits":
+        return (s << np.uint16(INSTANCE_BITS)) | i
+    return (s * np.uint16(1000) + i).astype(np.uint16)
 
 
-def unpack_ids(packed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def unpack_ids(packed: np.ndarray, encoding: str = "bits") -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`pack_ids`: ``(semantic uint8, instance uint32)``."""
-    packed = packed.astype(np.uint16, copy=False)
-    return (packed >> INSTANCE_BITS).astype(np.uint8), (packed & MAX_INSTANCE).astype(np.uint32)
+    packed = np.asarray(packed).astype(np.uint16, copy=False)
+    if check_encoding(encoding) == "bits":
+        return (packed >> INSTANCE_BITS).astype(np.uint8), (packed & 0x7FF).astype(np.uint32)
+    return (packed // 1000).astype(np.uint8), (packed % 1000).astype(np.uint32)
 
 
 def _refuse(where: str, what: str, largest: int, limit: int, why: str) -> FormatError:
@@ -94,15 +119,18 @@ def save_carlaocc_npz(
     instance: np.ndarray,
     voxel_size: float,
     voxel_origin: Sequence[float],
-) -> None:
-    """Write a frame as a CarlaOcc ``.npz`` (``np.savez_compressed``, atomic).
+    encoding: str = "bits",
+) -> int:
+    """Write a frame as a CarlaOcc ``.npz`` (deflated, atomic); returns the rows written.
 
     ``semantic``: integer ``(X, Y, Z)`` class ids (0 = free, not stored); ``instance``: integer
-    ``(X, Y, Z)`` ids of the same shape (0 for stuff). Refuses (``FormatError`` naming the largest
-    offending value and the limit) a semantic id > 31, an instance id > 2047, a grid whose indices
-    exceed 65535, and instance ids on free voxels (they would be lost).
+    ``(X, Y, Z)`` ids of the same shape (0 for stuff); ``encoding`` one of
+    :data:`LABEL_ENCODINGS`. Refuses (``FormatError`` naming the largest offending value and the
+    limit) ids beyond the encoding's :data:`LABEL_LIMITS`, a grid whose indices exceed 65535, and
+    instance ids on free voxels (they would be lost).
     """
     where = f"{os.fspath(path)} (writing)"
+    max_sem, max_inst = LABEL_LIMITS[check_encoding(encoding)]
     semantic = np.asarray(semantic)
     instance = np.asarray(instance)
     if semantic.ndim != 3 or instance.shape != semantic.shape:
@@ -125,35 +153,54 @@ def save_carlaocc_npz(
         raise FormatError(f"{where}: negative semantic id {int(semantic.min())}")
     if instance.size and instance.min() < 0:
         raise FormatError(f"{where}: negative instance id {int(instance.min())}")
-    if sem.size and sem.max() > MAX_SEMANTIC:
-        raise _refuse(where, "semantic id", int(sem.max()), MAX_SEMANTIC, "5 bits")
-    if inst.size and inst.max() > MAX_INSTANCE:
-        raise _refuse(where, "instance id", int(inst.max()), MAX_INSTANCE, "11 bits; see published_instance_ids")
+    if sem.size and sem.max() > max_sem:
+        raise _refuse(where, "semantic id", int(sem.max()), max_sem, f"the {encoding} encoding")
+    if inst.size and inst.max() > max_inst:
+        raise _refuse(where, "instance id", int(inst.max()), max_inst, f"the {encoding} encoding; see "
+                      "carlaocc_release.release_instance_ids")
     stray = instance.reshape(-1)[semantic.reshape(-1) == 0]
     if stray.size and stray.max() > 0:
         raise FormatError(f"{where}: instance id {int(stray.max())} on a free voxel (semantic 0) would be lost")
 
     xyz = np.stack(np.unravel_index(idx, semantic.shape), axis=1).astype(np.uint16)
-    occupancy = np.concatenate([xyz, pack_ids(sem, inst)[:, None]], axis=1)
+    arrays = {"occupancy": np.concatenate([xyz, pack_ids(sem, inst, encoding)[:, None]], axis=1),
+              "voxel_size": np.float64(voxel_size), "voxel_origin": np.asarray(origin, dtype=np.float64),
+              "volume_size": np.asarray(semantic.shape, dtype=np.int64)}  # fmt: skip
+    if encoding != "bits":
+        arrays[ENCODING_KEY] = np.asarray(encoding)
+    data = npz_bytes(arrays)
+    atomic_write(path, lambda fh: fh.write(data))
+    return len(idx)
+
+
+def npz_bytes(arrays: Mapping[str, np.ndarray], level: int = 1) -> bytes:
+    """An ``.npz`` (deflated zip of ``.npy`` members, as ``np.savez_compressed`` writes and
+    ``np.load`` reads) at zlib ``level``: level 1 writes a dense 0.1 m frame about five times
+    faster than ``savez_compressed``'s default, for files a few percent larger."""
     buf = io.BytesIO()
-    np.savez_compressed(
-        buf,
-        occupancy=occupancy,
-        voxel_size=np.float64(voxel_size),
-        voxel_origin=np.asarray(origin, dtype=np.float64),
-        volume_size=np.asarray(semantic.shape, dtype=np.int64),
-    )
-    atomic_write(path, lambda fh: fh.write(buf.getbuffer()))
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as zf:
+        for name, a in arrays.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(a), allow_pickle=False)
+    return buf.getvalue()
 
 
 def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
-    """Read a CarlaOcc ``.npz`` and rebuild the dense ``semantic`` (uint8) / ``instance`` (uint32).
+    """Read a CarlaOcc ``.npz`` and rebuild the dense ``semantic`` (uint8) / ``instance`` (uint32),
+    decoding its labels as its ``label_encoding`` key says (``bits`` without one).
 
     ``FormatError`` naming the file for a missing key, a wrong shape/dtype, an index outside
-    ``volume_size``, a row with semantic 0, a voxel listed twice, or a truncated archive.
+    ``volume_size``, a row with semantic 0, a voxel listed twice, an unknown encoding, or a
+    truncated archive.
     """
     p = os.fspath(path)
     a = read_npz(path, CARLAOCC_KEYS)
+    encoding = "bits"
+    with np.load(p, allow_pickle=False) as z:
+        if ENCODING_KEY in z.files:
+            encoding = str(z[ENCODING_KEY])
+    if encoding not in LABEL_ENCODINGS:
+        raise FormatError(f"{p}: unknown label_encoding {encoding!r} (known: {', '.join(LABEL_ENCODINGS)})")
     occ, vs, vo, shape = a["occupancy"], a["voxel_size"], a["voxel_origin"], a["volume_size"]
     if occ.dtype != np.uint16 or occ.ndim != 2 or occ.shape[1] != 4:
         raise FormatError(f"{p}: occupancy must be (N, 4) uint16, got {occ.shape} {occ.dtype}")
@@ -169,7 +216,7 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
         for axis, name in enumerate("xyz"):
             if hi[axis] >= dims[axis]:
                 raise FormatError(f"{p}: {name} index {int(hi[axis])} outside volume_size {dims}")
-    sem, inst = unpack_ids(occ[:, 3])
+    sem, inst = unpack_ids(occ[:, 3], encoding)
     if (sem == 0).any():
         raise FormatError(f"{p}: {int((sem == 0).sum())} occupancy rows have semantic 0 (free)")
     flat = np.ravel_multi_index(tuple(occ[:, :3].T.astype(np.intp)), dims)
@@ -183,38 +230,6 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
     return CarlaOccFrame(semantic, instance, float(vs.reshape(())), origin)  # type: ignore[arg-type]
 
 
-def published_instance_ids(ids: np.ndarray, actor_ids: np.ndarray, where: str = "sequence") -> np.ndarray:
-    """The published CarlaOcc id of each of a sequence's instances (DESIGN.md): static things
-    numbered 1..999 in id order, simulated actors at 1000 + (id mod 1000).
-
-    ``ids``: the sorted unique nonzero instance ids appearing in the sequence; ``actor_ids``: the
-    ids of its simulated actors. Returns int64 new ids aligned with ``ids``. Refuses
-    (:class:`FormatError` naming ``where``) more than 999 static things or two actors equal
-    modulo 1000 instead of wrapping.
-    """
-    ids = np.asarray(ids).astype(np.int64, copy=False)
-    is_actor = np.isin(ids, np.asarray(actor_ids).astype(np.int64, copy=False))
-    n_static = int((~is_actor).sum())
-    if n_static > 999:
-        raise FormatError(f"{where}: {n_static} static instances, more than CarlaOcc npz's ids 1-999 hold")
-    new = np.zeros(len(ids), dtype=np.int64)
-    new[~is_actor] = np.arange(1, n_static + 1)
-    new[is_actor] = 1000 + ids[is_actor] % 1000
-    if len(np.unique(new[is_actor])) != int(is_actor.sum()):
-        raise FormatError(f"{where}: two actors share an id modulo 1000 (CarlaOcc npz's 1000-1999 range)")
-    return new
-
-
-def remap_instances(instance: np.ndarray, ids: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """uint32 copy of ``instance`` with each id of the sorted ``ids`` replaced by ``new`` (0 stays
-    0; every nonzero value must be in ``ids``)."""
-    f = np.asarray(instance)
-    if len(ids) == 0:
-        return np.zeros(f.shape, dtype=np.uint32)
-    pos = np.minimum(np.searchsorted(ids, f), len(ids) - 1)  # the clip only guards zeros
-    return np.where(f == 0, 0, np.asarray(new)[pos]).astype(np.uint32)
-
-
 def load_carlaocc_grid(path: Path) -> LabelGrid:
     """A CarlaOcc ``.npz`` as a :class:`LabelGrid`: its semantic ids (0 = free), no visibility
     mask, the file's own voxel size and origin (LiDAR frame)."""
@@ -225,4 +240,4 @@ def load_carlaocc_grid(path: Path) -> LabelGrid:
 CARLAOCC_NPZ_FORMAT = DatasetFormat(
     "carlaocc-npz", "CarlaOcc", ".npz", load_carlaocc_grid, tuple(c.name for c in taxonomy.CLASSES),
     lambda i: i, taxonomy.dynamic_ids(), "none")
-"""The published CarlaOcc ``.npz`` layout (:mod:`carlaocc.catalog.formats.layout`)."""
+"""The CarlaOcc ``.npz`` layout (:mod:`carlaocc.catalog.formats.layout`)."""

@@ -18,6 +18,7 @@ app = typer.Typer(
     "Stages (carlaocc run runs them in this order; --stages a,b runs some alone):\n\n"
     "ingest: the procedural ADMesh library (carlaocc ingest adds external sources)\n\n"
     "scenes: towns, traffic, ego sequences, rig poses, actors\n\n"
+    "splits: train / val / test by sequence (seeded), used by every export\n\n"
     "voxelize: exact panoptic occupancy of every frame, flow, camera/LiDAR visibility masks\n\n"
     "sensors: ray-cast camera maps and LiDAR, rectification, normals\n\n"
     "quality: quality scores (spatial continuity, temporal consistency)\n\n"

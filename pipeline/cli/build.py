@@ -14,7 +14,8 @@ from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, _RichProgress, parse_voxel_sizes, _store,
                                          _validation_message, check_towns, fail, load_config,
-                                         plan_config, PresetOpt, MapsOpt, LimitFramesOpt)
+                                         plan_config, PresetOpt, MapsOpt, LimitFramesOpt, SequencesOpt,
+                                         TaxonomyOpt, sequence_patterns)
 
 
 @app.command()
@@ -29,12 +30,14 @@ def run(
     preset: PresetOpt = None,
     maps: MapsOpt = None,
     limit_frames: LimitFramesOpt = None,
+    sequences: SequencesOpt = None,
+    taxonomy: TaxonomyOpt = None,
 ) -> None:
     """Build the dataset (or the selected stages) on the embedded default, a --config file or a
-    --preset plan (--maps and --limit-frames pick the towns and a slice of it)."""
+    --preset plan (--maps, --limit-frames and --sequences pick the towns and a slice of it)."""
     from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
-    cfg = plan_config(config, root, preset, maps, limit_frames)
+    cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
@@ -48,7 +51,7 @@ def run(
     t0 = time.perf_counter()
     try:
         outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
-                                log=lambda s: typer.echo(s, err=True))
+                                log=lambda s: typer.echo(s, err=True), sequences=sequence_patterns(sequences))
     except PlanError as exc:  # refused before any task ran
         progress.close()
         fail(str(exc))
@@ -156,15 +159,25 @@ def status(
     root: RootOpt = "data",
     config: ConfigOpt = None,
     verbose: Annotated[bool, typer.Option("--verbose", "-v", help="list every stale partition")] = False,
+    preset: PresetOpt = None,
+    maps: MapsOpt = None,
+    limit_frames: LimitFramesOpt = None,
+    sequences: SequencesOpt = None,
+    taxonomy: TaxonomyOpt = None,
 ) -> None:
-    """List what is stale and why (runs nothing, writes nothing)."""
-    from carlaocc.pipeline.runner import status as plan_status
+    """List what is stale and why (runs nothing, writes nothing), for the same plan and slice
+    options as `carlaocc run`."""
+    from carlaocc.pipeline.runner import PlanError, status as plan_status
 
-    cfg = load_config(config, root)
+    cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     store = _store(root, writable=False)
-    for plan in plan_status(store, cfg, voxel_sizes):
+    try:
+        plans = plan_status(store, cfg, voxel_sizes, sequence_patterns(sequences))
+    except PlanError as exc:
+        fail(str(exc))
+    for plan in plans:
         name = plan.stage.name
         if plan.blocked:
             typer.echo(f"{name:<9} waiting: {plan.blocked}")
@@ -198,13 +211,14 @@ def list_stages() -> None:
 @app.command("config")
 def show_config(config: ConfigOpt = None, root: Annotated[Optional[str], typer.Option(
         "--root", help="a dataset root: its own dataset.yaml when it has one")] = None,
-        preset: PresetOpt = None, maps: MapsOpt = None, limit_frames: LimitFramesOpt = None) -> None:
+        preset: PresetOpt = None, maps: MapsOpt = None, limit_frames: LimitFramesOpt = None,
+        taxonomy: TaxonomyOpt = None) -> None:
     """Print the effective dataset config as YAML (a starting point for --config files): the
     --config file or --preset plan, else the root's dataset.yaml, else the embedded default; with
     a summary of the plan (towns, sequences, frames) on stderr."""
     import yaml
 
-    cfg = plan_config(config, root, preset, maps, limit_frames)
+    cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
     towns = cfg.scenes.towns
     seqs = sum(t.sequences_of(level) for t in towns for level in t.traffic_levels if t.style != "carla-recording")

@@ -29,6 +29,8 @@ VoxelSizeOpt = Annotated[str, typer.Option("--voxel-size", "--res", help="voxel 
 ConfigOpt = Annotated[Optional[Path], typer.Option("--config", help="YAML or JSON dataset config (see `carlaocc config`)")]
 PresetOpt = Annotated[Optional[str], typer.Option("--preset", help="a shipped dataset plan instead of --config: paper (the CarlaOcc paper's 104 sequences x 1,000 frames)")]
 MapsOpt = Annotated[Optional[Path], typer.Option("--maps", help="a folder of OpenDRIVE maps (e.g. CARLA's Town01..Town10HD .xodr): they replace the plan's towns, one town each, with the first town's traffic levels and sequence counts")]
+TaxonomyOpt = Annotated[Optional[str], typer.Option("--taxonomy", help="label table: release (the official CarlaOcc release's utils/labels.py, the default) | carlaocc-v1 (Building a thing; poles, lights, signs stuff); overrides the config's taxonomy")]
+SequencesOpt = Annotated[Optional[str], typer.Option("--sequences", help="build only the sequences matching these comma-separated patterns (fnmatch on sequence ids, e.g. 'town00_*' or 'town0?_high_00'); scenes and splits still cover every sequence")]
 LimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan)")]
 
 
@@ -143,9 +145,9 @@ def root_config(root: str | None) -> Path | None:
 
 
 def plan_config(path: Path | None, root: str | None, preset: str | None, maps: Path | None = None,
-                limit_frames: int | None = None) -> DatasetConfig:
+                limit_frames: int | None = None, taxonomy: str | None = None) -> DatasetConfig:
     """:func:`load_config` of ``--config`` or ``--preset`` (not both), then ``--maps`` (the
-    folder's .xodr files as the towns) and ``--limit-frames`` applied."""
+    folder's .xodr files as the towns), ``--limit-frames`` and ``--taxonomy`` applied."""
     if preset is not None:
         from carlaocc.catalog.presets import preset_path
 
@@ -167,10 +169,22 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
         scenes = scenes.model_copy(update={"towns": towns})
     if limit_frames is not None:
         scenes = scenes.model_copy(update={"frame_count": min(int(limit_frames), scenes.frame_count)})
+    update: dict = {"scenes": scenes}
+    if taxonomy is not None:
+        from carlaocc.schemas.taxonomy import LABEL_TABLES
+
+        if taxonomy not in LABEL_TABLES:
+            fail(f"--taxonomy {taxonomy!r}: unknown label table; valid: {', '.join(LABEL_TABLES)}")
+        update["taxonomy"] = taxonomy
     try:
-        return DatasetConfig.model_validate(cfg.model_copy(update={"scenes": scenes}).model_dump())
+        return DatasetConfig.model_validate(cfg.model_copy(update=update).model_dump())
     except ValidationError as exc:
         fail(_validation_message("config", exc))
+
+
+def sequence_patterns(text: str | None) -> tuple[str, ...]:
+    """``--sequences`` as a tuple of fnmatch patterns (empty: every sequence)."""
+    return tuple(p.strip() for p in (text or "").split(",") if p.strip())
 
 
 def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:

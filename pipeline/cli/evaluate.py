@@ -12,7 +12,7 @@ Inputs (``--pred`` and ``--gt`` are both files, or both directories):
   of one shape, labels in the ``--map`` space; a ground-truth npz may add ``mask_camera`` /
   ``mask_lidar`` (0/1), so an Occ3D ``labels.npz`` is ground truth as it is. A prediction may also
   be an ``.npy`` or a one-array ``.npz`` holding the semantics. A published CarlaOcc ``.npz``
-  (``occupancy`` rows, ``sem << 11 | inst``) is read on either side and its CarlaOcc ids are
+  (``occupancy`` rows, ``semantic << 11 | instance``, or decimal when the file says so) is read on either side and its CarlaOcc ids are
   mapped into ``--map`` through the taxonomy.
 * ``depth``: ``.npy`` or ``.npz`` (array ``depth``, or a single array), float metres, ``(H, W)``;
   ground truth 0 (or outside the cap) is invalid.
@@ -52,6 +52,7 @@ GtOpt = Annotated[Path, typer.Option("--gt", help="ground-truth file or director
 MapOpt = Annotated[str, typer.Option("--map", help="label space: carlaocc (30, 0 = free) | benchmark (paper's 15 + 15 = free) | occ3d (18, 17 = free) | sscbench (19, 0 = empty) | semantickitti (20, 0 = empty)")]
 IgnoreOpt = Annotated[str, typer.Option("--ignore", help="comma-separated label ids to skip (ground truth: void; prediction: abstain)")]
 MaskOpt = Annotated[str, typer.Option("--mask", help="none | camera | lidar: score only voxels the ground truth's mask_camera / mask_lidar marks")]
+TaxonomyOpt = Annotated[str, typer.Option("--taxonomy", help="label table of the CarlaOcc ids: release (the official release's utils/labels.py, the default) | carlaocc-v1; decides the thing classes and the Occ3D / KITTI-360 ids")]
 JsonOpt = Annotated[Optional[Path], typer.Option("--json", help="write the full result (per class, means, confusion) as JSON here")]
 
 
@@ -166,11 +167,16 @@ def _ids(text: str, opt: str) -> tuple[int, ...]:
         raise InputError(f"{opt} {text!r}: expected comma-separated integer label ids") from None
 
 
-def _label_map(name: str):
+def _label_map(name: str, table: str):
+    from carlaocc.schemas.taxonomy import label_table
     from carlaocc.stages.evaluation import label_map
 
     try:
-        return label_map(name)
+        label_table(table)
+    except ValueError as exc:
+        raise InputError(f"--taxonomy: {exc}") from None
+    try:
+        return label_map(name, table)
     except ValueError as exc:
         raise InputError(f"--map: {exc}") from None
 
@@ -223,20 +229,20 @@ def _occupancy_pairs(pred: Path, gt: Path, lm, mask: str, instances: bool, suffi
 
 @eval_app.command("ssc")
 def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: IgnoreOpt = "255",
-            mask: MaskOpt = "none", json_out: JsonOpt = None) -> None:  # fmt: skip
+            mask: MaskOpt = "none", table: TaxonomyOpt = "release", json_out: JsonOpt = None) -> None:  # fmt: skip
     """Semantic occupancy: per-class IoU, mIoU (classes absent from both sides are left out) and
     geometry IoU / precision / recall (occupied vs free), summed over all frames.
 
     Inputs: two .npz files, or two directories paired by relative path without suffix. An npz
     holds an integer array 'semantics' with labels in --map (a prediction may also be an .npy or a
     one-array npz); ground truth may add 0/1 'mask_camera' / 'mask_lidar', so an Occ3D
-    labels.npz is ground truth as it is. A CarlaOcc npz ('occupancy' rows, sem << 11 | inst) is
+    labels.npz is ground truth as it is. A CarlaOcc npz ('occupancy' rows, semantic << 11 | instance; decimal when its label_encoding key says so) is
     read on either side, its CarlaOcc ids mapped into --map. Missing counterpart: exit code 2."""
 
     def go() -> None:
         from carlaocc.stages.evaluation import SSCAccumulator
 
-        lm = _label_map(map_name)
+        lm = _label_map(map_name, table)
         if mask not in ("none", "camera", "lidar"):
             raise InputError(f"--mask must be none, camera or lidar, got {mask!r}")
         acc = SSCAccumulator(lm, _ids(ignore, "--ignore"))
@@ -262,6 +268,7 @@ def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: Ign
 @eval_app.command("panoptic")
 def panoptic_cmd(
     pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: IgnoreOpt = "255", mask: MaskOpt = "none",
+    table: TaxonomyOpt = "release",
     min_size: Annotated[int, typer.Option("--min-size", min=0, help="voxels: unmatched segments smaller than this are neither FN nor FP")] = 0,
     things: Annotated[Optional[str], typer.Option("--things", help="comma-separated thing label ids (default: the map's, from the taxonomy)")] = None,
     json_out: JsonOpt = None,
@@ -276,7 +283,7 @@ def panoptic_cmd(
     def go() -> None:
         from carlaocc.stages.evaluation import PanopticAccumulator
 
-        lm = _label_map(map_name)
+        lm = _label_map(map_name, table)
         if mask not in ("none", "camera", "lidar"):
             raise InputError(f"--mask must be none, camera or lidar, got {mask!r}")
         try:

@@ -58,18 +58,23 @@ def voxelize_files(
 
 @app.command("export")
 def export_cmd(
-    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz")],
-    res: Annotated[float, typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling)")],
+    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz | carlaocc-release")],
     out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
+    res: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling; carlaocc-release: 0.1 by default, any size dividing 0.1)")] = None,
     root: RootOpt = "data",
     config: ConfigOpt = None,
     sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to export (default: all voxelized)")] = None,
+    label_encoding: Annotated[str, typer.Option("--label-encoding", help="carlaocc-npz / carlaocc-release labels: bits (semantic << 11 | instance, what the release's code writes and its loader reads; default) | decimal (semantic * 1000 + instance, the release's documentation; the files say so in a label_encoding key)")] = "bits",
 ) -> None:
     """Export the occupancy in the layouts models train on: occ3d (gts/<seq>/<frame>/labels.npz,
     200x200x16 at 0.4 m, ego frame, free 17, masks), semantickitti (sequences/<seq>/voxels/
     <frame>.bin/.label/.invalid/.occluded, 256x256x32 at 0.2 m, forward), surroundocc
     (<seq>/<frame>.npy sparse rows, 200x200x16 at 0.5 m), carlaocc-npz (<seq>/<frame>.npz on our
-    grid, sem << 11 | inst; refuses ids beyond 5/11 bits instead of wrapping)."""
+    grid; labels semantic << 11 | instance as the release's code reads them, or --label-encoding
+    decimal; ids renumbered per class where they would collide),
+    carlaocc-release (the official release's layout: Town<NN>_Opt_Seq<NN>/occupancy/{vs_0_1,
+    vs_0_2_forward_view, vs_0_4_surround_view}, poses, calib, splits, camera maps, LiDAR).
+    Every export writes the dataset's splits beside it (splits/{train,val,test}.txt)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from carlaocc.catalog.formats import FormatError
@@ -77,6 +82,12 @@ def export_cmd(
 
     if fmt not in FORMATS:
         fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
+    if label_encoding not in ("bits", "decimal"):
+        fail(f"--label-encoding {label_encoding!r}: must be bits or decimal")
+    if res is None:
+        if fmt != "carlaocc-release":
+            fail(f"export {fmt} needs --voxel-size (the built resolution to export from)")
+        res = 0.1
     cfg = load_config(config, root)
     store = _store(root, writable=False)
     try:
@@ -84,13 +95,22 @@ def export_cmd(
         with Progress(TextColumn(f"export {fmt}"), BarColumn(), MofNCompleteColumn(), TextColumn("frames"),
                       TimeElapsedColumn(), transient=True) as bar:
             task = bar.add_task(fmt, total=total)
-            summary = export(store, cfg, fmt, res, out, sequence, progress=lambda n: bar.advance(task, n))
+            summary = export(store, cfg, fmt, res, out, sequence, progress=lambda n: bar.advance(task, n),
+                             encoding=label_encoding)
     except (StoreError, FormatError, ValueError) as exc:
         fail(exc)
     except OSError as exc:
         fail(f"--out {out}: cannot write: {exc.strerror or exc}")
     typer.echo(f"wrote {summary.files:,} files for {summary.frames} frames of {summary.sequences} sequence(s) "
                f"in {fmt} layout under {out}")
+    if fmt == "carlaocc-release":
+        import json
+
+        rates = {v["rate_hz"] for v in json.loads((out / "carlaocc_export.json").read_text())["sequences"].values()}
+        if rates - {10.0}:
+            typer.echo(f"note: the release's reader assumes 10 Hz (timestamp = frame * 0.1); these sequences run at "
+                       f"{', '.join(f'{r:g}' for r in sorted(rates))} Hz (carlaocc_export.json records it; the paper "
+                       f"preset is 10 Hz)", err=True)
 
 
 @app.command("compare-resolutions")

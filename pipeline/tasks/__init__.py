@@ -4,6 +4,7 @@ writes the outputs through the catalog, returning their fingerprints.
 
 * ``ingest``   — the procedural ADMesh library; an external mesh source, one task per item
 * ``scenes``   — one task per town: layout, placements, traffic, sequences, actors
+* ``splits``   — one task: train / val / test by sequence into ``splits/``
 * ``voxelize`` — one task per (sequence, voxel size, frame): occupancy, flow, visibility masks
 * ``sensors``  — one task per (sequence, frame): camera maps, LiDAR, rectification, normals
 * ``quality``  — one task per (sequence, voxel size): spatial continuity, temporal consistency

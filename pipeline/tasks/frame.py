@@ -142,8 +142,10 @@ class FrameInputs:
         return np.asarray(self.frame.lidar_pose, dtype=np.float64).reshape(4, 4)[2, :3].copy()
 
 
-def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameInputs:
-    """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame."""
+def frame_inputs(store: Store, seq_id: str, frame_index: int, region, taxonomy: str | None = None) -> FrameInputs:
+    """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame;
+    ``taxonomy`` names the label table whose stuff parts carry instance 0 (None: the default)."""
+    from carlaocc.schemas.taxonomy import thing_ids
     from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
 
     t_seq = ParquetTable(store, SequenceRecord)
@@ -166,11 +168,12 @@ def frame_inputs(store: Store, seq_id: str, frame_index: int, region) -> FrameIn
     needed = {index.placements[i].asset_id for i in selected} | {a.asset_id for a in actors}
     geometry = load_geometry(store, needed, index.placements)
     scene = assemble_frame(frames[0], actors, index, geometry, region,
-                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id)
+                           pedestrian_geometry=pedestrian_geometry(geometry), ego_asset_id=sequence.ego_asset_id,
+                           things=frozenset(thing_ids(taxonomy)))
     return FrameInputs(sequence, frames[0], actors, scene)
 
 
-def frame_scene(store: Store, seq_id: str, frame_index: int, region) -> list:
+def frame_scene(store: Store, seq_id: str, frame_index: int, region, taxonomy: str | None = None) -> list:
     """The panoptic scene (list of SceneMesh, LiDAR frame) of one frame, cut to ``region`` =
-    (lo, hi) in the LiDAR frame."""
-    return frame_inputs(store, seq_id, frame_index, region).scene
+    (lo, hi) in the LiDAR frame, under label table ``taxonomy``."""
+    return frame_inputs(store, seq_id, frame_index, region, taxonomy).scene

@@ -15,6 +15,7 @@ import numpy as np
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.schemas.taxonomy import thing_ids
 from carlaocc.schemas.records import AssetRecord
 
 __all__ = ["RecordedTown", "recorded_scenes", "recording_files", "rig_from_calib"]
@@ -175,7 +176,7 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
             continue
         statics.append((a.name, a.semantic_id, V, F))
     try:
-        town = recorded_town(name, index, str(rec.root), statics)
+        town = recorded_town(name, index, str(rec.root), statics, frozenset(thing_ids(cfg.taxonomy)))
     except ValueError as exc:
         raise StoreError(f"{label}: {exc}") from None
     # the ADMesh assets of the recording's models, by source path

@@ -185,15 +185,16 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
     page = render_html(
         root=store.url, sequences=sequences, grids=grids, totals=totals, asset_rows=asset_rows,
         quality=quality, usage=[(u.part, u.files, u.bytes) for u in usage],
-        lineage=stage_lineage(LineageLog(store).load()), images=png,
+        lineage=stage_lineage(LineageLog(store).load()), images=png, label_table=cfg.taxonomy,
     )
     outputs[REPORT_HTML] = store.write_bytes(REPORT_HTML, page.encode())
     return outputs
 
 
 def report_config(config: DatasetConfig) -> QualityConfig:
-    """The report stage's config: the metrics section (the report is the metrics' presentation)."""
-    return config.quality
+    """The report stage's config: the metrics section (the report is the metrics' presentation)
+    with the dataset's taxonomy."""
+    return config.quality.model_copy(update={"taxonomy": config.taxonomy})
 
 
 def _report_partitions(ctx: Context) -> list[Partition]:

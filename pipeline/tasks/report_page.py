@@ -150,17 +150,19 @@ SECTIONS = ("size", "sequences", "statistics", "quality", "frame", "lineage")
 def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridSpec],
                 totals: dict[float, ResolutionStats], asset_rows: list[AssetStatisticsRecord],
                 quality: list[QualityRecord], usage: list[tuple[str, int, int]], lineage: list[StageLineage],
-                images: dict[str, bytes]) -> str:
-    """The report page: one string of HTML with every picture inlined (``images``: name -> PNG)."""
+                images: dict[str, bytes], label_table: str | None = None) -> str:
+    """The report page: one string of HTML with every picture inlined (``images``: name -> PNG);
+    ``label_table``: the dataset's (which classes are things)."""
     from carlaocc.stages.report.plots import metric_label
 
+    table = taxonomy.label_table(label_table)
     res_keys = ", ".join(f"{g.key} m" for g in grids)
     frames = sum(s.frame_count for s in sequences)
     out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>carlaocc dataset report</title>"
            f"<style>{_CSS}</style></head><body><main>",
            "<h1>carlaocc dataset report</h1>",
            f"<p class=\"muted\">root <code>{_e(root)}</code> · {len(sequences)} sequences · {frames} frames · "
-           f"resolutions {_e(res_keys)} · taxonomy {_e(taxonomy.TAXONOMY_VERSION)}</p>",
+           f"resolutions {_e(res_keys)} · taxonomy {_e(table.version)}</p>",
            "<nav>" + "".join(f'<a href="#{s}">{s}</a>' for s in SECTIONS) + "</nav>"]
     # dataset size
     total_files, total_bytes = sum(u[1] for u in usage), sum(u[2] for u in usage)
@@ -181,9 +183,9 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
         if t is None:
             continue
         occupied = int(t.voxels[1:].sum())
-        rows = [[_swatch(c), _e(taxonomy.by_id(c).kind), f"{t.voxels[c]:,}",
+        rows = [[_swatch(c), _e(table.by_id(c).kind), f"{t.voxels[c]:,}",
                  f"{100 * t.voxels[c] / max(occupied, 1):.3f}",
-                 f"{t.instances[c]:,}" if taxonomy.by_id(c).kind == "thing" else "",
+                 f"{t.instances[c]:,}" if table.by_id(c).kind == "thing" else "",
                  f"{t.moving[c]:,}" if t.moving[c] else ""]
                 for c in range(1, len(t.voxels)) if t.voxels[c] or t.instances[c]]
         out += [f"<h3>{_e(k)} m</h3>", '<div class="grid2"><div>',

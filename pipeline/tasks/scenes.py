@@ -12,6 +12,7 @@ from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, town_key
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, QuarantineRecord,
                                       SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
@@ -51,6 +52,12 @@ def scenes_partitions(ctx: Context) -> list[Partition]:
                   if r.status == "completed" and k.split(":")[0] in others]
     return [Partition(town_key(i), {"town_index": i}, needs=tuple(needs), files=_town_files(spec))
             for i, spec in enumerate(ctx.config.scenes.towns)]
+
+
+def scenes_config(config) -> ScenesConfig:
+    """The scenes stage's config: ``scenes`` with the dataset's taxonomy (which placed classes
+    get instance ids)."""
+    return config.scenes.model_copy(update={"taxonomy": config.taxonomy})
 
 
 def scene_assets(store: Store, cfg: ScenesConfig) -> list[AssetRecord]:
@@ -135,7 +142,7 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         lane_count=len(net.lanes), junction_count=len(net.junction_ids),
         walkway_length=float(sum(w.length for w in net.walkways)),
         crosswalk_count=sum(1 for w in net.walkways if w.crosswalk), placement_count=len(placements),
-        bounds=[float(v) for v in town.bounds],
+        bounds=[float(v) for v in town.bounds], label_table=taxonomy.label_table(cfg.taxonomy).name,
     )  # fmt: skip
     outputs[t_town.path(key)] = t_town.save(key, [row])
 
@@ -185,4 +192,5 @@ SPEC = StageSpec(
             "admesh/quarantine/scenes-<town>.parquet (recorded towns: what was left out)"),
     partitions=scenes_partitions,
     task=scenes_task,
+    config_of=scenes_config,
 )

@@ -23,8 +23,8 @@ if TYPE_CHECKING:
 
 
 def sensors_config(config: DatasetConfig) -> SensorsConfig:
-    """The sensors stage's config: ``sensors`` with the rig of ``scenes``."""
-    return config.sensors.model_copy(update={"rig": config.scenes.rig})
+    """The sensors stage's config: ``sensors`` with the rig of ``scenes`` and the dataset's taxonomy."""
+    return config.sensors.model_copy(update={"rig": config.scenes.rig, "taxonomy": config.taxonomy})
 
 
 RECORDED_ARRAYS = ("depth_raw", "semantic_raw", "rgb")  # what a recorded sequence's frames bring
@@ -71,7 +71,8 @@ def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
             attrs = {"intrinsics": [list(r) for r in cam.intrinsics],
                      "camera_to_ego": [list(r) for r in cam.camera_to_ego()],
                      "camera_to_lidar": to_lidar[cam.name].tolist(),
-                     "camera_frame": "opencv: x right, y down, z forward", "source": source}
+                     "camera_frame": "opencv: x right, y down, z forward", "source": source,
+                     "label_table": cfg.taxonomy}
             replaced |= sensors.create(seq, cam.name, cam.width, cam.height, frames[seq], names, extra_attrs=attrs,
                                        keep_others=cfg.source == "recorded" and seq not in recorded)
         if replaced:
@@ -128,7 +129,7 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     rig = cfg.rig or RigConfig()
-    inputs = frame_inputs(store, seq_id, frame_index, sensor_region(cfg))
+    inputs = frame_inputs(store, seq_id, frame_index, sensor_region(cfg), cfg.taxonomy)
     sensors = SensorStore(store)
     cams = cfg.selected_cameras(rig)
     outputs: dict[str, str] = {}

@@ -20,7 +20,7 @@ from carlaocc.schemas.configs import DatasetConfig, VoxelizeConfig
 def voxelize_config(config: DatasetConfig) -> VoxelizeConfig:
     """The voxelize stage's config: ``voxelize`` with the rig of ``scenes`` (masks are cast from
     the sensors the sequences were recorded with; a rig change re-runs both stages)."""
-    return config.voxelize.model_copy(update={"rig": config.scenes.rig})
+    return config.voxelize.model_copy(update={"rig": config.scenes.rig, "taxonomy": config.taxonomy})
 
 
 def _voxelize_partitions(ctx: Context) -> list[Partition]:
@@ -45,10 +45,10 @@ def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Pa
     groups = {(p.params["sequence_id"], p.params["voxel_size"]) for p in to_run}
     invalid: set[str] = set()
     for seq, voxel_size in sorted(groups):
-        vcfg = ctx.config.voxelize
+        vcfg = voxelize_config(ctx.config)
         # the rig's LiDAR mount travels with the arrays: exports to ego-frame grids need it
         lidar_to_ego = [list(r) for r in ctx.config.scenes.rig.lidar.sensor_to_ego()]
-        if occ.create(seq, vcfg.grid(voxel_size), frames[seq], vcfg.chunk_edge, extra_attrs={"lidar_to_ego": lidar_to_ego},
+        if occ.create(seq, vcfg.grid(voxel_size), frames[seq], vcfg.chunk_edge, extra_attrs={"lidar_to_ego": lidar_to_ego, "label_table": ctx.config.taxonomy},
                       names=occupancy_arrays(vcfg)):
             invalid |= {p.key for p in partitions
                         if (p.params["sequence_id"], p.params["voxel_size"]) == (seq, voxel_size)}
@@ -99,7 +99,7 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["voxel_size"])
-    inputs = frame_inputs(store, seq_id, frame_index, region_of_grid(grid))
+    inputs = frame_inputs(store, seq_id, frame_index, region_of_grid(grid), cfg.taxonomy)
     occ = OccupancyStore(store)
     names = occupancy_arrays(cfg)
     tile_x = cfg.chunk_edge * cfg.tile_chunks

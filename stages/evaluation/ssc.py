@@ -96,50 +96,63 @@ class LabelMap:
         return lut[sem]
 
 
-def _things_of(target: str) -> tuple[int, ...]:
-    """Target ids whose CarlaOcc sources are all thing classes (ids with no source are stuff)."""
-    lut = taxonomy.mapping(target)
+def _things_of(target: str, table: taxonomy.LabelTable) -> tuple[int, ...]:
+    """Target ids whose CarlaOcc sources are all thing classes of ``table`` (ids with no source
+    are stuff)."""
+    lut = table.mapping(target)
     sources: dict[int, set[str]] = {}
-    for c in taxonomy.CLASSES:
+    for c in table.classes:
         sources.setdefault(lut[c.id], set()).add(c.kind)
     return tuple(sorted(t for t, kinds in sources.items() if kinds == {"thing"} and t != taxonomy.IGNORE))
 
 
-def _carlaocc() -> LabelMap:
-    names = tuple(c.name for c in taxonomy.CLASSES)
-    return LabelMap("carlaocc", names, 0, taxonomy.thing_ids(), tuple(range(len(names))))
+def _carlaocc(table: taxonomy.LabelTable) -> LabelMap:
+    names = tuple(c.name for c in table.classes)
+    return LabelMap("carlaocc", names, 0, table.thing_ids(), tuple(range(len(names))))
 
 
-def _benchmark() -> LabelMap:
+def _benchmark(table: taxonomy.LabelTable) -> LabelMap:
     # benchmark15 has no free id: the classes it ignores (None, Sky) never occupy a voxel, so
     # here they become an explicit free id 15 and geometry IoU / FP on empty space work.
     names = taxonomy.BENCHMARK15_NAMES + ("free",)
     free = len(taxonomy.BENCHMARK15_NAMES)
-    lut = tuple(free if t == taxonomy.IGNORE else t for t in taxonomy.mapping("benchmark15"))
-    return LabelMap("benchmark", names, free, _things_of("benchmark15"), lut)
+    lut = tuple(free if t == taxonomy.IGNORE else t for t in table.mapping("benchmark15"))
+    return LabelMap("benchmark", names, free, _things_of("benchmark15", table), lut)
 
 
-def _target(name: str, target: str, free: int) -> LabelMap:
-    return LabelMap(name, taxonomy.TARGETS[target], free, _things_of(target), taxonomy.mapping(target))
+def _target(name: str, target: str, free: int, table: taxonomy.LabelTable) -> LabelMap:
+    return LabelMap(name, taxonomy.TARGETS[target], free, _things_of(target, table), table.mapping(target))
 
 
-LABEL_MAPS: dict[str, LabelMap] = {
-    "carlaocc": _carlaocc(),
-    "benchmark": _benchmark(),
-    "occ3d": _target("occ3d", "occ3d_nuscenes", 17),
-    "sscbench": _target("sscbench", "sscbench_kitti360", 0),
-    "semantickitti": _target("semantickitti", "semantickitti", 0),
-}
-"""CarlaOcc 30 (0 = free), the paper's 15-class benchmark (+ 15 = free), Occ3D-nuScenes 18
-(17 = free), SSCBench-KITTI-360 19 and SemanticKITTI 20 (0 = empty)."""
+def _label_maps(table: taxonomy.LabelTable) -> dict[str, LabelMap]:
+    return {
+        "carlaocc": _carlaocc(table),
+        "benchmark": _benchmark(table),
+        "occ3d": _target("occ3d", "occ3d_nuscenes", 17, table),
+        "sscbench": _target("sscbench", "sscbench_kitti360", 0, table),
+        "semantickitti": _target("semantickitti", "semantickitti", 0, table),
+    }
 
 
-def label_map(name: str) -> LabelMap:
-    """The :class:`LabelMap` called ``name`` (see :data:`LABEL_MAPS`); ``ValueError`` otherwise."""
+LABEL_MAPS: dict[str, LabelMap] = _label_maps(taxonomy.label_table())
+"""Under the default label table: CarlaOcc 30 (0 = free), the paper's 15-class benchmark
+(+ 15 = free), Occ3D-nuScenes 18 (17 = free), SSCBench-KITTI-360 19 and SemanticKITTI 20
+(0 = empty)."""
+_BY_TABLE: dict[str, dict[str, LabelMap]] = {taxonomy.DEFAULT_LABEL_TABLE: LABEL_MAPS}
+
+
+def label_map(name: str, table: str | None = None) -> LabelMap:
+    """The :class:`LabelMap` called ``name`` (see :data:`LABEL_MAPS`) under label table ``table``
+    (None: the default; it decides the things and the Occ3D / KITTI-360 ids); ``ValueError``
+    otherwise."""
+    lt = taxonomy.label_table(table)
+    maps = _BY_TABLE.get(lt.name)
+    if maps is None:
+        maps = _BY_TABLE[lt.name] = _label_maps(lt)
     try:
-        return LABEL_MAPS[name]
+        return maps[name]
     except KeyError:
-        raise ValueError(f"unknown label map {name!r}; valid: {', '.join(LABEL_MAPS)}") from None
+        raise ValueError(f"unknown label map {name!r}; valid: {', '.join(maps)}") from None
 
 
 @numba.njit(cache=True, nogil=True)

@@ -7,14 +7,15 @@ Standardization measures an asset in the asset frame (after the frame step) by i
 ``normalized``, declared units, inferred units, fallback); a standardized size outside
 ``[min / ABSURD_FACTOR, max * ABSURD_FACTOR]`` is absurd (quarantined). Sizes in metres.
 
-Degenerate extents (:func:`min_extent`), per the taxonomy's kind of the class:
+Degenerate extents (:func:`min_extent`), per the class (the same whichever label table says
+which classes carry instance ids):
 
-* **Things** (kind ``"thing"``: Building and the road users) are solid objects with an instance
-  id, filled when closed: no axis of their bounding box may be zero (``"flat mesh"``, checked
+* **Solid objects** (:data:`SOLID_CLASSES`: Building and the road users) are filled when closed:
+  no axis of their bounding box may be zero (``"flat mesh"``, checked
   before the scale: zero is zero in any units), and after the scale every axis must be at least
   the (sub-)class's minimum measured size / :data:`THIN_FACTOR` (``"too thin"``): Car 3.5 m ->
   0.175 m, Pedestrian 0.8 m -> 0.04 m, Building 2.5 m -> 0.125 m, Bicycle 1.0 m -> 0.05 m.
-* **Stuff** may be flat on an axis: ground-like surfaces (Road, RoadLine, Ground, Sidewalk,
+* **Everything else** may be flat on an axis (a sign plate is a plane): ground-like surfaces (Road, RoadLine, Ground, Sidewalk,
   Terrain, Water, RailTrack) and thin sheets (Fence, Wall, GuardRail, sign plates, billboards,
   foliage cards) are routinely single planes, and stuff is voxelized as a surface. Only its
   measured dimension is checked (zero height for a class measured by height is ``"absurd
@@ -221,11 +222,17 @@ def size_range(category: str, subclass: str) -> SizeRange:
     return SUBCLASS_SIZE_RANGES.get((name, subclass), SIZE_RANGES[name])
 
 
+SOLID_CLASSES: frozenset[str] = frozenset(
+    ("Building", "Pedestrian", "Rider", "Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle"))
+"""Classes whose assets are solid objects, never flat."""
+
+
 def min_extent(category: str, subclass: str) -> float:
     """The smallest extent any axis of a standardized asset of the class may have, in metres:
-    the (sub-)class's minimum measured size / :data:`THIN_FACTOR` for a thing, 0 for stuff (which
-    may be flat). ``KeyError`` for a class the taxonomy does not know."""
-    if taxonomy.by_name(category).kind != "thing":
+    the (sub-)class's minimum measured size / :data:`THIN_FACTOR` for a solid object
+    (:data:`SOLID_CLASSES`), 0 for the rest (which may be flat). ``KeyError`` for a class the
+    taxonomy does not know."""
+    if taxonomy.by_name(category).name not in SOLID_CLASSES:
         return 0.0
     return size_range(category, subclass)[1] / THIN_FACTOR
 

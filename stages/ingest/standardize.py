@@ -38,7 +38,7 @@ Steps, in order:
 6. **Origin** at the bottom centre of the bounding box (x, y centred, z from 0); vertices rounded
    to 0.1 um so float noise never reaches hashes or files.
 7. **Plausibility.** The measured dimension outside ``[min / 3, max * 3]`` -> ``"absurd size"``
-   (the hint names the size, the range and the scale rule). A thing class (``sizes.min_extent``)
+   (the hint names the size, the range and the scale rule). A solid class (``sizes.min_extent``)
    with a zero extent on any axis -> ``"flat mesh"`` (checked before the scale), with an axis
    below its minimum extent -> ``"too thin"``; stuff may be flat (a road, a road line, a fence
    sheet).
@@ -216,7 +216,7 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
                      f"{raw.forward} is sideways)")
     flat = _flat_axes(hi - lo)
     if flat and min_extent(category, raw.subclass) > 0.0:
-        return Rejection("flat mesh", f"{range_label(category, raw.subclass)} is a solid thing but the mesh has no "
+        return Rejection("flat mesh", f"{range_label(category, raw.subclass)} is a solid object but the mesh has no "
                          f"extent along {' and '.join(flat)} of the asset frame (z up; extent {_fmt_extent(hi - lo)} in source "
                          f"units): a flat "
                          f"mesh cannot be a {category}; check the category, the up axis ({raw.up}) or the file")

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.schemas.taxonomy import CLASSES, palette, thing_ids
+from carlaocc.schemas.taxonomy import CLASSES, palette
 from carlaocc.stages.render.colours import check_mode
 from carlaocc.stages.render.occupancy import (DEFAULT_MAX_VOXELS, FREE_RGB, bev_colours, bev_image, block_top,
                                              classes_present, crop_indices, draw_ego, grid_arrays, top_surface,
@@ -87,10 +87,10 @@ def _strip(width: int, text: str, scale: int, centre: bool = True) -> np.ndarray
     return strip
 
 
-def _legend(class_ids: Sequence[int], mode: str, height: int, scale: int) -> np.ndarray:
+def _legend(class_ids: Sequence[int], mode: str, height: int, scale: int, things: set[int]) -> np.ndarray:
     """Legend panel: a colour swatch and the name of every class, in columns of at most
-    ``height`` pixels; thing classes are starred in instance mode (one colour per instance)."""
-    things = set(thing_ids())
+    ``height`` pixels; ``things`` (the classes with instance ids in the frame, whichever label
+    table built it) are starred in instance mode (one colour per instance)."""
     row_h = (FONT_HEIGHT + 4) * scale
     names = [CLASSES[c].name + (" *" if mode == "instance" and c in things else "") for c in class_ids]
     notes = ["* colour per instance"] if mode == "instance" and any(c in things for c in class_ids) else []
@@ -155,7 +155,9 @@ def occupancy_figure(
                             elevation_deg, azimuth_deg, mode, 40.0, None, max_voxels, _FIG_BG, 2, 0.03,
                             True)  # fmt: skip
     present = [int(c) for c in classes_present(sem) if c < len(CLASSES)]
-    legend = _legend(present, mode, H, scale)
+    # the classes carrying instance ids in this frame (the dataset's label table decided which)
+    things = {int(c) for c in np.unique(sem[inst > 0])} if has else set()
+    legend = _legend(present, mode, H, scale, things)
     gap = 6 * scale
     res = f"{grid.voxel_size:g} m"
     cap_bev = _strip(bev.shape[1], f"BEV {res}, up = forward", scale)

@@ -67,7 +67,8 @@ __all__ = [
     "town_mesh",
 ]
 
-_STUFF = frozenset(taxonomy.stuff_ids())
+DEFAULT_THINGS: frozenset[int] = frozenset(taxonomy.thing_ids())
+"""The thing classes of the default label table (``taxonomy.DEFAULT_LABEL_TABLE``)."""
 _UNIT_CUBE = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
 
 PedestrianGeometry = Callable[[str, int], AssetGeometry]
@@ -182,11 +183,12 @@ class _Prepared:
     whole every frame.
     """
 
-    __slots__ = ("big", "geom", "small", "starts", "stuff", "vertices", "whole")
+    __slots__ = ("big", "geom", "small", "starts", "stuff", "things", "vertices", "whole")
 
-    def __init__(self, geom: AssetGeometry) -> None:
-        self.geom = geom
-        self.stuff = [int(p.semantic_id) in _STUFF for p in geom.parts]
+    def __init__(self, geom: AssetGeometry, things: frozenset[int]) -> None:
+        self.geom, self.things = geom, things
+        # a part is stuff (instance 0, fused per class) unless the label table makes its class a thing
+        self.stuff = [int(p.semantic_id) not in things for p in geom.parts]
         # stuff parts the fill rule fills are kept whole like things (the fill needs every triangle)
         self.whole = [not st or fills(p.semantic_id, p.name) for st, p in zip(self.stuff, geom.parts)]
         self.small: list[int] = []
@@ -211,12 +213,14 @@ class _Prepared:
 _BIG_STUFF = 4096  # stuff parts with at least this many triangles are pre-culled in the asset frame
 
 
-def _prepared(cache: dict[object, _Prepared], key: object, geom: AssetGeometry) -> _Prepared:
-    """The preparation of ``geom``, cached in ``cache`` under ``key`` (an asset id, or an
-    ``(asset id, phase)`` pair) while the same geometry object is passed for it."""
+def _prepared(cache: dict[object, _Prepared], key: object, geom: AssetGeometry,
+              things: frozenset[int] = DEFAULT_THINGS) -> _Prepared:
+    """The preparation of ``geom`` under the thing classes ``things``, cached in ``cache`` under
+    ``key`` (an asset id, or an ``(asset id, phase)`` pair) while the same geometry object and
+    thing classes are passed for it."""
     hit = cache.get(key)
-    if hit is None or hit.geom is not geom:
-        hit = cache[key] = _Prepared(geom)
+    if hit is None or hit.geom is not geom or hit.things != things:
+        hit = cache[key] = _Prepared(geom, things)
     return hit
 
 
@@ -330,6 +334,7 @@ def assemble_frame(
     region: tuple[np.ndarray, np.ndarray],
     pedestrian_geometry: PedestrianGeometry | None = None,
     ego_asset_id: str | None = None,
+    things: frozenset[int] = DEFAULT_THINGS,
 ) -> list[SceneMesh]:
     """The panoptic scene of ``frame`` in its LiDAR frame (metres, x forward, y left, z up).
 
@@ -338,8 +343,9 @@ def assemble_frame(
     are used. ``geometry`` maps asset ids (ADMesh ids and the town's ``"<town>/<name>"`` stuff
     keys) to geometry in the object frame; it needs only the assets of the selected placements
     and of this frame's actors. ``pedestrian_geometry(asset_id, phase_index)`` gives a walker's
-    mesh at a canonical gait phase. Raises ``ValueError`` naming the placement or actor whose
-    asset has no geometry.
+    mesh at a canonical gait phase. ``things``: the class ids that carry instance ids (the
+    dataset's label table); parts of other classes are stuff (instance 0). Raises ``ValueError``
+    naming the placement or actor whose asset has no geometry.
     """
     lo = np.asarray(region[0], dtype=np.float64).reshape(3)
     hi = np.asarray(region[1], dtype=np.float64).reshape(3)
@@ -353,7 +359,7 @@ def assemble_frame(
     # 1. static placements meeting the frame's world region, by placement id
     for i in index.select(*frame_region(frame, lo, hi)):
         p = index.placements[int(i)]
-        prep = _prepared(index._prepared, p.asset_id, _placement_geometry(p, geometry))
+        prep = _prepared(index._prepared, p.asset_id, _placement_geometry(p, geometry), things)
         out.extend(_emit(prep, world_to_lidar @ pose_from_list(p.pose), p.instance_id, p.name, box))
     # 2. this frame's actors (never the ego), by instance id
     mine = [a for a in actors if a.sequence_id == frame.sequence_id and a.frame_index == frame.frame_index]
@@ -361,7 +367,7 @@ def assemble_frame(
         if _is_ego(a, ego_pose, ego_asset_id):
             continue
         key, geom = _actor_geometry(a, geometry, pedestrian_geometry)
-        out.extend(_emit(_prepared(index._prepared, key, geom), world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
+        out.extend(_emit(_prepared(index._prepared, key, geom, things), world_to_lidar @ pose_from_list(a.pose), a.instance_id, f"actor_{a.instance_id}", box))
     return out
 
 
@@ -430,13 +436,15 @@ def flatten(scene: Sequence[SceneMesh]) -> PanopticMesh:
                         np.concatenate(inst), np.concatenate(transp))  # fmt: skip
 
 
-def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, AssetGeometry]) -> PanopticMesh:
+def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, AssetGeometry],
+              things: frozenset[int] = DEFAULT_THINGS) -> PanopticMesh:
     """The town's unified static mesh in the world frame: every placement (by placement id) moved
-    by its pose, every part whole, stuff with instance 0 and things with the placement's
-    instance id. Raises ``ValueError`` naming a placement whose asset has no geometry."""
+    by its pose, every part whole, stuff with instance 0 and things (``things``: the label
+    table's thing classes) with the placement's instance id. Raises ``ValueError`` naming a
+    placement whose asset has no geometry."""
     scene: list[SceneMesh] = []
     prepared: dict[object, _Prepared] = {}
     for p in sorted(placements, key=lambda p: p.placement_id):
-        prep = _prepared(prepared, p.asset_id, _placement_geometry(p, geometry))
+        prep = _prepared(prepared, p.asset_id, _placement_geometry(p, geometry), things)
         scene.extend(_emit(prep, pose_from_list(p.pose), p.instance_id, p.name, None))
     return flatten(scene)

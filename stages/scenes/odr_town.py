@@ -36,6 +36,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.opendrive import OpenDriveNetwork, Signal
 from carlaocc.schemas.records import AssetRecord
@@ -245,7 +246,7 @@ def build_opendrive_town_with_stats(odr: OpenDriveNetwork, spec: TownSpec, scene
         stuff[f"{name}/roadline"] = stuff_geometry(f"{name}/roadline", concatenate(marks), "RoadLine", "paint")
     if len(terrain[1]):
         stuff[f"{name}/terrain"] = stuff_geometry(f"{name}/terrain", terrain, "Terrain", "grass")
-    placer = Placer(name)
+    placer = Placer(name, frozenset(taxonomy.thing_ids(scenes.taxonomy)))
     for geom in stuff.values():
         placer.add_stuff(geom)
 

@@ -25,7 +25,8 @@ __all__ = [
 SURFACE = 0.01  # m: thickness of the thin closed slabs that stand for ground surfaces
 STUFF_TILE = 8.0  # m: largest tile edge of a stuff slab's top and bottom faces
 POLE_RADIUS = 0.09  # m: pole radius assumed when placing pole-like assets by their pole axis
-THINGS = frozenset(taxonomy.thing_ids())
+DEFAULT_THINGS: frozenset[int] = frozenset(taxonomy.thing_ids())
+"""The thing classes of the default label table."""
 
 
 def grid_slab(G: np.ndarray, z0: float, z1: float):
@@ -95,11 +96,11 @@ def box_corners_aabb(lo, hi, T: np.ndarray) -> tuple[list[float], list[float]]:
 
 class Placer:
     """Accumulates placement records in order: sequential placement ids, per-kind names
-    (``<kind>_<nnn>``), instance ids 1.. for thing classes (taxonomy thing ids), 0 for stuff,
-    and the world AABB of every placed mesh."""
+    (``<kind>_<nnn>``), instance ids 1.. for thing classes (``things``: the thing ids of the
+    dataset's label table), 0 for stuff, and the world AABB of every placed mesh."""
 
-    def __init__(self, town: str) -> None:
-        self.town = town
+    def __init__(self, town: str, things: frozenset[int] = DEFAULT_THINGS) -> None:
+        self.town, self.things = town, frozenset(things)
         self.records: list[PlacementRecord] = []
         self.counts: dict[str, int] = {}
         self.next_instance = 1
@@ -111,13 +112,13 @@ class Placer:
         k = self.counts.get(kind, 0)
         self.counts[kind] = k + 1
         instance = 0
-        if semantic_id in THINGS:
+        if semantic_id in self.things:
             instance, self.next_instance = self.next_instance, self.next_instance + 1
         lo, hi = box_corners_aabb(local_bounds[0], local_bounds[1], np.asarray(pose, dtype=np.float64))
         rec = PlacementRecord(
             town=self.town, placement_id=len(self.records), name=named or f"{kind}_{k:03d}",
             asset_id=asset_id, mesh_path="", semantic_id=semantic_id, instance_id=instance,
-            pose=pose_to_list(pose), is_thing=semantic_id in THINGS, aabb_min=lo, aabb_max=hi,
+            pose=pose_to_list(pose), is_thing=semantic_id in self.things, aabb_min=lo, aabb_max=hi,
         )  # fmt: skip
         self.records.append(rec)
         return rec

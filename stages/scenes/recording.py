@@ -100,9 +100,11 @@ def traffic_level_of(index: int) -> str:
     return "none" if index == 0 else "low" if index <= 3 else "medium" if index <= 6 else "high"
 
 
-def recorded_town(name: str, index: int, source: str, statics: Sequence[tuple[str, int, np.ndarray, np.ndarray]]) -> Town:
-    """The town of a recording: ``statics`` = (actor name, class id, world vertices, faces)."""
-    placer = Placer(name)
+def recorded_town(name: str, index: int, source: str, statics: Sequence[tuple[str, int, np.ndarray, np.ndarray]],
+                  things: frozenset[int] | None = None) -> Town:
+    """The town of a recording: ``statics`` = (actor name, class id, world vertices, faces);
+    ``things`` (default: the default label table's) get instance ids."""
+    placer = Placer(name) if things is None else Placer(name, things)
     stuff: dict[str, AssetGeometry] = {}
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
     for actor, sem, V, F in statics:

@@ -51,6 +51,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.geometry import concatenate
@@ -119,15 +120,15 @@ def build_procedural_town(spec: TownSpec, scenes: ScenesConfig, index: int, asse
     # things, before the stuff meshes: lot frontages add fences and walls
     place_buildings(draft)
     place_furniture(draft)
-    return _town(town_name(index), index, draft, network)
+    return _town(town_name(index), index, draft, network, frozenset(taxonomy.thing_ids(scenes.taxonomy)))
 
 
-def _town(name: str, index: int, draft: TownDraft, network: RoadNetwork) -> Town:
+def _town(name: str, index: int, draft: TownDraft, network: RoadNetwork, things: frozenset[int]) -> Town:
     """The finished town: one stuff mesh per non-empty kind placed first (identity poses), then
-    the deferred asset placements at kerb height."""
+    the deferred asset placements at kerb height; ``things`` get instance ids."""
     lay = draft.lay
     stuff = {}
-    placer = Placer(name)
+    placer = Placer(name, things)
     for key, parts in draft.pieces.items():
         if not parts:
             continue

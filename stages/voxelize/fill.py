@@ -8,9 +8,9 @@ Fill modes
 
 The per-class rule (``auto``)
 -----------------------------
-*Volumetric* classes are filled: every thing class (vehicles, people, buildings) and the stuff
+*Volumetric* classes are filled: the road users (vehicles, people), buildings and the other
 classes whose objects are solids -- Wall, Pole, TrafficLight, TrafficSign, Static and Dynamic
-props, Rock. *Thin or open* classes stay surfaces: Road, Sidewalk, RoadLine, Terrain, Ground,
+props, Rock -- whichever of them the label table makes things. *Thin or open* classes stay surfaces: Road, Sidewalk, RoadLine, Terrain, Ground,
 Water, RailTrack, Bridge (ground-like meshes cut to the region), Fence and GuardRail (thin
 structures, often single sheets), Other (unknown geometry) and Vegetation: a tree's crown and
 trunk share the class, and a crown is foliage, not a solid -- so vegetation stays a surface
@@ -38,10 +38,12 @@ FillMode = Literal["auto", "surface", "solid"]
 FILL_MODES: tuple[str, ...] = ("auto", "surface", "solid")
 FillMethod = Literal["surface", "parity", "winding"]
 
-_VOLUMETRIC_STUFF = ("Wall", "Pole", "TrafficLight", "TrafficSign", "Static", "Dynamic", "Rock")
-VOLUMETRIC_CLASSES: frozenset[int] = frozenset(
-    [c.id for c in taxonomy.CLASSES if c.kind == "thing"] + [taxonomy.by_name(n).id for n in _VOLUMETRIC_STUFF])
-"""Semantic ids filled under ``auto``."""
+# Solid objects, whatever label table says which of them carry instance ids: the road users,
+# buildings, and the closed static structures and props.
+_VOLUMETRIC = ("Pedestrian", "Rider", "Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle", "Building",
+               "Wall", "Pole", "TrafficLight", "TrafficSign", "Static", "Dynamic", "Rock")
+VOLUMETRIC_CLASSES: frozenset[int] = frozenset(taxonomy.by_name(n).id for n in _VOLUMETRIC)
+"""Semantic ids filled under ``auto`` (the same under every label table)."""
 _VEGETATION = taxonomy.by_name("Vegetation").id
 
 

@@ -46,13 +46,14 @@ from typing import Literal
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.schemas.taxonomy import CLASSES, TARGETS, by_name, mapping, thing_ids
+from carlaocc.schemas.taxonomy import CLASSES, TARGETS, LabelTable, by_name, mapping
 
 __all__ = [
     "DEFAULT_POOLING_PRIORITY",
     "rank_table",
     "pool_to_grid",
     "pool_instances",
+    "pool_window",
     "pooling_disagreement",
     "TargetGrid",
     "OCC3D_NUSCENES",
@@ -121,13 +122,6 @@ def rank_table(priority: Sequence[int] | np.ndarray | None = None) -> tuple[np.n
     rank = np.zeros(256, dtype=np.uint8)  # label -> rank
     rank[label] = np.arange(256, dtype=np.uint8)
     return rank, label
-
-
-def _thing_table() -> np.ndarray:
-    """Bool lookup table of length 256: label is a thing class (carries instance ids)."""
-    table = np.zeros(256, dtype=bool)
-    table[list(thing_ids())] = True
-    return table
 
 
 # ------------------------------------------------------------------------------------------------
@@ -239,16 +233,15 @@ def pool_instances(
     """Instance ids of a pooled volume (uint32 ``coarse.shape``; 0 for stuff and free).
 
     ``instance`` (uint32) and ``semantic_fine`` (uint8) are on ``fine``; ``pooled_semantic`` is the
-    result of :func:`pool_to_grid` on them. A coarse voxel whose winning class is a thing takes the
-    **smallest non-zero** instance id among its fine voxels of that class (deterministic; 0 when
-    none carries one); a stuff or free voxel gets 0. Same grid rules and slab memory as
+    result of :func:`pool_to_grid` on them. A coarse voxel takes the **smallest non-zero**
+    instance id among its fine voxels of the winning class (deterministic; 0 when none carries
+    one): stuff and free voxels carry 0 whatever the label table, so they stay 0. Same grid rules and slab memory as
     :func:`pool_to_grid` (about 10 bytes per fine voxel of a slab).
     """
     f = _pool_factor(fine, coarse)
     _check_volume("instance", instance, fine.shape, np.uint32)
     _check_volume("semantic_fine", semantic_fine, fine.shape, np.uint8)
     _check_volume("pooled_semantic", pooled_semantic, coarse.shape, np.uint8)
-    is_thing = _thing_table()
     none = np.iinfo(np.uint32).max
     _, cy, cz = coarse.shape
     _, ny, nz = fine.shape
@@ -256,8 +249,8 @@ def pool_instances(
     for cx0, cx1, fx0, fx1 in _slabs(fine, coarse, f, 10):
         n = cx1 - cx0
         win = pooled_semantic[cx0:cx1]
-        if not is_thing[win].any():
-            continue  # no thing won in this slab: all zero
+        if not instance[fx0:fx1].any():
+            continue  # no instance in this slab: all zero
         # 1. fine labels / ids of the slab, padded (label 0 never equals a thing winner)
         sem = np.zeros((n * f, cy * f, cz * f), dtype=np.uint8)
         sem[: fx1 - fx0, :ny, :nz] = semantic_fine[fx0:fx1]
@@ -270,9 +263,64 @@ def pool_instances(
         cand = np.where(keep, ids6, none)
         # 3. smallest id per block (x, y, z as in pool_to_grid); none -> 0; stuff winners -> 0
         best = cand.min(axis=1).min(axis=2).min(axis=3)
-        best[(best == none) | ~is_thing[win]] = 0
+        best[best == none] = 0
         out[cx0:cx1] = best
     return out
+
+
+def pool_window(
+    semantic: np.ndarray,
+    instance: np.ndarray,
+    fine: GridSpec,
+    coarse: GridSpec,
+    priority: np.ndarray | Sequence[int] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Class-priority pooling onto a coarse grid that may cover another window of the region.
+
+    ``coarse.voxel_size`` must be an integer multiple ``f`` of ``fine.voxel_size`` and the coarse
+    origin must sit a whole number of fine voxels from the fine one (the release's 0.2 m forward
+    view starts 256 fine voxels of 0.1 m ahead of our origin and 6 above it). Steps:
+
+    1. the fine voxels under the coarse grid are cut out of ``semantic`` / ``instance``; where
+       the coarse grid reaches beyond the fine region they are free (0);
+    2. that window is pooled with :func:`pool_to_grid` and :func:`pool_instances`.
+
+    Returns ``(semantic uint8, instance uint32)`` of ``coarse.shape``. Both grids in one frame
+    (the LiDAR frame), metres.
+    """
+    ratio = coarse.voxel_size / fine.voxel_size
+    f = round(ratio)
+    if f < 1 or abs(ratio - f) > _FACTOR_TOLERANCE:
+        raise ValueError(f"coarse voxel size {coarse.voxel_size:g} m is not an integer multiple of {fine.voxel_size:g} m")
+    shift = (np.asarray(coarse.origin) - np.asarray(fine.origin)) / fine.voxel_size
+    offset = np.round(shift).astype(np.int64)
+    if np.abs(shift - offset).max() > 1e-6:
+        raise ValueError(f"coarse origin {coarse.origin} is not a whole number of {fine.voxel_size:g} m voxels from "
+                         f"{fine.origin}")
+    _check_volume("semantic", semantic, fine.shape, np.uint8)
+    _check_volume("instance", instance, fine.shape, np.uint32)
+    # 1. the window under the coarse grid: a view when it lies inside the fine grid, else a copy
+    #    that is zero where it leaves the fine region
+    want = np.asarray(coarse.shape) * f
+    src = [slice(max(0, o), min(n, o + w)) for o, n, w in zip(offset, fine.shape, want)]
+    if all(o >= 0 and o + w <= n for o, n, w in zip(offset, fine.shape, want)):
+        sem_w, inst_w = semantic[tuple(src)], instance[tuple(src)]
+    else:
+        sem_w = np.zeros(tuple(want), np.uint8)
+        inst_w = np.zeros(tuple(want), np.uint32)
+        dst = [slice(s.start - o, s.stop - o) for s, o in zip(src, offset)]
+        if all(s.stop > s.start for s in src):
+            sem_w[tuple(dst)] = semantic[tuple(src)]
+            inst_w[tuple(dst)] = instance[tuple(src)]
+    window = GridSpec(region_min=coarse.region_min, region_max=tuple(
+        float(np.float64(o) + n * fine.voxel_size) for o, n in zip(coarse.origin, want)), voxel_size=fine.voxel_size)
+    if window.shape != tuple(want):
+        raise ValueError(f"window grid {window.shape} is not {tuple(want)} voxels")  # rounding of the region
+    if f == 1:
+        return sem_w, inst_w  # the same voxels: the window is the result
+    # 2. pool the window
+    sem_c = pool_to_grid(sem_w, window, coarse, priority)
+    return sem_c, pool_instances(inst_w, sem_w, window, coarse, sem_c)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -395,10 +443,11 @@ def _check_affine(m: np.ndarray) -> np.ndarray:
     return m
 
 
-def _label_lut(target: TargetGrid) -> np.ndarray:
-    """uint8 table of length 256: CarlaOcc class id -> target id (ids beyond the taxonomy -> free)."""
+def _label_lut(target: TargetGrid, table: str | LabelTable | None = None) -> np.ndarray:
+    """uint8 table of length 256: CarlaOcc class id -> target id under label table ``table``
+    (None: the default; ids beyond the taxonomy -> free)."""
     lut = np.full(256, target.free_label, dtype=np.uint8)
-    table = mapping(target.taxonomy)
+    table = mapping(target.taxonomy, table)
     lut[: len(table)] = np.asarray(table, dtype=np.uint8)
     return lut
 
@@ -508,6 +557,7 @@ def resample(
     grid_to_target: np.ndarray,
     masks: Mapping[str, np.ndarray] | None = None,
     priority: np.ndarray | Sequence[int] | None = None,
+    label_table: str | LabelTable | None = None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Resample a CarlaOcc semantic volume onto another dataset's grid and label set.
 
@@ -520,7 +570,8 @@ def resample(
     target voxel ``floor((p - range_min) / voxel_size)``; centres outside the target grid are
     dropped. Each target voxel takes the **highest-priority** class among the centres it received
     (priority on our class ids, as in :func:`pool_to_grid`), then that class is mapped through
-    ``taxonomy.mapping(target.taxonomy)``; classes the target maps to its empty label rank below
+    ``taxonomy.mapping(target.taxonomy, label_table)`` (the label table the volume was built under;
+    None: the default); classes the target maps to its empty label rank below
     all others (they only win a voxel nothing else reaches). Target voxels that receive nothing get
     ``target.free_label``. A class that maps to the target's ignore/unlabelled id keeps that id
     (e.g. Wall -> 0 in SemanticKITTI, which coincides with empty there, as in the real labels).
@@ -538,7 +589,7 @@ def resample(
     mask_items = dict(masks or {})
     for name, mk in mask_items.items():
         _check_volume(f"mask {name!r}", np.asarray(mk), grid.shape)
-    lut = _label_lut(target)
+    lut = _label_lut(target, label_table)
     # classes the target maps to its empty label rank below every class it keeps, so a wall or
     # prop voxel in a target voxel of road does not turn the road empty (SemanticKITTI: 0)
     prio = [int(c) for c in (DEFAULT_POOLING_PRIORITY if priority is None else priority)]

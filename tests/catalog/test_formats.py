@@ -13,12 +13,7 @@ from hypothesis import strategies as st
 
 from carlaocc.catalog.formats import FormatError, atomic_write, occ3d, semantickitti, surroundocc
 from carlaocc.catalog.formats import carlaocc_npz as cnpz
-from carlaocc.catalog.formats.carlaocc_npz import (
-    load_carlaocc_npz,
-    published_instance_ids,
-    remap_instances,
-    save_carlaocc_npz,
-)
+from carlaocc.catalog.formats.carlaocc_npz import load_carlaocc_npz, save_carlaocc_npz
 from carlaocc.catalog.formats.occ3d import Occ3DFrame, load_occ3d, save_occ3d
 from carlaocc.catalog.formats.semantickitti import (
     SemanticKittiVoxels,
@@ -247,7 +242,7 @@ def test_carlaocc_npz_round_trip_and_layout(tmp_path):
         assert set(z.files) == {"occupancy", "voxel_size", "voxel_origin", "volume_size"}
         occ = z["occupancy"]
         assert occ.dtype == np.uint16 and occ.shape == (np.count_nonzero(sem), 4)
-        assert occ[0].tolist() == [0, 0, 0, 31 << 11 | 2047]
+        assert occ[0].tolist() == [0, 0, 0, 31 << 11 | 2047]  # the release's code: semantic << 11 | instance
         assert z["volume_size"].tolist() == [40, 30, 12]
         assert float(z["voxel_size"]) == 0.2 and z["voxel_origin"].tolist() == [-25.6, -25.6, -3.0]
     assert {i.compress_type for i in zipfile.ZipFile(tmp_path / "f.npz").infolist()} == {zipfile.ZIP_DEFLATED}
@@ -269,6 +264,8 @@ def test_carlaocc_npz_refuses_instead_of_wrapping(tmp_path):
     inst[2, 2, 2] = 0
     with pytest.raises(FormatError, match=r"instance id 2048 exceeds 2047"):
         save_carlaocc_npz(tmp_path / "f.npz", sem, inst, 0.1, (0, 0, 0))
+    with pytest.raises(FormatError, match=r"instance id 2048 exceeds 999 \(the decimal encoding"):
+        save_carlaocc_npz(tmp_path / "f.npz", sem, inst, 0.1, (0, 0, 0), "decimal")
     inst[1, 1, 1] = 3
     sem[3, 3, 3] = 32
     with pytest.raises(FormatError, match=r"semantic id 32 exceeds 31"):
@@ -293,9 +290,11 @@ def test_carlaocc_npz_refuses_instead_of_wrapping(tmp_path):
 )
 def test_carlaocc_npz_hypothesis_identity(tmp_path, shape, density, seed, voxel_size, origin):
     rng = np.random.default_rng(seed)
-    sem, inst = _sparse_frame(rng, shape, n_sem=32, density=density)
+    encoding = ("bits", "decimal")[seed % 2]
+    sem, inst = _sparse_frame(rng, shape, n_sem=32 if encoding == "bits" else 65, density=density,
+                              max_inst=2047 if encoding == "bits" else 999)
     path = tmp_path / "h.npz"
-    save_carlaocc_npz(path, sem, inst, voxel_size, origin)
+    save_carlaocc_npz(path, sem, inst, voxel_size, origin, encoding)
     back = load_carlaocc_npz(path)
     np.testing.assert_array_equal(back.semantic, sem)
     np.testing.assert_array_equal(back.instance, inst)
@@ -316,44 +315,10 @@ def test_carlaocc_npz_loader_validates(tmp_path):
     np.savez_compressed(tmp_path / "d.npz", occupancy=np.zeros((0, 4), np.uint16), voxel_size=np.float64(0.1))
     with pytest.raises(FormatError, match="voxel_origin"):
         load_carlaocc_npz(tmp_path / "d.npz")
-
-
-def test_published_instance_ids_static_then_actors_stable_across_frames():
-    ids = np.array([5, 900, 70001, 3_000_000_000], np.uint32)  # sorted unique, 70001 and 3e9 actors
-    new = published_instance_ids(ids, np.array([70001, 3_000_000_000]))
-    assert new.tolist() == [1, 2, 1001, 1000]
-    f0 = np.array([[0, 70001], [5, 5]], np.uint32)
-    f1 = np.array([[900, 0], [70001, 3_000_000_000]], np.uint32)
-    assert remap_instances(f0, ids, new).tolist() == [[0, 1001], [1, 1]]
-    assert remap_instances(f1, ids, new).tolist() == [[2, 0], [1001, 1000]]
-    assert remap_instances(f1, ids, new).dtype == np.uint32
-    assert remap_instances(np.zeros((2, 2), np.uint32), ids[:0], new[:0]).tolist() == [[0, 0], [0, 0]]
-
-
-def test_published_instance_ids_refuse_instead_of_wrapping():
-    with pytest.raises(FormatError, match="seq7: 1000 static instances"):
-        published_instance_ids(np.arange(1, 1001), [], "seq7")
-    with pytest.raises(FormatError, match="modulo 1000"):
-        published_instance_ids(np.array([1234, 2234]), [1234, 2234])
-
-
-@settings(max_examples=30, deadline=None)
-@given(st.lists(st.lists(st.integers(0, 2**32 - 1), min_size=1, max_size=20), min_size=1, max_size=4),
-       st.integers(0, 2**32 - 1))
-def test_published_instance_ids_hypothesis(frames, actor_seed):
-    arrays = [np.array(f, np.uint32) for f in frames]
-    ids = np.unique(np.concatenate(arrays))
-    ids = ids[ids != 0]
-    rng = np.random.default_rng(actor_seed)
-    actors = ids[rng.random(len(ids)) < 0.3]
-    actors = actors[np.unique(actors % 1000, return_index=True)[1]]  # no two equal modulo 1000
-    new = published_instance_ids(ids, actors)
-    static = ~np.isin(ids, actors)
-    assert new[static].tolist() == list(range(1, static.sum() + 1))
-    assert (new[~static] == 1000 + ids[~static].astype(np.int64) % 1000).all()
-    table = dict(zip(ids.tolist(), new.tolist()))
-    for a in arrays:
-        assert remap_instances(a, ids, new).tolist() == [table.get(int(v), 0) for v in a]
+    np.savez_compressed(tmp_path / "e.npz", occupancy=np.zeros((0, 4), np.uint16), label_encoding=np.asarray("hex"),
+                        **good)
+    with pytest.raises(FormatError, match="unknown label_encoding 'hex'"):
+        load_carlaocc_npz(tmp_path / "e.npz")
 
 
 # ------------------------------------------------------------------------ corrupt / truncated

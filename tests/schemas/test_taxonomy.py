@@ -109,9 +109,72 @@ def test_things_and_stuff_partition_the_table() -> None:
     for name in ("None", "Sky", "Road", "Vegetation", "Terrain"):
         assert tx.by_name(name).id in stuff, name
         assert tx.by_name(name).motion == "static", name
-    # buildings are annotated instances (paper), but never move
-    building = tx.by_name("Building")
-    assert building.kind == "thing" and building.motion == "static"
+    # the release: poles, lights and signs are instances, buildings are not; none of them moves
+    for name in ("Pole", "TrafficLight", "TrafficSign"):
+        assert tx.by_name(name).kind == "thing" and tx.by_name(name).motion == "static", name
+    assert tx.by_name("Building").kind == "stuff"
+    # carlaocc-v1: the other way round
+    v1 = tx.label_table("carlaocc-v1")
+    assert v1.by_id(tx.by_name("Building").id).kind == "thing"
+    assert not {tx.by_name(n).id for n in ("Pole", "TrafficLight", "TrafficSign")} & set(v1.thing_ids())
+    for table in tx.LABEL_TABLES.values():
+        assert set(table.thing_ids()) | set(table.stuff_ids()) == set(range(30))
+        assert {tx.by_name(n).id for n in ROAD_USERS} <= set(table.thing_ids())
+
+
+# --- the release's label table ------------------------------------------------------------------
+
+# fengyi233/carlaocc utils/labels.py (commit de6a21c), transcribed independently of the module
+# under test: (name, is_instance, colour, nuscenes_id, kitti360_id) per id 0..29.
+RELEASE_LABELS_PY = [
+    ("None", False, (0, 0, 0), 17, 0), ("Road", False, (128, 64, 128), 11, 7),
+    ("Sidewalk", False, (244, 35, 232), 13, 9), ("Building", False, (70, 70, 70), 15, 11),
+    ("Wall", False, (102, 102, 156), 15, 17), ("Fence", False, (190, 153, 153), 1, 12),
+    ("Pole", True, (153, 153, 153), 15, 15), ("TrafficLight", True, (250, 170, 30), 0, 16),
+    ("TrafficSign", True, (220, 220, 0), 0, 16), ("Vegetation", False, (107, 142, 35), 16, 13),
+    ("Terrain", False, (152, 251, 152), 14, 14), ("Sky", False, (70, 130, 180), 17, 0),
+    ("Pedestrian", True, (220, 20, 60), 7, 6), ("Rider", True, (255, 0, 0), 7, 6),
+    ("Car", True, (0, 0, 142), 4, 1), ("Truck", True, (0, 0, 70), 10, 4),
+    ("Bus", True, (0, 60, 100), 3, 5), ("Train", True, (0, 80, 100), 9, 5),
+    ("Motorcycle", True, (0, 0, 230), 6, 3), ("Bicycle", True, (119, 11, 32), 2, 2),
+    ("Static", False, (110, 190, 160), 0, 18), ("Dynamic", False, (170, 120, 50), 0, 18),
+    ("Other", False, (55, 90, 80), 0, 18), ("Water", False, (45, 60, 150), 12, 10),
+    ("RoadLine", False, (157, 234, 50), 11, 7), ("Ground", False, (81, 0, 81), 14, 10),
+    ("Bridge", False, (150, 100, 100), 15, 17), ("RailTrack", False, (230, 150, 140), 12, 10),
+    ("GuardRail", False, (180, 165, 180), 1, 12), ("Rock", False, (180, 130, 70), 14, 14),
+]
+
+
+def test_the_default_table_is_the_release_row_by_row() -> None:
+    assert tx.DEFAULT_LABEL_TABLE == "release" and tx.label_table().name == "release"
+    table = tx.label_table("release")
+    assert len(RELEASE_LABELS_PY) == 30
+    for i, (name, is_instance, color, nus, k360) in enumerate(RELEASE_LABELS_PY):
+        c = table.by_id(i)
+        assert (c.name, c.kind == "thing", c.color, c.occ3d_nuscenes, c.sscbench_kitti360) == \
+            (name, is_instance, color, nus, k360), i
+        assert tx.by_id(i) == c  # module-level lookups are the default table's
+
+
+def test_carlaocc_v1_differs_from_the_release_in_nine_rows() -> None:
+    v1, rel = tx.label_table("carlaocc-v1"), tx.label_table("release")
+    differ = [a.name for a, b in zip(v1.classes, rel.classes) if a != b]
+    assert differ == ["Building", "Fence", "Pole", "TrafficLight", "TrafficSign", "Train", "Static", "Ground",
+                      "GuardRail"]
+    # the release's Occ3D ids: barrier, others, terrain, trailer
+    occ = tx.OCC3D_NUSCENES_NAMES
+    for name, want in (("Fence", "barrier"), ("GuardRail", "barrier"), ("TrafficLight", "others"),
+                       ("TrafficSign", "others"), ("Static", "others"), ("Ground", "terrain"), ("Train", "trailer")):
+        assert occ[tx.mapping("occ3d_nuscenes", "release")[tx.by_name(name).id]] == want, name
+        assert occ[tx.mapping("occ3d_nuscenes", "carlaocc-v1")[tx.by_name(name).id]] != want, name
+    # KITTI-360, SemanticKITTI and the 15 classes agree
+    for target in ("sscbench_kitti360", "semantickitti", "benchmark15"):
+        assert v1.mapping(target) == rel.mapping(target), target
+
+
+def test_unknown_label_table_is_a_clear_error() -> None:
+    with pytest.raises(ValueError, match="valid: release, carlaocc-v1"):
+        tx.label_table("cityscapes")
 
 
 # --- mappings ----------------------------------------------------------------------------------

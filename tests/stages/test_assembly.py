@@ -62,6 +62,7 @@ POLE_G = geom("pole", ("pole", box([-0.1, -0.1, 0], [0.1, 0.1, 5]), POLE, True, 
 PED_G = geom("ped", ("body", box([-0.3, -0.3, 0], [0.3, 0.3, 1.7]), PED, True, False))
 ROAD_G = geom("T/road", ("road", grid_mesh(-200, 200, -200, 200, 80), ROAD, False, False))
 GEOMETRY = {g.asset_id: g for g in (CAR_G, HOUSE_G, POLE_G, PED_G, ROAD_G)}
+V1_THINGS = frozenset(taxonomy.thing_ids("carlaocc-v1"))  # Building a thing, poles stuff
 
 
 def place(pid, g: AssetGeometry, x=0.0, y=0.0, z=0.0, yaw=0.0, instance=None, name=None) -> PlacementRecord:
@@ -176,12 +177,16 @@ def test_region_of_grid():
 
 def test_vertices_moved_into_lidar_frame():
     f = frame(x=10.0, y=5.0, yaw=np.pi / 2)
-    index = PlacementIndex([place(3, HOUSE_G, x=20.0, y=5.0)])
+    index = PlacementIndex([place(3, HOUSE_G, x=20.0, y=5.0, instance=3)])
     (m,) = assemble_frame(f, [], index, GEOMETRY, (np.array([-100.0] * 3), np.array([100.0] * 3)))
     # asset vertex (5, 5, 8) -> world (25, 10, 8); minus lidar (10, 5, 1.73) = (15, 5, 6.27);
     # rotated by -90 deg about z: (x, y) -> (y, -x) = (5, -15)
     k = int(np.flatnonzero(np.all(HOUSE_G.parts[0].vertices == [5, 5, 8], axis=1))[0])
     np.testing.assert_allclose(m.vertices[k], [5.0, -15.0, 6.27], atol=1e-12)
+    # the release's table: a building is stuff (instance 0), kept closed (it is filled)
+    assert (m.semantic_id, m.instance_id, m.is_stuff, m.closed) == (BUILDING, 0, True, True)
+    # carlaocc-v1: a building is a thing with its placement's instance
+    (m,) = assemble_frame(f, [], index, GEOMETRY, (np.array([-100.0] * 3), np.array([100.0] * 3)), things=V1_THINGS)
     assert (m.semantic_id, m.instance_id, m.is_stuff, m.closed) == (BUILDING, 3, False, True)
 
 
@@ -287,7 +292,7 @@ def test_order_is_deterministic_and_only_this_frames_actors():
 @settings(max_examples=25, deadline=None)
 @given(x=st.floats(-150, 150), y=st.floats(-150, 150), yaw=st.floats(-np.pi, np.pi), precull=st.booleans())
 def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw, precull):
-    """Every emitted stuff triangle touches the region, every thing part kept reaches it, and every
+    """Every emitted surface-stuff triangle touches the region, every thing or filled part kept reaches it, and every
     placed triangle lying inside the region is emitted."""
     rng = np.random.default_rng(0)
     placements = [place(0, ROAD_G, name="road")]
@@ -303,7 +308,7 @@ def test_scene_is_sound_and_complete_for_any_pose(x, y, yaw, precull):
     lo, hi = REGION
     emitted = set()
     for m in out:
-        if m.is_stuff:
+        if m.is_stuff and not assembly.fills(m.semantic_id, m.part):
             assert tri_touches(m.vertices, m.faces, lo, hi).all()
         else:
             assert np.all(m.vertices.min(axis=0) <= hi) and np.all(m.vertices.max(axis=0) >= lo)
@@ -369,11 +374,13 @@ def test_flatten_counts_and_ids():
 def test_town_mesh_world_frame_ids():
     placements = [place(2, HOUSE_G, x=300.0, y=-40.0, instance=17), place(0, ROAD_G, name="road"),
                   place(1, CAR_G, x=-500.0, instance=4)]  # fmt: skip
-    tm = town_mesh(placements, GEOMETRY)
+    tm = town_mesh(placements, GEOMETRY, things=V1_THINGS)
     n_road, n_car, n_house = 2 * 80 * 80, 24, 12
     assert len(tm.faces) == n_road + n_car + n_house  # everything, stuff whole, however far
     np.testing.assert_array_equal(tm.semantic, [ROAD] * n_road + [CAR] * n_car + [BUILDING] * n_house)
     np.testing.assert_array_equal(tm.instance, [0] * n_road + [4] * n_car + [17] * n_house)
+    # under the release's table (the default) the building is stuff
+    np.testing.assert_array_equal(town_mesh(placements, GEOMETRY).instance, [0] * n_road + [4] * n_car + [0] * n_house)
     np.testing.assert_array_equal(tm.transparent, [False] * (n_road + 12) + [True] * 12 + [False] * n_house)
     house = tm.vertices[tm.faces[-n_house:]].reshape(-1, 3)
     np.testing.assert_allclose(house.min(axis=0), [295.0, -45.0, 0.0])
@@ -460,7 +467,8 @@ def test_filled_stuff_kept_whole_surface_stuff_culled():
         place(1, TREE_G, x=x_border, y=5.0),
         place(2, FENCE_G, x=x_border, y=-5.0),
     ])  # fmt: skip
-    by_name = {m.name.split("/")[-1]: m for m in assemble_frame(f, [], index, geometry, REGION)}
+    # (carlaocc-v1's table, where a pole is stuff; the release makes it a thing, whole anyway)
+    by_name = {m.name.split("/")[-1]: m for m in assemble_frame(f, [], index, geometry, REGION, things=V1_THINGS)}
     pole, trunk, crown, fence = by_name["pole"], by_name["trunk"], by_name["crown"], by_name["panel"]
     for m in (pole, trunk):  # whole: all 12 faces, watertight, past the border
         assert m.is_stuff and m.instance_id == 0 and m.closed and len(m.faces) == 12

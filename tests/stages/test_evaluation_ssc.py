@@ -177,7 +177,10 @@ def test_label_maps_come_from_the_taxonomy():
     assert bench.n == 16 and bench.free == 15 and bench.names[:15] == taxonomy.BENCHMARK15_NAMES
     # None and Sky (IGNORE in benchmark15) are free here; Building and road users are things
     assert bench.from_carlaocc[0] == 15 and bench.from_carlaocc[11] == 15
-    assert {bench.names[t] for t in bench.things} == {"Building", "Person", "Car", "Truck", "OtherVehicle"}
+    assert {bench.names[t] for t in bench.things} == {"Pole", "TrafficLight", "TrafficSign", "Person", "Car",
+                                                      "Truck", "OtherVehicle"}
+    v1 = label_map("benchmark", "carlaocc-v1")
+    assert {v1.names[t] for t in v1.things} == {"Building", "Person", "Car", "Truck", "OtherVehicle"}
     assert label_map("sscbench").n == 19 and label_map("sscbench").free == 0
     assert label_map("carlaocc").n == 30 and label_map("carlaocc").things == taxonomy.thing_ids()
     with pytest.raises(ValueError, match="unknown label map 'kitti'"):

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from carlaocc.schemas import taxonomy
 from carlaocc.stages.scenes.recording import match_walk_frames, recorded_town, traffic_level_of
 
 K = 36
@@ -50,11 +51,15 @@ def test_traffic_levels_follow_the_collection_protocol():
 def test_a_recorded_town_places_every_static_mesh():
     V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
-    # a road (stuff) and a building (a thing class of the taxonomy: numbered)
-    town = recorded_town("town03", 3, "rec", [("Road_1", 1, V, F), ("House_1", 3, V + [5, 0, 0], F)])
-    assert town.style == "carla-recording" and sorted(town.stuff) == ["town03/House_1", "town03/Road_1"]
+    # a road (stuff), a building (stuff in the release's table) and a pole (a thing there: numbered)
+    statics = [("Road_1", 1, V, F), ("House_1", 3, V + [5, 0, 0], F), ("Pole_1", 6, V + [2, 0, 0], F)]
+    town = recorded_town("town03", 3, "rec", statics)
+    assert town.style == "carla-recording" and sorted(town.stuff) == ["town03/House_1", "town03/Pole_1", "town03/Road_1"]
     by_name = {p.name: p for p in town.placements}
-    assert by_name["Road_1"].instance_id == 0 and by_name["House_1"].instance_id == 1 and town.max_instance_id == 1
+    assert [by_name[n].instance_id for n in ("Road_1", "House_1", "Pole_1")] == [0, 0, 1] and town.max_instance_id == 1
+    # under carlaocc-v1 the building is the thing
+    v1 = recorded_town("town03", 3, "rec", statics, frozenset(taxonomy.thing_ids("carlaocc-v1")))
+    assert [p.instance_id for p in v1.placements] == [0, 1, 0]
     assert town.bounds == (0.0, 0.0, 6.0, 1.0)
     with pytest.raises(ValueError, match="no static actor"):
         recorded_town("town03", 3, "rec", [])

@@ -339,9 +339,12 @@ def test_priority_applies_to_our_classes_before_mapping():
     i, j = i - i % 2, j - j % 2  # align to an Occ3D voxel along x, y (both grids start on 0.4 m)
     sem = np.zeros(G02.shape, np.uint8)
     sem[i : i + 2, j : j + 2, k] = VEGETATION
-    sem[i, j, k] = FENCE  # thin structure beats vegetation -> manmade, not vegetation
+    sem[i, j, k] = FENCE  # thin structure beats vegetation -> barrier (release), not vegetation
     labels, _ = resample(sem, G02, OCC3D_NUSCENES, ego)
     (hit,) = map(tuple, np.argwhere(labels != 17))
+    assert labels[hit] == OCC3D_NUSCENES_NAMES.index("barrier")
+    # under carlaocc-v1's table a fence is manmade
+    labels, _ = resample(sem, G02, OCC3D_NUSCENES, ego, label_table="carlaocc-v1")
     assert labels[hit] == OCC3D_NUSCENES_NAMES.index("manmade")
     sem[i + 1, j + 1, k] = RIDER
     sem[i + 1, j, k] = BICYCLE  # rider ranks above bicycle -> pedestrian
@@ -423,3 +426,51 @@ def test_classes_mapped_to_target_empty_do_not_erase_road():
     sem[10, 20, 4] = static
     labels, _ = resample(sem, grid, skitti, np.eye(4))
     assert labels[5, 10, 2] == 0
+
+
+# -- pooling onto another window of the region (the release's grids) ------------------------------
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10**6), f=st.sampled_from([1, 2, 4]), shift=st.tuples(st.integers(-6, 6), st.integers(-6, 6),
+                                                                                  st.integers(-6, 6)))
+def test_pool_window_agrees_with_brute_force(seed, f, shift):
+    from carlaocc.stages.voxelize.resample import pool_window, rank_table
+
+    rng = np.random.default_rng(seed)
+    fine = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(1.2, 1.0, 0.8), voxel_size=0.1)
+    sem = np.where(rng.random(fine.shape) < 0.3, rng.choice([ROAD, BUILDING, CAR, POLE, VEGETATION], fine.shape), 0)
+    sem = sem.astype(np.uint8)
+    inst = np.where(np.isin(sem, [CAR, POLE]), rng.integers(1, 5, fine.shape), 0).astype(np.uint32)
+    vs = 0.1 * f
+    lo = tuple(round(0.1 * s, 6) for s in shift)
+    coarse = GridSpec(region_min=lo, region_max=tuple(round(a + n * vs, 6) for a, n in zip(lo, (3, 2, 2))), voxel_size=vs)
+    got_s, got_i = pool_window(sem, inst, fine, coarse)
+    rank, _ = rank_table()
+    # brute force: every coarse voxel's fine voxels by index arithmetic
+    for I, J, K in np.ndindex(coarse.shape):
+        cells = [(shift[0] + I * f + a, shift[1] + J * f + b, shift[2] + K * f + c)
+                 for a in range(f) for b in range(f) for c in range(f)]
+        inside = [x for x in cells if all(0 <= x[d] < fine.shape[d] for d in range(3))]
+        labels = [int(sem[x]) for x in inside if sem[x]]
+        want = max(labels, key=lambda c: rank[c]) if labels else 0
+        assert got_s[I, J, K] == want
+        ids = [int(inst[x]) for x in inside if sem[x] == want and inst[x]]
+        assert got_i[I, J, K] == (min(ids) if ids else 0)
+
+
+def test_pool_window_of_the_release_grids_on_the_default_region():
+    from carlaocc.stages.voxelize.resample import pool_window
+
+    fine = GridSpec(voxel_size=0.1)  # 768 x 512 x 130 from (-25.6, -25.6, -3)
+    sem = np.zeros(fine.shape, np.uint8)
+    inst = np.zeros(fine.shape, np.uint32)
+    sem[256, 0, 6], inst[256, 0, 6] = CAR, 7  # x 0.0, y -25.6, z -2.4: the forward view's first voxel
+    fwd = GridSpec(region_min=(0.0, -25.6, -2.4), region_max=(51.2, 25.6, 4.0), voxel_size=0.2)
+    s, i = pool_window(sem, inst, fine, fwd)
+    assert s.shape == (256, 256, 32) and s[0, 0, 0] == CAR and i[0, 0, 0] == 7 and np.count_nonzero(s) == 1
+    same = GridSpec(voxel_size=0.1)
+    s1, i1 = pool_window(sem, inst, fine, same)
+    assert np.array_equal(s1, sem) and np.array_equal(i1, inst)
+    with pytest.raises(ValueError, match="whole number"):
+        pool_window(sem, inst, fine, GridSpec(region_min=(0.05, -25.6, -3.0), region_max=(51.25, 25.6, 10.0), voxel_size=0.2))

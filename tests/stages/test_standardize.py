@@ -22,7 +22,8 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.meshes import SourceAsset, SourcePart
 from carlaocc.stages.geometry import is_watertight, signed_volume
 from carlaocc.stages.ingest.checks import Rejection
-from carlaocc.stages.ingest.sizes import SIZE_RANGES, SUBCLASS_SIZE_RANGES, THIN_FACTOR, min_extent, size_range
+from carlaocc.stages.ingest.sizes import (SIZE_RANGES, SOLID_CLASSES, SUBCLASS_SIZE_RANGES, THIN_FACTOR, min_extent,
+                                          size_range)
 from carlaocc.stages.ingest.standardize import StandardizedAsset, rotation_to_asset_frame, standardize
 from shared_data import needs, shared_path
 
@@ -471,10 +472,10 @@ def test_sideways_vehicle_is_turned_long_side_to_x():
 
 
 # --------------------------------------------------------------------------------------------
-# degenerate extents (issue 17): things are solid, stuff may be flat
+# degenerate extents (issue 17): solid objects (Building, road users) are solid, the rest may be flat
 # --------------------------------------------------------------------------------------------
 
-THING_CLASSES = [c for c in taxonomy.CLASSES if c.kind == "thing"]
+THING_CLASSES = [c for c in taxonomy.CLASSES if c.name in SOLID_CLASSES]
 FLAT_STUFF = ["Road", "RoadLine", "Ground", "Sidewalk", "Terrain", "Water", "Fence", "TrafficSign"]
 
 
@@ -531,11 +532,12 @@ def test_a_thing_far_too_thin_for_its_class_is_quarantined():
     assert r.reason == "too thin" and "y below" in r.hint
 
 
-def test_min_extent_is_zero_exactly_for_stuff():
+def test_min_extent_is_zero_exactly_for_what_may_be_flat():
+    assert SOLID_CLASSES == {"Building", "Pedestrian", "Rider", "Car", "Truck", "Bus", "Train", "Motorcycle", "Bicycle"}
     for c in taxonomy.CLASSES:
         for sub in c.subclasses or ("",):
             m = min_extent(c.name, sub)
-            assert (m > 0.0) == (c.kind == "thing"), (c.name, sub, m)
+            assert (m > 0.0) == (c.name in SOLID_CLASSES), (c.name, sub, m)
 
 
 def test_source_notes_come_first_in_the_record_notes():
