@@ -12,7 +12,8 @@ OpenCV inside D2NT):
   semantic/instance lookups) and for clean + raw maps (rays continued through glass);
 * **s/frame**: one whole ``sensors_task`` (frame assembly from the store, BVH build, six cameras
   clean and raw, the compact mesh and the rectification, D2NT normals, the 32-beam LiDAR, every
-  image written to Zarr and the LiDAR to Parquet), mean over warm frames.
+  image written to Zarr and the LiDAR to Parquet), mean over warm frames, without and with the
+  cameras' RGB (shading with one shadow ray per sunlit pixel): the RGB's cost as a ratio.
 
 Usage: ``python -m benchmarks.bench_sensors [frames] [out.json]``.
 """
@@ -78,12 +79,13 @@ out["ours_clean_raw_s"] = best(lambda: [render_camera(ours, c, poses[c.name], ra
 ss = SensorStore(store)
 for cam in cams:
     ss.create(seq, cam.name, cam.width, cam.height, 20, sensor_arrays(cfg))
-run = lambda t: sensors_task(store, cfg, Partition("b", {"sequence_id": seq, "frame_index": t}))
-run(0)  # per-worker caches (geometry, rays, JIT)
-times = []
-for t in range(1, frames + 1):
-    t0 = time.perf_counter(); run(t); times.append(time.perf_counter() - t0)
-out["task_seconds"] = times
+for key, c in (("task_seconds_no_rgb", cfg.model_copy(update={"rgb": False})), ("task_seconds", cfg)):
+    run = lambda t, c=c: sensors_task(store, c, Partition("b", {"sequence_id": seq, "frame_index": t}))
+    run(0)  # per-worker caches (geometry, rays, JIT)
+    times = []
+    for t in range(1, frames + 1):
+        t0 = time.perf_counter(); run(t); times.append(time.perf_counter() - t0)
+    out[key] = times
 out["peak_rss_gib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 print(json.dumps(out))
 """
@@ -102,9 +104,11 @@ def main(argv: list[str] | None = None) -> dict:
             ("ours: clean + raw maps", r["ours_clean_raw_s"])]
     for name, s in rows:
         print(f"  {name:<42} {s:.3f} s  {n / s / 1e6:6.2f} M rays/s  {r['o3d_cast_s'] / s:5.2f}x of open3d")
-    ts = r["task_seconds"]
-    print(f"sensors task (6 cameras clean+raw, rectification, normals, LiDAR, writes): mean {sum(ts) / len(ts):.2f} s "
-          f"per frame (min {min(ts):.2f}, max {max(ts):.2f}) over {len(ts)} frames; peak RSS {r['peak_rss_gib']:.2f} GiB")
+    ts, t0 = r["task_seconds"], r["task_seconds_no_rgb"]
+    print(f"sensors task (6 cameras clean+raw, rectification, normals, LiDAR, writes) without RGB: mean "
+          f"{sum(t0) / len(t0):.2f} s per frame (min {min(t0):.2f}, max {max(t0):.2f})")
+    print(f"  with RGB: mean {sum(ts) / len(ts):.2f} s per frame (min {min(ts):.2f}, max {max(ts):.2f}) over {len(ts)} "
+          f"frames: x{sum(ts) / sum(t0):.2f}; peak RSS {r['peak_rss_gib']:.2f} GiB")
     save_json(argv, 1, r)
     return r
 

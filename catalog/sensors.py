@@ -46,8 +46,9 @@ SENSOR_MAPS: dict[str, tuple[str, str, tuple[int, ...]]] = {
     "depth_raw": ("float32", _RAW + _DEPTH, ()),
     "semantic_raw": ("uint8", _RAW + _SEMANTIC, ()),
     "instance_raw": ("uint32", _RAW + _INSTANCE, ()),
-    "rgb": ("uint8", "recorded colour image, 8-bit RGB as the recorder saved it (the CarlaOcc saver's x1.2 gain "
-                     "kept); recorded sequences only", (3,)),
+    "rgb": ("uint8", "colour image, 8-bit RGB: a recording's as the recorder saved it (the CarlaOcc saver's x1.2 "
+                     "gain kept), else shaded from the frame's scene (base colours, sun and cast shadows, ambient, sky)",
+            (3,)),
 }
 CAMERA_MAPS = ("depth", "semantic", "instance", "normal")
 

@@ -205,6 +205,12 @@ class SensorsConfig(StageConfig):
         "rectified depth marks a pixel seen through a translucent surface")
     normals: Literal["d2nt_basic", "d2nt_v2", "d2nt_v3"] = Field(
         "d2nt_v2", description="D2NT version for the normal maps (v3 adds MRF refinement at 3x the cost)")
+    rgb: bool = Field(True, description="raycast source: render each camera's RGB from the scene (parts' base colours, "
+                                        "sun with cast shadows, ambient, sky gradient); recorded RGB takes precedence")
+    sun_azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0,
+                                   description="the sun's azimuth, degrees counter-clockwise from the world's +x")
+    sun_elevation_deg: float = Field(50.0, gt=0.0, le=90.0, description="the sun's elevation above the horizon, degrees")
+    ambient: float = Field(0.35, ge=0.0, le=1.0, description="share of light that reaches shadowed and unlit surfaces")
     rig: RigConfig | None = Field(None, description="the ego rig; the pipeline sets it from scenes.rig")
     taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE)
 

@@ -121,6 +121,7 @@ class SceneMesh:
     transparent: bool = False  # glass and other see-through parts (cameras see past them)
     asset_id: str = ""  # the ADMesh asset (or town stuff key) the mesh is a part of
     part: str = ""  # the asset part's name
+    color: tuple[int, int, int] = (200, 200, 200)  # the part's base colour, RGB 0-255 (cameras' RGB)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))

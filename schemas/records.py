@@ -90,6 +90,8 @@ class PartRecord(Record):
     face_count: int
     watertight: bool
     texture: str = ""  # texture reference (URI or path relative to the source), kept by reference
+    # base colour RGBA 0-255 (the material's diffuse colour; parts written before the column: grey)
+    color: list[int] = [200, 200, 200, 255]  # pydantic copies the default per instance
 
 
 class QuarantineRecord(Record):

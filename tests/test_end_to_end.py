@@ -480,7 +480,7 @@ def test_sensor_maps_lidar_and_rectification_records(built):
     assert sensors.cameras(seq) == sorted(c.name for c in rig.cameras)
     for cam in rig.cameras:
         assert sensors.names(seq, cam.name) == sorted(["depth", "semantic", "instance", "normal", "depth_raw",
-                                                       "semantic_raw", "instance_raw"])
+                                                       "semantic_raw", "instance_raw", "rgb"])
         arr = sensors.open(seq, cam.name, "depth")
         assert arr.shape == (frames, 376, 1408) and arr.chunks == (1, 376, 1408)
         assert dict(arr.attrs)["intrinsics"][0][0] == pytest.approx(cam.focal_px)
@@ -499,6 +499,14 @@ def test_sensor_maps_lidar_and_rectification_records(built):
         assert np.median(depth[v][road[v]]) == pytest.approx(1.55 * f / (v + 0.5 - 188), rel=0.02)
     things = np.isin(sem, taxonomy.thing_ids())
     assert (inst[~things] == 0).all() and (inst[things] > 0).mean() > 0.99
+    # RGB for every camera and frame: sky blue above, the road an asphalt grey, colours elsewhere
+    rgb = sensors.read_image(seq, "camera_00", 5, "rgb")
+    assert rgb.shape == (376, 1408, 3) and rgb.dtype == np.uint8
+    sky = rgb[sem == 11].astype(int)
+    assert (sky[:, 2] > sky[:, 0]).all() and (sky[:, 2] - sky[:, 0]).max() > 40  # bluer towards the zenith
+    asphalt = rgb[road].astype(int)
+    assert np.median(np.ptp(asphalt, axis=1)) < 12 and 20 < np.median(asphalt) < 90
+    assert all(sensors.exists(seq, c.name, "rgb", t) for c in rig.cameras for t in range(frames))
     # normals are unit vectors; the flat road's is "up", -y in the OpenCV camera frame
     n = normal.astype(np.float32)
     ok = np.abs(np.linalg.norm(n[depth > 0], axis=-1) - 1) < 1e-2
@@ -563,7 +571,7 @@ def test_show_sensors_png(built, tmp_path):
     out = tmp_path / "sensors.png"
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--root", built.url, "--out", str(out)])
     assert r.exit_code == 0, r.output
-    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "x1768" in r.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "x1989" in r.output  # a row per camera: rgb first
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--camera", "camera_09",
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 2 and "camera_09" in r.output

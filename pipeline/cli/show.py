@@ -180,7 +180,7 @@ def show_sensors(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Contact sheet of one frame's camera maps (the recorded RGB of a recorded town, depth,
+    """Contact sheet of one frame's camera maps (the RGB -- recorded, or rendered from the scene --, depth,
     normals, semantics, instances per camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
     transparency region tinted red and of the omission region blue (epsilon from the config).
     With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""

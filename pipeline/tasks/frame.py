@@ -69,12 +69,14 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
                     raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
                 return AssetGeometry(
                     asset_id=aid,
-                    parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent)
+                    parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent, tuple(r.color))
                                 for r, (v, f) in zip(recs, arrays)),
                     part_closed=tuple(r.watertight for r in recs),
                 )
 
-            out[aid] = _mesh_geometry(store, assets[aid].mesh_path, (aid, recs), asset_geometry)
+            # the cache key: the parts' rows, hashable (their colour is a list)
+            key = (aid, tuple(r.model_dump_json() for r in recs))
+            out[aid] = _mesh_geometry(store, assets[aid].mesh_path, key, asset_geometry)
         elif aid in stuff:
             pl = stuff[aid]
 

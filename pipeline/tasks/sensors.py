@@ -93,7 +93,8 @@ def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
     from carlaocc.catalog.sensors import CAMERA_MAPS
 
     raw = ("depth_raw", "semantic_raw", "instance_raw") if cfg.source == "raycast" else ()
-    return CAMERA_MAPS + raw
+    rgb = ("rgb",) if cfg.source == "raycast" and cfg.rgb else ()
+    return CAMERA_MAPS + raw + rgb
 
 
 def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
@@ -149,8 +150,10 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
         per_camera = {name: (r, n, raw[name], recorded_stats(name, r, raw[name])) for name, (r, n) in rect.items()}
         frame = None
     elif cfg.source == "raycast":
-        frame = simulate_frame(inputs.scene, rig, cfg, nthreads=kernel_threads())
+        world_to_lidar = np.linalg.inv(np.asarray(inputs.frame.lidar_pose, dtype=np.float64).reshape(4, 4))
+        frame = simulate_frame(inputs.scene, rig, cfg, nthreads=kernel_threads(), world_to_scene=world_to_lidar)
         per_camera = {name: (cf.rectification, cf.normal, cf.raw, cf.stats) for name, cf in frame.cameras.items()}
+        rgb = {name: cf.rgb for name, cf in frame.cameras.items() if cf.rgb is not None}
     else:
         raw = {cam.name: _recorded_raw(sensors, seq_id, frame_index, cam) for cam in cams}
         rect = rectify_cameras(inputs.scene, rig, cfg, raw, nthreads=kernel_threads())
@@ -168,6 +171,8 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
                 images["rgb"] = rgb[cam.name]
         elif cfg.source == "raycast":
             images.update(depth_raw=raw.depth, semantic_raw=raw.semantic, instance_raw=raw.instance)
+            if cam.name in rgb:
+                images["rgb"] = rgb[cam.name]
         for name, data in images.items():
             sensors.write_image(seq_id, cam.name, frame_index, name, data)
         outputs.update(sensors.fingerprints(seq_id, cam.name, frame_index, tuple(images)))

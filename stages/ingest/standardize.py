@@ -301,6 +301,7 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
         PartRecord(
             asset_id=aid, part_index=k, name=p.name, material=p.material, transparent=p.transparent,
             semantic_id=p.semantic_id, face_count=int(len(p.faces)), watertight=t, texture=part.texture or "",
+            color=[int(v) for v in p.color],
         )  # fmt: skip
         for k, (p, t, (part, _, _)) in enumerate(zip(mesh_parts, closed, cleaned))
     ]

@@ -292,6 +292,7 @@ def _emit(
             instance_id=0 if is_stuff else int(instance_id), is_stuff=is_stuff,
             closed=bool(closed) and prep.whole[k], name=f"{name}/{part.name}",
             transparent=bool(part.transparent), asset_id=geom.asset_id, part=part.name,
+            color=tuple(int(c) for c in part.color[:3]),
         ))  # fmt: skip
     return out
 
@@ -386,15 +387,18 @@ class PanopticMesh:
     semantic: np.ndarray  # (M,) uint8
     instance: np.ndarray  # (M,) uint32, 0 for stuff
     transparent: np.ndarray  # (M,) bool
+    color: np.ndarray | None = None  # (M, 3) uint8 base colour per triangle (None: grey)
 
     def __post_init__(self) -> None:
         V = np.ascontiguousarray(self.vertices, dtype=np.float64).reshape(-1, 3)
         F = np.ascontiguousarray(self.faces, dtype=np.int64).reshape(-1, 3)
         m = len(F)
+        color = np.full((m, 3), 200, np.uint8) if self.color is None else self.color
         arrays = {
             "semantic": np.ascontiguousarray(self.semantic, dtype=np.uint8).reshape(-1),
             "instance": np.ascontiguousarray(self.instance, dtype=np.uint32).reshape(-1),
             "transparent": np.ascontiguousarray(self.transparent, dtype=bool).reshape(-1),
+            "color": np.ascontiguousarray(color, dtype=np.uint8).reshape(-1, 3),
         }
         for name, a in arrays.items():
             if len(a) != m:
@@ -414,8 +418,8 @@ class PanopticMesh:
 
 def flatten(scene: Sequence[SceneMesh]) -> PanopticMesh:
     """Concatenate scene meshes into one mesh, in scene order, with each mesh's semantic id,
-    instance id and transparent flag repeated on its triangles."""
-    verts, faces, sem, inst, transp = [], [], [], [], []
+    instance id, transparent flag and base colour repeated on its triangles."""
+    verts, faces, sem, inst, transp, color = [], [], [], [], [], []
     offset = 0
     for pos, m in enumerate(scene):
         if not 0 <= int(m.semantic_id) <= 255:
@@ -428,12 +432,13 @@ def flatten(scene: Sequence[SceneMesh]) -> PanopticMesh:
         sem.append(np.full(n, m.semantic_id, dtype=np.uint8))
         inst.append(np.full(n, m.instance_id, dtype=np.uint32))
         transp.append(np.full(n, bool(m.transparent)))
+        color.append(np.tile(np.asarray(m.color[:3], np.uint8), (n, 1)))
         offset += len(m.vertices)
     if not faces:
         return PanopticMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.uint8),
                             np.zeros(0, np.uint32), np.zeros(0, bool))  # fmt: skip
     return PanopticMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(sem),
-                        np.concatenate(inst), np.concatenate(transp))  # fmt: skip
+                        np.concatenate(inst), np.concatenate(transp), np.concatenate(color))  # fmt: skip
 
 
 def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, AssetGeometry],

@@ -53,6 +53,7 @@ class CameraFrame:
     normal: np.ndarray  # (H, W, 3) float32, OpenCV camera frame
     raw: CameraMaps
     stats: CameraStats
+    rgb: np.ndarray | None = None  # (H, W, 3) uint8, shaded from the scene (raycast path, cfg.rgb)
 
     @property
     def maps(self) -> CameraMaps:
@@ -115,9 +116,11 @@ def _stats(name: str, rect: Rectification, raw: CameraMaps, clean: CameraMaps | 
 
 
 def simulate_frame(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConfig,
-                   nthreads: int = 0) -> SensorFrame:
+                   nthreads: int = 0, world_to_scene: np.ndarray | None = None) -> SensorFrame:
     """The raycast path for one frame: clean and raw maps of the selected cameras, rectified
-    maps and normals, LiDAR points (when ``cfg.lidar``), per-camera statistics."""
+    maps and normals, RGB (when ``cfg.rgb``: the sun of ``cfg`` in the world, turned into the
+    scene frame by ``world_to_scene``, 3x3 or 4x4; identity when None), LiDAR points (when
+    ``cfg.lidar``), per-camera statistics."""
     poses = camera_poses(rig)
     flags = unlabelled_meshes(scene, cfg.artifacts)
     mesh = flatten(scene)
@@ -130,11 +133,25 @@ def simulate_frame(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConfi
         clean[cam.name], raw[cam.name] = render_camera(full, cam, poses[cam.name], raw=True,
                                                          see_through=cfg.artifacts.transparent, nthreads=nthreads)
     rectified = rectify_cameras(scene, rig, cfg, raw, nthreads=nthreads)
+    rgb = {}
+    if cfg.rgb:
+        from carlaocc.stages.sensors.raycast import camera_ray_bundle
+        from carlaocc.stages.sensors.shading import base_colours, face_normals, render_rgb, sun_direction
+
+        R = np.eye(3) if world_to_scene is None else np.asarray(world_to_scene, dtype=np.float64)[:3, :3]
+        sun, up = sun_direction(cfg.sun_azimuth_deg, cfg.sun_elevation_deg, R), R @ np.array([0.0, 0.0, 1.0])
+        # per triangle, once for the frame's cameras: normals and base colours
+        normals = face_normals(mesh.vertices, mesh.faces)
+        base = base_colours(mesh.color, mesh.semantic).astype(np.float32)
+        for cam in cams:
+            origin, dirs = camera_ray_bundle(cam, poses[cam.name])
+            rgb[cam.name] = render_rgb(full, origin, dirs, clean[cam.name], raw[cam.name], sun, up, cfg.ambient,
+                                       normals, base, nthreads)
     out = {}
     for cam in cams:
         rect, normal = rectified[cam.name]
         out[cam.name] = CameraFrame(cam, rect, normal, raw[cam.name],
-                                    _stats(cam.name, rect, raw[cam.name], clean[cam.name]))
+                                    _stats(cam.name, rect, raw[cam.name], clean[cam.name]), rgb.get(cam.name))
     lidar = lidar_scan(full, rig.lidar, nthreads=nthreads) if cfg.lidar else None
     return SensorFrame(out, lidar)
 

@@ -34,11 +34,13 @@ _INVALID_ID = np.uint32(0xFFFFFFFF)  # open3d's RaycastingScene.INVALID_ID
 @dataclass(frozen=True)
 class CameraMaps:
     """One camera image's maps: planar depth (float32, m, 0 = no surface), semantic (uint8,
-    :data:`SKY` where no surface) and instance (uint32, 0 = stuff or sky), all (H, W)."""
+    :data:`SKY` where no surface) and instance (uint32, 0 = stuff or sky), all (H, W); ``face``
+    (int64, (H, W), -1 = no surface) is the scene triangle each pixel sees, when known."""
 
     depth: np.ndarray
     semantic: np.ndarray
     instance: np.ndarray | None
+    face: np.ndarray | None = None
 
 
 class RayScene:
@@ -64,6 +66,7 @@ class RayScene:
         self._semantic = np.append(mesh.semantic, np.uint8(SKY))
         self._instance = np.append(mesh.instance, np.uint32(0))
         self._transparent = np.append(mesh.transparent, False)
+        self._color = np.concatenate([mesh.color, np.zeros((1, 3), np.uint8)])
         self._raw_semantic = np.append(np.where(self.unlabelled, np.uint8(UNLABELLED), mesh.semantic), np.uint8(SKY))
         self._raw_instance = np.append(np.where(self.unlabelled, np.uint32(0), mesh.instance), np.uint32(0))
         self._scene = o3d.t.geometry.RaycastingScene(nthreads=1)
@@ -109,6 +112,10 @@ class RayScene:
     def transparent(self, face: np.ndarray) -> np.ndarray:
         """Whether each hit triangle is transparent (False on a miss)."""
         return self._transparent[face]
+
+    def color(self, face: np.ndarray) -> np.ndarray:
+        """Base colour (uint8 RGB, (N, 3)) of each hit triangle (black on a miss)."""
+        return self._color[face]
 
 
 @lru_cache(maxsize=32)
@@ -224,7 +231,7 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     sem, inst = scene.labels(face)
     depth = t.copy()
     depth[far] = 0.0
-    clean = CameraMaps(depth.reshape(H, W), sem.reshape(H, W), inst.reshape(H, W))
+    clean = CameraMaps(depth.reshape(H, W), sem.reshape(H, W), inst.reshape(H, W), face.reshape(H, W))
     if not raw:
         return clean, None
     # 2. continue the rays that stopped on glass, from just past the hit, until an opaque surface
@@ -245,7 +252,7 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     sem_r, inst_r = scene.labels(face_raw, raw=True)
     depth_raw = t_raw.astype(np.float32)
     depth_raw[far] = 0.0
-    raw_maps = CameraMaps(depth_raw.reshape(H, W), sem_r.reshape(H, W), inst_r.reshape(H, W))
+    raw_maps = CameraMaps(depth_raw.reshape(H, W), sem_r.reshape(H, W), inst_r.reshape(H, W), face_raw.reshape(H, W))
     return clean, raw_maps
 
 

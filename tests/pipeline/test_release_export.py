@@ -23,21 +23,30 @@ from carlaocc.schemas.grid import GridSpec
 
 cli = CliRunner()
 FRAMES = 2
+# the embedded default with two of the six cameras (the export writes whichever were built)
+CONFIG = {"sensors": {"cameras": ["camera_00", "camera_03"]}}
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory) -> Store:
+def config_file(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("release_config") / "cfg.json"
+    path.write_text(json.dumps(CONFIG))
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory, config_file) -> Store:
     root = tmp_path_factory.mktemp("release") / "data"
-    r = cli.invoke(app, ["run", "--res", "0.1", "--limit-frames", str(FRAMES), "--root", str(root),
-                         "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--res", "0.1", "--limit-frames", str(FRAMES), "--root", str(root), "--config",
+                         config_file, "--stages", "ingest,scenes,splits,voxelize,sensors", "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     return Store(str(root))
 
 
 @pytest.fixture(scope="module")
-def exported(built, tmp_path_factory) -> Path:
+def exported(built, tmp_path_factory, config_file) -> Path:
     out = tmp_path_factory.mktemp("release_out") / "CarlaOcc"
-    r = cli.invoke(app, ["export", "carlaocc-release", "--root", built.url, "--out", str(out)])
+    r = cli.invoke(app, ["export", "carlaocc-release", "--root", built.url, "--out", str(out), "--config", config_file])
     assert r.exit_code == 0, r.output
     return out
 
@@ -170,7 +179,10 @@ def test_camera_maps_and_lidar_in_the_release_encodings(built, exported):
     lut = {c: i for i, c in enumerate(taxonomy.palette())}
     sem = np.vectorize(lambda r, g, b: lut[(r, g, b)])(rgb[..., 0], rgb[..., 1], rgb[..., 2])
     assert np.array_equal(sem, sensors.read_image(seq, "camera_03", 0, "semantic"))
-    assert (d / "normal" / "image_05" / "0001.png").is_file()
+    assert (d / "normal" / "image_03" / "0001.png").is_file() and not (d / "depth" / "image_05").exists()
+    # rendered RGB (load_utils.load_rgb: BGR -> RGB), ours byte for byte
+    rgb = cv2.cvtColor(cv2.imread(str(d / "rgb" / "image_00" / "0001.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(rgb, sensors.read_image(seq, "camera_00", 1, "rgb"))
     # lidar/<frame>.ply: x y z I, our points
     text = (d / "lidar" / "0000.ply").read_text().splitlines()
     n = int(next(h for h in text if h.startswith("element vertex")).split()[2])
@@ -227,7 +239,7 @@ def test_decimal_encoding_and_exports_add_up_in_one_folder(built, tmp_path):
     assert sorted(json.loads((out / "carlaocc_export.json").read_text())["sequences"]) == seqs[:2]
 
 
-def test_label_table_recorded_and_never_mixed(built, tmp_path):
+def test_label_table_recorded_and_never_mixed(built, tmp_path, config_file):
     root = tmp_path / "data"
     shutil.copytree(built.root, root)
     store = Store(str(root))
@@ -237,11 +249,12 @@ def test_label_table_recorded_and_never_mixed(built, tmp_path):
     assert query(store, "SELECT kind FROM classes WHERE name = 'Pole'")[1] == [("thing",)]
     # a single stage under another table: its upstream is stale, refused before any work
     r = cli.invoke(app, ["run", "--stages", "voxelize", "--res", "0.1", "--root", str(root), "--taxonomy", "carlaocc-v1",
-                         "--scheduler", "synchronous"])
+                         "--limit-frames", str(FRAMES), "--config", config_file, "--scheduler", "synchronous"])
     assert r.exit_code == 2 and "stale" in r.output
     # rebuild the scenes and the 0.4 m occupancy under carlaocc-v1: the 0.1 m arrays are now of the other table
     r = cli.invoke(app, ["run", "--stages", "ingest,scenes,splits,voxelize", "--res", "0.4", "--root", str(root),
-                         "--taxonomy", "carlaocc-v1", "--scheduler", "synchronous"])
+                         "--taxonomy", "carlaocc-v1", "--limit-frames", str(FRAMES), "--config", config_file,
+                         "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     assert query(store, "SELECT kind FROM classes WHERE name = 'Building'")[1] == [("thing",)]
     assert query(store, "SELECT count(*) FROM label_tables")[1] == [(60,)]
@@ -255,16 +268,16 @@ def test_label_table_recorded_and_never_mixed(built, tmp_path):
     assert r.exit_code == 0, r.output
 
 
-def test_sequences_selector_builds_a_slice(built, tmp_path):
+def test_sequences_selector_builds_a_slice(built, tmp_path, config_file):
     root = tmp_path / "data"
     shutil.copytree(built.root, root)
     r = cli.invoke(app, ["run", "--res", "0.4", "--limit-frames", str(FRAMES), "--root", str(root), "--sequences",
-                         "town00_high_*", "--stages", "voxelize", "--scheduler", "synchronous"])
+                         "town00_high_*", "--stages", "voxelize", "--config", config_file, "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     occ = OccupancyStore(Store(str(root)))
     built_04 = {s for (s,) in query(Store(str(root)), "SELECT sequence_id FROM sequences")[1]
                 if occ.stored_grid(s, 0.4) is not None}
     assert built_04 == {"town00_high_seq000"}
     r = cli.invoke(app, ["run", "--res", "0.4", "--limit-frames", str(FRAMES), "--root", str(root), "--sequences", "nowhere_*",
-                         "--stages", "voxelize"])
+                         "--stages", "voxelize", "--config", config_file])
     assert r.exit_code == 2 and "matches none" in r.output and "town00_high_seq000" in r.output

@@ -34,7 +34,7 @@ def test_fields_order_and_defaults():
                                  ("material", "default"), ("transparent", False), ("color", (200, 200, 200, 255))]
     assert _fields(AssetGeometry) == [("asset_id", M), ("parts", M), ("part_closed", M)]
     assert [f for f, _ in _fields(SceneMesh)] == ["vertices", "faces", "semantic_id", "instance_id", "is_stuff",
-                                                  "closed", "name", "transparent", "asset_id", "part"]
+                                                  "closed", "name", "transparent", "asset_id", "part", "color"]
 
 
 def test_frozen_and_arrays_coerced():

@@ -203,7 +203,7 @@ def _records(
     part_records = [
         PartRecord(
             asset_id=aid, part_index=k, name=p.name, material=p.material, transparent=p.transparent,
-            semantic_id=p.semantic_id, face_count=int(len(p.faces)), watertight=c,
+            semantic_id=p.semantic_id, face_count=int(len(p.faces)), watertight=c, color=[int(v) for v in p.color],
         )  # fmt: skip
         for k, (p, c) in enumerate(zip(parts, closed))
     ]

@@ -1,0 +1,145 @@
+"""Camera RGB from the frame's panoptic scene: the ray caster's hits shaded with the parts' base
+colours, a sun (Lambert + cast shadows), ambient light and a sky gradient.
+
+Frames and units: the scene frame is the frame's LiDAR frame (metres); ``sun`` and ``up`` are
+unit vectors in it (towards the sun; the world's up). Colours are RGB 0-255.
+
+The model, per pixel:
+
+1. the first opaque surface along the pixel ray (the raw maps' hit: glass is looked through);
+   no surface: the sky, blended from :data:`SKY_HORIZON` to :data:`SKY_ZENITH` by the ray's
+   elevation;
+2. its base colour: the part's material colour (ADMesh ``parts.color``); parts that carry only
+   the default grey (town ground meshes, sources without materials) take their class's
+   :data:`CLASS_BASE` colour (asphalt, paving, grass, paint...);
+3. shading ``ambient + (1 - ambient) * max(0, n . sun) * lit``, with ``n`` the triangle's normal
+   turned towards the camera and ``lit`` whether a ray from the point towards the sun escapes the
+   scene (glass does not cast shadows);
+4. glass in front of it (the clean maps' first hit is transparent): tinted by
+   :data:`GLASS` at :data:`GLASS_OPACITY`.
+
+Everything is deterministic: the same scene and sun give the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from carlaocc.schemas import taxonomy
+
+__all__ = ["CLASS_BASE", "DEFAULT_GREY", "GLASS", "GLASS_OPACITY", "SKY_HORIZON", "SKY_ZENITH", "base_colours",
+           "face_normals", "render_rgb", "shade", "sun_direction"]
+
+SKY_HORIZON = np.array([206.0, 222.0, 236.0])
+SKY_ZENITH = np.array([92.0, 142.0, 207.0])
+GLASS = np.array([120.0, 150.0, 165.0])
+GLASS_OPACITY = 0.35
+DEFAULT_GREY = (200, 200, 200)
+SHADOW_OFFSET = 2e-3  # m: shadow rays start this far off the surface (no self-shadowing)
+
+# what an uncoloured part of a class looks like (the town's ground meshes carry no colour)
+CLASS_BASE: dict[str, tuple[int, int, int]] = {
+    "Road": (72, 72, 76), "RoadLine": (226, 224, 214), "Sidewalk": (168, 165, 158), "Terrain": (98, 126, 64),
+    "Ground": (130, 118, 100), "Water": (62, 92, 122), "RailTrack": (92, 82, 72), "Bridge": (142, 137, 130),
+    "Building": (178, 168, 152), "Wall": (160, 152, 142), "Fence": (140, 128, 108), "GuardRail": (172, 172, 178),
+    "Pole": (118, 118, 124), "TrafficLight": (52, 56, 60), "TrafficSign": (190, 60, 50), "Vegetation": (72, 112, 52),
+    "Static": (132, 122, 112), "Dynamic": (128, 110, 90), "Other": (128, 128, 128), "Rock": (128, 120, 110),
+}  # fmt: skip
+
+
+def _class_table() -> np.ndarray:
+    table = np.array([DEFAULT_GREY] * 256, dtype=np.float64)
+    for name, rgb in CLASS_BASE.items():
+        table[taxonomy.by_name(name).id] = rgb
+    return table
+
+
+_CLASS_TABLE = _class_table()
+
+
+def sun_direction(azimuth_deg: float, elevation_deg: float, world_to_scene: np.ndarray) -> np.ndarray:
+    """Unit vector towards the sun in the scene frame: ``azimuth`` counter-clockwise from the
+    world's +x (east in CARLA's maps) and ``elevation`` above the horizon, both degrees, rotated by
+    the 3x3 (or 4x4) ``world_to_scene``."""
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    s = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    R = np.asarray(world_to_scene, dtype=np.float64)[:3, :3]
+    return R @ s
+
+
+def base_colours(color: np.ndarray, semantic: np.ndarray) -> np.ndarray:
+    """(N, 3) float base colours: each triangle's colour, or its class's :data:`CLASS_BASE`
+    colour where it carries only the default grey."""
+    c = np.asarray(color, dtype=np.float64).reshape(-1, 3)
+    grey = np.all(np.asarray(color).reshape(-1, 3) == DEFAULT_GREY, axis=1)
+    return np.where(grey[:, None], _CLASS_TABLE[np.asarray(semantic, dtype=np.int64).reshape(-1)], c)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit normals (M, 3) float32 of the triangles (right-hand rule; degenerate ones (0, 0, 1))."""
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    n[norm == 0] = (0.0, 0.0, 1.0)
+    norm[norm == 0] = 1.0
+    return (n / norm[:, None]).astype(np.float32)
+
+
+def shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.ndarray, sun: np.ndarray,
+          up: np.ndarray, ambient: float, normals: np.ndarray, base: np.ndarray | None = None,
+          nthreads: int = 0) -> np.ndarray:
+    """(N, 3) float32 colours of rays ``origin + t * dirs`` hitting triangles ``face`` (-1: sky)
+    of ``scene`` (a :class:`~carlaocc.stages.sensors.raycast.RayScene`), lit by ``sun``;
+    ``normals`` and ``base`` (per triangle, :func:`face_normals` and :func:`base_colours`; base
+    computed here when None) are computed once per frame for all cameras."""
+    n_rays = len(face)
+    out = np.empty((n_rays, 3), dtype=np.float32)
+    hit = face >= 0
+    d_all = np.asarray(dirs, dtype=np.float32)
+    # 1. the sky: horizon to zenith by the ray's elevation
+    d = d_all[~hit]
+    h = np.clip((d @ up.astype(np.float32)) / np.linalg.norm(d, axis=1), 0.0, 1.0) ** 0.6
+    out[~hit] = SKY_HORIZON.astype(np.float32) + (SKY_ZENITH - SKY_HORIZON).astype(np.float32) * h[:, None]
+    if not hit.any():
+        return out
+    if base is None:
+        base = base_colours(scene.mesh.color, scene.mesh.semantic).astype(np.float32)
+    f = face[hit]
+    d = d_all[hit]
+    # 2. the normal turned towards the camera: its sign against the ray
+    n = normals[f]
+    sign = np.where(np.einsum("ij,ij->i", n, d) > 0, np.float32(-1.0), np.float32(1.0))
+    lambert = np.clip(sign * (n @ sun.astype(np.float32)), 0.0, 1.0)
+    # 3. shadows: a ray towards the sun from each sunlit point; glass lets the light through
+    lit = np.zeros(len(f), dtype=bool)
+    facing = np.flatnonzero(lambert > 0)
+    if facing.size:
+        p = (origin + t[hit][facing, None] * d[facing]) + (SHADOW_OFFSET * sign[facing])[:, None] * n[facing]
+        _, blocker = scene.cast(p, np.broadcast_to(sun, p.shape), nthreads=nthreads)
+        lit[facing] = (blocker < 0) | scene.transparent(blocker)
+    light = np.float32(ambient) + np.float32(1.0 - ambient) * lambert * lit
+    out[hit] = base[f] * light[:, None]
+    return out
+
+
+def render_rgb(scene, origin: np.ndarray, dirs: np.ndarray, clean, raw, sun: np.ndarray, up: np.ndarray,
+               ambient: float = 0.35, normals: np.ndarray | None = None, base: np.ndarray | None = None,
+               nthreads: int = 0) -> np.ndarray:
+    """(H, W, 3) uint8 image of one camera from its maps: ``clean`` (first surface) and ``raw``
+    (first opaque surface; None: the clean one), :class:`CameraMaps` with ``face`` set; ``origin``
+    and ``dirs`` the camera's rays (unit component along the optical axis, so the planar depth
+    is the hit distance). ``normals`` / ``base``: per triangle, shared by a frame's cameras."""
+    opaque = raw if raw is not None else clean
+    H, W = opaque.depth.shape
+    face = opaque.face.reshape(-1)
+    t = opaque.depth.reshape(-1)
+    if normals is None:
+        normals = face_normals(scene.mesh.vertices, scene.mesh.faces)
+    rgb = shade(scene, origin, dirs, t, face, sun, up, ambient, normals, base, nthreads)
+    # 4. glass in front of the opaque surface tints it
+    front = clean.face.reshape(-1)
+    glass = (front >= 0) & scene.transparent(front) & (front != face)
+    rgb[glass] = (1.0 - GLASS_OPACITY) * rgb[glass] + GLASS_OPACITY * GLASS.astype(np.float32)
+    return np.clip(np.rint(rgb), 0, 255).astype(np.uint8).reshape(H, W, 3)
