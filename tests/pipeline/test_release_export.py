@@ -281,3 +281,20 @@ def test_sequences_selector_builds_a_slice(built, tmp_path, config_file):
     r = cli.invoke(app, ["run", "--res", "0.4", "--limit-frames", str(FRAMES), "--root", str(root), "--sequences", "nowhere_*",
                          "--stages", "voxelize", "--config", config_file])
     assert r.exit_code == 2 and "matches none" in r.output and "town00_high_seq000" in r.output
+
+
+def test_a_frame_without_a_pose_is_refused(built, tmp_path):
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import FrameRecord
+
+    root = tmp_path / "data"
+    shutil.copytree(built.root, root)
+    store = Store(str(root))
+    seq = query(store, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    frames = ParquetTable(store, FrameRecord)
+    frames.save(seq, [f for f in frames.load([seq]) if f.frame_index != 1])
+    out = tmp_path / "out"
+    r = cli.invoke(app, ["export", "carlaocc-release", "--root", str(root), "--out", str(out), "--sequence", seq])
+    # the release's reader would fail on the frame: refused, naming it, before any file is written
+    assert r.exit_code == 2 and f"{seq}: no LiDAR pose for frame 1" in r.output
+    assert not out.exists() or not any(out.rglob("*.npz"))
