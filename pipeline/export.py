@@ -77,7 +77,7 @@ def _coverage(target: TargetGrid, grid: GridSpec, grid_to_target: np.ndarray) ->
     return inside.reshape(target.shape)
 
 
-def _actor_ids(store: Store, seq: str) -> set[int]:
+def actor_ids(store: Store, seq: str) -> set[int]:
     """Instance ids of the sequence's simulated actors (the actors table)."""
     from carlaocc.schemas.records import ActorStateRecord
 
@@ -163,7 +163,7 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         if fmt == "carlaocc-npz":
             # the published id layout, stable across the sequence (a first pass collects the ids
             # frame by frame: one dense frame in memory at a time)
-            table = sequence_release_ids(occ, seq, grid, frame_count, _actor_ids(store, seq), encoding)
+            table = sequence_release_ids(occ, seq, grid, frame_count, actor_ids(store, seq), encoding)
             keys, vals = instance_lookup(table)
             atomic_write(out / seq / "instances.json", lambda fh: fh.write(json.dumps(
                 {"encoding": encoding, "instances": {f"{c}:{i}": v for (c, i), v in sorted(table.items())}},

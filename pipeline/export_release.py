@@ -172,9 +172,8 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
     the calibration and ``carlaocc_export.json`` cover every sequence exported there)."""
     from carlaocc.catalog.formats.carlaocc_npz import check_encoding, save_carlaocc_npz
     from carlaocc.catalog.splits import SPLIT_NAMES
-    from carlaocc.pipeline.export import (built_label_table, scenes_label_tables, sequence_release_ids,
+    from carlaocc.pipeline.export import (actor_ids, built_label_table, scenes_label_tables, sequence_release_ids,
                                           sequence_splits, voxelized_sequences)
-    from carlaocc.schemas.records import ActorStateRecord
     from carlaocc.stages.voxelize.resample import pool_window
 
     check_encoding(encoding)
@@ -202,7 +201,7 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
     note = {"format": "carlaocc-release", "label_table": table_name, "encoding": encoding,
             "labels": rel.ENCODING_TEXT[encoding], "towns": note.get("towns", {}), "sequences": note.get("sequences", {}),
             "instances": note.get("instances", {})}  # fmt: skip
-    t_frames, t_actors = ParquetTable(store, FrameRecord), ParquetTable(store, ActorStateRecord)
+    t_frames = ParquetTable(store, FrameRecord)
     n_files = n_frames = 0
     for seq, grid, frame_count in todo:
         town_no, seq_no = folders[seq]
@@ -217,8 +216,7 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
         atomic_write(folder / "poses" / "lidar.txt", lambda fh, b=text.encode(): fh.write(b))
         n_files += 1
         # 2. the sequence's exported instance ids, from every frame (actors are the moving ones)
-        actors = set(t_actors.load_arrow([seq])["instance_id"].to_pylist()) if t_actors.exists(seq) else set()
-        ids = sequence_release_ids(occ, seq, grid, frame_count, actors, encoding)
+        ids = sequence_release_ids(occ, seq, grid, frame_count, actor_ids(store, seq), encoding)
         keys, vals = rel.instance_lookup(ids)
         # 3. per frame: the three grids (class priority of the release's sem_z_order), camera maps, LiDAR
         for t in range(frame_count):
