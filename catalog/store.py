@@ -39,6 +39,7 @@ OCCUPANCY_ZARR = "occupancy.zarr"
 SENSORS_ZARR = "sensors.zarr"
 LIDAR_DIR = "lidar"
 ADMESH_MESHES = "admesh/meshes"
+ADMESH_TEXTURES = "admesh/textures"
 SCENE_MESHES = "scenes/meshes"
 
 
@@ -175,6 +176,10 @@ class Store:
     @staticmethod
     def asset_mesh_path(asset_id: str) -> str:
         return f"{ADMESH_MESHES}/{asset_id}.glb"
+
+    @staticmethod
+    def asset_texture_path(asset_id: str) -> str:
+        return f"{ADMESH_TEXTURES}/{asset_id}.npz"
 
     @staticmethod
     def scene_mesh_path(stuff_asset_id: str) -> str:

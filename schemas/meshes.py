@@ -44,6 +44,13 @@ class SourcePart:
     transparent: bool = False  # glTF alphaMode BLEND or alpha < 1; MTL d < 1 or Tr > 0
     texture: str = ""  # texture reference, kept by reference
     semantic_id: int | None = None  # part-level class when the source labels parts; None: the asset's
+    # what the material looks like (cameras' RGB): its base colour RGBA 0-255 (None: the source
+    # gives none), its base colour texture as an (H, W, 3) uint8 image with texture coordinates
+    # per triangle corner (M, 3, 2) float32 (u right, v up from the image's bottom-left corner,
+    # repeating outside [0, 1]); None when the part has no texture or its image is missing
+    color: tuple[int, int, int, int] | None = None
+    corner_uv: np.ndarray | None = None
+    image: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -85,10 +92,29 @@ class MeshPart:
     material: str = "default"
     transparent: bool = False
     color: tuple[int, int, int, int] = (200, 200, 200, 255)
+    # the base colour texture (H, W, 3) uint8 and its coordinates per triangle corner (M, 3, 2)
+    # float32 (u right, v up from the bottom-left corner, repeating): both or neither
+    corner_uv: np.ndarray | None = None
+    image: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
         object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
+        _check_texture(self.name, len(self.faces), self.corner_uv, self.image)
+        if self.corner_uv is not None:
+            object.__setattr__(self, "corner_uv", np.ascontiguousarray(self.corner_uv, dtype=np.float32))
+
+
+def _check_texture(name: str, n_faces: int, corner_uv, image) -> None:
+    """A texture comes with coordinates for every triangle corner, and the other way round."""
+    if (corner_uv is None) != (image is None):
+        raise ValueError(f"part {name!r}: a texture needs both its image and its corner coordinates")
+    if corner_uv is not None:
+        if np.shape(corner_uv) != (n_faces, 3, 2):
+            raise ValueError(f"part {name!r}: corner coordinates have shape {np.shape(corner_uv)}, "
+                             f"expected ({n_faces}, 3, 2)")
+        if np.ndim(image) != 3 or np.shape(image)[2] != 3 or np.asarray(image).dtype != np.uint8:
+            raise ValueError(f"part {name!r}: a texture image is (H, W, 3) uint8")
 
 
 @dataclass(frozen=True)
@@ -122,7 +148,10 @@ class SceneMesh:
     asset_id: str = ""  # the ADMesh asset (or town stuff key) the mesh is a part of
     part: str = ""  # the asset part's name
     color: tuple[int, int, int] = (200, 200, 200)  # the part's base colour, RGB 0-255 (cameras' RGB)
+    corner_uv: np.ndarray | None = None  # (M, 3, 2) float32, the part's texture coordinates
+    image: np.ndarray | None = None  # (H, W, 3) uint8, the part's base colour texture
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
         object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
+        _check_texture(self.name, len(self.faces), self.corner_uv, self.image)

@@ -75,6 +75,7 @@ class AssetRecord(Record):
     aliases: list[str] = []  # source paths of duplicates stored once under this asset
     notes: str = ""  # what standardization changed (faces removed, winding repaired, turned...)
     mesh_path: str  # store-relative path of the standardized GLB
+    texture_path: str = ""  # store-relative path of the parts' textures ("" when none has one)
 
 
 class PartRecord(Record):

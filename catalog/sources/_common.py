@@ -236,12 +236,100 @@ def compact(vertices: np.ndarray, faces) -> tuple[np.ndarray, np.ndarray]:
 
 
 def make_part(name, vertices, faces, *, material="default", transparent=False, texture="",
-              semantic_id=None) -> SourcePart:  # fmt: skip
+              semantic_id=None, color=None, corner_uv=None, image=None) -> SourcePart:  # fmt: skip
     v = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-    v, f = weld_unindexed(v, f)
+    v, f = weld_unindexed(v, f)  # faces keep their order: corner coordinates stay valid
     return SourcePart(name=name, vertices=v, faces=f, material=material or "default",
-                      transparent=bool(transparent), texture=texture, semantic_id=semantic_id)  # fmt: skip
+                      transparent=bool(transparent), texture=texture, semantic_id=semantic_id,
+                      color=color, corner_uv=corner_uv, image=image)  # fmt: skip
+
+
+MAX_TEXTURE_SIDE = 1024
+"""Texture images are kept at most this many pixels on their long side (box-filtered down):
+a camera never sees more of one asset's texture, and the ADMesh library stays small."""
+
+
+def texture_image(img) -> np.ndarray:
+    """An (H, W, 3) uint8 RGB array of a PIL image (palette, grey and alpha images converted),
+    its long side at most :data:`MAX_TEXTURE_SIDE`."""
+    from PIL import Image
+
+    if img.mode in ("P", "PA", "LA", "RGBA", "La"):
+        img = img.convert("RGBA")  # palette and alpha images: through RGBA (no warning, no surprise)
+    img = img.convert("RGB")
+    w, h = img.size
+    if max(w, h) > MAX_TEXTURE_SIDE:
+        k = MAX_TEXTURE_SIDE / max(w, h)
+        img = img.resize((max(1, round(w * k)), max(1, round(h * k))), Image.Resampling.BOX)
+    return np.ascontiguousarray(np.asarray(img, dtype=np.uint8))
+
+
+def read_texture(path: str) -> np.ndarray | None:
+    """The image file at ``path`` as :func:`texture_image` gives it; None when it is missing or
+    unreadable (the part keeps its texture by reference and its material colour)."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as img:
+            return texture_image(img)
+    except (OSError, UnidentifiedImageError, ValueError):
+        return None
+
+
+def obj_appearance(data, material, uv_index, mesh_dir: str, reversed_: bool = False):
+    """``(color, corner_uv, image)`` of an OBJ part read by our reader (``data`` its ObjData,
+    ``material`` its MtlMaterial or None, ``uv_index`` its triangles' ``vt`` corners): the MTL
+    ``Kd``, and the ``map_Kd`` image (relative to ``mesh_dir``) with the corners' coordinates
+    when the file reads and every corner has a ``vt``; ``reversed_``: the caller re-wound the
+    triangles (a, b, c) -> (c, b, a), so the corners reverse too."""
+    if material is None:
+        return None, None, None
+    if not material.texture:
+        return material.color, None, None
+    image = read_texture(os.path.join(mesh_dir, material.texture))
+    corner_uv = data.corner_uv(uv_index) if image is not None else None
+    if corner_uv is None:
+        return material.color, None, None
+    return material.color, np.ascontiguousarray(corner_uv[:, ::-1] if reversed_ else corner_uv), image
+
+
+def _colour(value) -> tuple[int, int, int, int] | None:
+    """An RGBA 0-255 tuple of a trimesh colour (uint8 RGB or RGBA), None when there is none."""
+    if value is None:
+        return None
+    c = np.asarray(value).reshape(-1)
+    if c.size not in (3, 4) or not np.all(np.isfinite(c)):
+        return None
+    if c.dtype.kind == "f" and c.max() <= 1.0:
+        c = c * 255.0
+    c = np.clip(np.rint(c), 0, 255).astype(int)
+    return (int(c[0]), int(c[1]), int(c[2]), int(c[3]) if c.size == 4 else 255)
+
+
+def trimesh_appearance(geom, faces: np.ndarray, texture: str) -> tuple[tuple | None, np.ndarray | None, np.ndarray | None]:
+    """``(color, corner_uv, image)`` of a trimesh geometry: its material's base colour (glTF
+    ``baseColorFactor``, MTL ``Kd``), and, when the source references a base colour texture
+    (``texture`` non-empty) that trimesh could read, the image and the coordinates of each corner
+    of ``faces`` (the geometry's faces in the order the part keeps them; trimesh's coordinates
+    have v up from the bottom-left corner for glTF and OBJ alike)."""
+    visual = getattr(geom, "visual", None)
+    material = getattr(visual, "material", None)
+    color = None
+    if material is not None:
+        color = _colour(getattr(material, "baseColorFactor", None))
+        if color is None and not hasattr(material, "baseColorFactor"):
+            color = _colour(getattr(material, "diffuse", None))  # SimpleMaterial (MTL Kd)
+    elif visual is not None and getattr(visual, "kind", None) == "face":
+        color = _colour(np.asarray(visual.face_colors)[0]) if len(visual.face_colors) else None
+    uv = getattr(visual, "uv", None)
+    img = None
+    if material is not None and texture:
+        img = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    if img is None or uv is None or len(uv) != len(geom.vertices) or not np.all(np.isfinite(uv)):
+        return color, None, None
+    corner = np.asarray(uv, dtype=np.float32)[np.asarray(faces, dtype=np.int64)]
+    return color, np.ascontiguousarray(corner), texture_image(img)
 
 
 def read_json_object(path: str, reason: str, missing_reason: str | None = None) -> dict:
@@ -488,7 +576,7 @@ def _load_trimesh(path: str, ext: str) -> list[SourcePart]:
         v = np.asarray(geom.vertices, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
         f = np.asarray(geom.faces, dtype=np.int64)
         if np.linalg.det(T[:3, :3]) < 0:
-            f = f[:, ::-1]
+            f = f[:, ::-1]  # (the corners' coordinates below follow the reversed order)
         material = getattr(geom.visual, "material", None)
         name, transparent = _trimesh_material_info(material)
         texture = ""
@@ -501,8 +589,9 @@ def _load_trimesh(path: str, ext: str) -> list[SourcePart]:
         # glTF nodes keep their names; trimesh's own per-primitive nodes carry a random suffix,
         # so those parts are named after their (deterministic) geometry name instead
         label = str(node) if node_names is None or str(node) in node_names else str(gname)
-        parts.append(make_part(_unique(label, taken), v, f, material=name,
-                               transparent=transparent, texture=texture))  # fmt: skip
+        color, corner_uv, image = trimesh_appearance(geom, f, texture)
+        parts.append(make_part(_unique(label, taken), v, f, material=name, transparent=transparent,
+                               texture=texture, color=color, corner_uv=corner_uv, image=image))  # fmt: skip
     return parts
 
 

@@ -6,11 +6,12 @@ component geometry, so both read OBJ here. The folder and shapenet adapters load
 and use :func:`read_mtl` for what trimesh does not expose (``d``/``Tr`` transparency, the
 ``map_Kd`` texture path).
 
-Supported: ``v`` (extra colour components ignored), ``f`` with ``i``, ``i/t``, ``i//n``, ``i/t/n``
-corners and negative (relative) indices, polygons (fan-triangulated), ``o``, ``g``, ``usemtl``,
-``mtllib``, ``\\`` line continuations, comments. An ``o`` record clears the current ``g`` group
-(a new object does not inherit the previous object's group). Everything else (``vt``, ``vn``, ``l``, ``s``,
-curves) is ignored.
+Supported: ``v`` (extra colour components ignored), ``vt`` (texture coordinates: u, v up from the
+image's bottom-left corner), ``f`` with ``i``, ``i/t``, ``i//n``, ``i/t/n`` corners and negative
+(relative) indices, polygons (fan-triangulated), ``o``, ``g``, ``usemtl``, ``mtllib``, ``\\``
+line continuations, comments. An ``o`` record clears the current ``g`` group (a new object does
+not inherit the previous object's group). Everything else (``vn``, ``l``, ``s``, curves) is
+ignored. MTL: ``d``/``Tr`` (transparency), ``Kd`` (diffuse colour), ``map_Kd`` (its texture).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class MtlMaterial:
     name: str
     transparent: bool = False
     texture: str = ""
+    color: tuple[int, int, int, int] | None = None  # Kd as RGBA 0-255 (None: not stated)
 
 
 @dataclass
@@ -50,6 +52,8 @@ class ObjGroup:
     group: str
     material: str
     faces: list = field(default_factory=list)  # triangles as lists of 0-based vertex indices
+    # per triangle, its corners' 0-based ``vt`` indices (-1 where a corner has none)
+    uv_index: list = field(default_factory=list)
 
 
 @dataclass
@@ -57,6 +61,15 @@ class ObjData:
     vertices: np.ndarray  # (N, 3) float64
     groups: list[ObjGroup]  # in order of first appearance
     mtllibs: list[str]  # as written
+    uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (T, 2) float64, the ``vt`` records
+
+    def corner_uv(self, uv_index) -> np.ndarray | None:
+        """(M, 3, 2) float32 texture coordinates of triangles with ``uv_index`` (M, 3) corners;
+        None when a corner has no coordinates."""
+        idx = np.asarray(uv_index, dtype=np.int64).reshape(-1, 3)
+        if idx.size == 0 or idx.min() < 0:
+            return None
+        return np.ascontiguousarray(self.uv[idx], dtype=np.float32)
 
 
 def _logical_lines(text: str):
@@ -85,6 +98,7 @@ def _statements(text: str):
 def parse_obj(text: str) -> ObjData:
     """Parse OBJ text. Raises :class:`ObjError` naming the line of a malformed record."""
     verts: list[tuple[float, float, float]] = []
+    uvs: list[tuple[float, float]] = []
     groups: dict[tuple[str, str, str], ObjGroup] = {}
     mtllibs: list[str] = []
     obj, grp, mat = "", "", ""
@@ -93,15 +107,25 @@ def parse_obj(text: str) -> ObjData:
         try:
             if tag == "v":
                 verts.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            elif tag == "vt":
+                uvs.append((float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0))
             elif tag == "f":
-                n = len(verts)
-                idx = []
+                n, nt = len(verts), len(uvs)
+                idx, tdx = [], []
                 for corner in parts[1:]:
-                    i = int(corner.split("/", 1)[0])
+                    fields = corner.split("/")
+                    i = int(fields[0])
                     i = i - 1 if i > 0 else n + i
                     if not 0 <= i < n:
                         raise ObjError(f"line {no}: vertex index {corner} out of range (1..{n})")
                     idx.append(i)
+                    t = -1
+                    if len(fields) > 1 and fields[1]:
+                        t = int(fields[1])
+                        t = t - 1 if t > 0 else nt + t
+                        if not 0 <= t < nt:
+                            raise ObjError(f"line {no}: texture index {corner} out of range (1..{nt})")
+                    tdx.append(t)
                 if len(idx) < 3:
                     raise ObjError(f"line {no}: a face needs 3 vertices, got {len(idx)}")
                 key = (obj, grp, mat)
@@ -109,6 +133,7 @@ def parse_obj(text: str) -> ObjData:
                 if g is None:
                     g = groups[key] = ObjGroup(obj, grp, mat)
                 g.faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
+                g.uv_index.extend([tdx[0], tdx[k], tdx[k + 1]] for k in range(1, len(idx) - 1))
             elif tag == "o":  # a new object starts without the previous object's group
                 obj, grp = " ".join(parts[1:]), ""
             elif tag == "g":
@@ -122,7 +147,7 @@ def parse_obj(text: str) -> ObjData:
                 raise
             raise ObjError(f"line {no}: malformed {tag!r} record") from None
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    return ObjData(vertices, list(groups.values()), mtllibs)
+    return ObjData(vertices, list(groups.values()), mtllibs, np.asarray(uvs, dtype=np.float64).reshape(-1, 2))
 
 
 def read_obj(path: str) -> ObjData:
@@ -166,13 +191,13 @@ def parse_mtl(text: str) -> dict[str, MtlMaterial]:
                 transparent = cur["d"] < 1.0
             else:
                 transparent = cur["tr"] is not None and cur["tr"] > 0.0
-            out[cur["name"]] = MtlMaterial(cur["name"], transparent, cur["map"])
+            out[cur["name"]] = MtlMaterial(cur["name"], transparent, cur["map"], cur["kd"])
 
     for _, parts in _statements(text):
         tag = parts[0].lower()
         if tag == "newmtl":
             close()
-            cur = {"name": " ".join(parts[1:]), "d": None, "tr": None, "map": ""}
+            cur = {"name": " ".join(parts[1:]), "d": None, "tr": None, "map": "", "kd": None}
         elif cur is None:
             continue
         elif tag in ("d", "tr") and len(parts) > 1:
@@ -181,6 +206,12 @@ def parse_mtl(text: str) -> dict[str, MtlMaterial]:
             except ValueError:
                 continue
             cur["d" if tag == "d" else "tr"] = value
+        elif tag == "kd" and len(parts) >= 4:
+            try:
+                rgb = [min(max(float(x), 0.0), 1.0) for x in parts[1:4]]
+            except ValueError:
+                continue  # "Kd spectral file.rfl", "Kd xyz ...": not an RGB we read
+            cur["kd"] = (*(int(round(255 * c)) for c in rgb), 255)
         elif tag == "map_kd" and len(parts) > 1:
             cur["map"] = _map_path(parts[1:])
     close()
@@ -225,7 +256,7 @@ def obj_materials(obj_path: str, mtllibs: list[str] | None = None) -> dict[str, 
         lib_dir = posixpath.dirname(lib.replace("\\", "/"))
         for name, m in mats.items():
             tex = posixpath.normpath(posixpath.join(lib_dir, m.texture)) if m.texture else ""
-            out.setdefault(name, MtlMaterial(name, m.transparent, tex))
+            out.setdefault(name, MtlMaterial(name, m.transparent, tex, m.color))
     return out
 
 

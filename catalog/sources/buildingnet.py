@@ -57,7 +57,7 @@ from __future__ import annotations
 import os
 import re
 
-from carlaocc.catalog.sources._common import (check_subclass, compact, is_excluded, make_part,
+from carlaocc.catalog.sources._common import (check_subclass, compact, is_excluded, make_part, obj_appearance,
                                               missing_file_notes, read_json_object, semantic_class,
                                               sidecar_files)
 from carlaocc.catalog.sources._obj import ObjError, obj_materials, read_obj
@@ -241,12 +241,13 @@ class BuildingNetAdapter:
                 name, k = f"{base}_{k}", k + 1
             taken.add(name)
             v, f = compact(data.vertices, g.faces)
+            color, corner_uv, image = obj_appearance(data, mat, g.uv_index, os.path.dirname(obj))
             parts.append(make_part(
                 name, v, f,
                 material="glass" if glass else (g.material or "default"),
                 transparent=glass or (mat.transparent if mat else False),
                 texture=mat.texture if mat else "",
-                semantic_id=semantic_id,
+                semantic_id=semantic_id, color=color, corner_uv=corner_uv, image=image,
             ))  # fmt: skip
         if parts and labels and matched == 0:
             raise SourceError("bad metadata", f"{label_path}: no label key names a g/o component "

@@ -92,6 +92,7 @@ from carlaocc.catalog.sources._common import (
     drop_excluded,
     make_part,
     missing_file_notes,
+    obj_appearance,
     read_json_object,
     semantic_class,
 )
@@ -268,19 +269,24 @@ class CarlaAdapter:
                 used = [meshes[mesh_path][1][g.material] for g in data.groups if g.material in meshes[mesh_path][1]]
                 notes += [n for n in missing_file_notes(mesh_path, used, data.mtllibs) if n not in notes]
             data, mtl = meshes[mesh_path]
-            by_mat: dict[str, list] = {}
+            by_mat: dict[str, tuple[list, list]] = {}
             for g in data.groups:
-                by_mat.setdefault(g.material, []).extend(g.faces)
-            for mat_name, faces in by_mat.items():
+                faces, uv_index = by_mat.setdefault(g.material, ([], []))
+                faces.extend(g.faces)
+                uv_index.extend(g.uv_index)
+            for mat_name, (faces, uv_index) in by_mat.items():
                 v, f = compact(data.vertices, faces)
                 v, f = to_ours(v, f, world[name])
                 m = mtl.get(mat_name)
+                # to_ours re-winds the triangles when the world matrix keeps handedness: so are their corners
+                color, corner_uv, image = obj_appearance(data, m, uv_index, os.path.dirname(mesh_path),
+                                                         reversed_=np.linalg.det(world[name][:3, :3]) > 0)
                 parts.append(make_part(
                     name if len(by_mat) == 1 else f"{name}/{mat_name or 'default'}", v, f,
                     material=mat_name or "default",
                     transparent=m.transparent if m else False,
                     texture=m.texture if m else "",  # relative to the mesh's directory
-                    semantic_id=semantic_id,
+                    semantic_id=semantic_id, color=color, corner_uv=corner_uv, image=image,
                 ))  # fmt: skip
         return SourceAsset(
             source=self.kind,

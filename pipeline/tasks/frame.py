@@ -17,6 +17,7 @@ import numpy as np
 from carlaocc.catalog.meshes import load_glb_arrays
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.textures import TextureStore
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, PartRecord, PlacementRecord, SequenceRecord
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.stages.geometry import is_watertight
@@ -64,18 +65,24 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
         if aid in assets:
             recs = tuple(sorted(parts.get(aid, {}).values(), key=lambda r: r.part_index))
 
-            def asset_geometry(arrays, aid=aid, recs=recs) -> AssetGeometry:
+            tex_rel = assets[aid].texture_path
+
+            def asset_geometry(arrays, aid=aid, recs=recs, tex_rel=tex_rel) -> AssetGeometry:
                 if len(arrays) != len(recs):
                     raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
-                return AssetGeometry(
-                    asset_id=aid,
-                    parts=tuple(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent, tuple(r.color))
-                                for r, (v, f) in zip(recs, arrays)),
-                    part_closed=tuple(r.watertight for r in recs),
-                )
+                textures = TextureStore(store).load(tex_rel) if tex_rel else {}
+                parts = []
+                for k, (r, (v, f)) in enumerate(zip(recs, arrays)):
+                    uv, image = textures.get(k, (None, None))
+                    if uv is not None and len(uv) != len(f):
+                        raise StoreError(f"asset {aid}: part {k} has {len(f)} faces, its texture "
+                                         f"coordinates {len(uv)} ({tex_rel})")
+                    parts.append(MeshPart(r.name, v, f, r.semantic_id, r.material, r.transparent, tuple(r.color),
+                                          corner_uv=uv, image=image))
+                return AssetGeometry(asset_id=aid, parts=tuple(parts), part_closed=tuple(r.watertight for r in recs))
 
-            # the cache key: the parts' rows, hashable (their colour is a list)
-            key = (aid, tuple(r.model_dump_json() for r in recs))
+            # the cache key: the parts' rows, hashable (their colour is a list), and the textures
+            key = (aid, tex_rel, tuple(r.model_dump_json() for r in recs))
             out[aid] = _mesh_geometry(store, assets[aid].mesh_path, key, asset_geometry)
         elif aid in stuff:
             pl = stuff[aid]

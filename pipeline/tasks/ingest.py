@@ -20,7 +20,8 @@ from carlaocc.catalog.meshes import MeshStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.registry import adapter
-from carlaocc.catalog.store import ADMESH_MESHES, Store
+from carlaocc.catalog.store import ADMESH_MESHES, ADMESH_TEXTURES, Store
+from carlaocc.catalog.textures import TextureStore, has_texture
 from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, PROCEDURAL_SOURCE
 
@@ -114,7 +115,12 @@ def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -
     store.remove(t_quarantine.path(key))
     rel = store.asset_mesh_path(result.asset.asset_id)
     outputs = {rel: MeshStore(store).save(rel, result.geometry.parts)}
-    asset = result.asset.model_copy(update={"mesh_path": rel})
+    update = {"mesh_path": rel}
+    if has_texture(result.geometry.parts):  # the parts' textures, beside the GLB
+        tex = store.asset_texture_path(result.asset.asset_id)
+        outputs[tex] = TextureStore(store).save(tex, result.geometry.parts)
+        update["texture_path"] = tex
+    asset = result.asset.model_copy(update=update)
     outputs[t_assets.path(key)] = t_assets.save(key, [asset])
     outputs[t_parts.path(key)] = t_parts.save(key, result.parts)
     return outputs
@@ -172,7 +178,8 @@ def source_spec(cfg: SourceIngestConfig, exclude: tuple[str, ...] = ()) -> Stage
         description=f"ingest the {cfg.kind} source {cfg.root}",
         upstream=(),
         reads=(cfg.root,),
-        writes=("admesh/meshes/<id>.glb", "admesh/assets/", "admesh/parts/", "admesh/quarantine/"),
+        writes=("admesh/meshes/<id>.glb", "admesh/textures/<id>.npz", "admesh/assets/", "admesh/parts/",
+                "admesh/quarantine/"),
         partitions=lambda ctx: parts,
         task=ingest_source_task,
         config_of=lambda _: cfg,
@@ -207,10 +214,12 @@ def prune_vanished(store: Store, cfg: SourceIngestConfig, keys: set[str]) -> int
 
 
 def prune_orphan_meshes(store: Store) -> int:
-    """Remove standardized meshes no asset row references any more (an item that changed,
-    turned bad or vanished leaves its old GLB behind)."""
-    referenced = {a.mesh_path for a in ParquetTable(store, AssetRecord).load()}
-    orphans = [rel for rel in store.glob(ADMESH_MESHES, ".glb") if rel not in referenced]
+    """Remove standardized meshes (and their textures) no asset row references any more (an item
+    that changed, turned bad or vanished leaves its old GLB behind)."""
+    assets = ParquetTable(store, AssetRecord).load()
+    referenced = {a.mesh_path for a in assets} | {a.texture_path for a in assets if a.texture_path}
+    orphans = [rel for rel in store.glob(ADMESH_MESHES, ".glb") + store.glob(ADMESH_TEXTURES, ".npz")
+               if rel not in referenced]
     for rel in orphans:
         store.remove(rel)
     return len(orphans)

@@ -36,6 +36,7 @@ class CleanedPart:
     degenerate: int
     duplicates: int
     unreferenced: int
+    face_index: np.ndarray | None = None  # (M,) int64: the input face each kept face is
 
 
 def _weld(v: np.ndarray, f: np.ndarray, quantum: float) -> tuple[np.ndarray, np.ndarray]:
@@ -61,14 +62,15 @@ def clean_part(v: np.ndarray, f: np.ndarray, tol2: float, quantum: float = 0.0) 
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     flat = np.einsum("ij,ij->i", cross, cross) <= tol2 * tol2
-    f = f[~(repeated | flat)]
+    index = np.flatnonzero(~(repeated | flat))  # which input faces survive, in order
+    f = f[index]
     degenerate = n_in - len(f)
     # duplicates: same sorted vertex triple; the first occurrence wins
     if len(f):
         _, first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)
         keep = np.sort(first)
         duplicates = len(f) - len(keep)
-        f = f[keep]
+        f, index = f[keep], index[keep]
     else:
         duplicates = 0
     # unreferenced vertices: renumber the used ones in their original order
@@ -76,7 +78,7 @@ def clean_part(v: np.ndarray, f: np.ndarray, tol2: float, quantum: float = 0.0) 
     used[f.ravel()] = True
     remap = np.cumsum(used) - 1
     return CleanedPart(v[used], remap[f].reshape(-1, 3).astype(np.int64), degenerate, duplicates,
-                  int(len(v) - used.sum()))
+                       int(len(v) - used.sum()), index.astype(np.int64))
 
 
 # --------------------------------------------------------------------------------------------

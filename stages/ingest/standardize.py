@@ -142,6 +142,37 @@ def _fmt_extent(extent) -> str:
 
 
 
+UNCOLOURED = (200, 200, 200)
+"""The colour of a part whose source gives none: cameras shade it in its class's base colour."""
+
+
+def _base_colour(part: SourcePart, textured: bool) -> tuple[int, int, int, int]:
+    """The part's RGBA base colour: the source material's, white under a texture that has no
+    colour factor (the texture is the colour), else :data:`UNCOLOURED`; glass 110 alpha."""
+    if part.color is not None:
+        r, g, b = part.color[:3]
+    else:
+        r, g, b = (255, 255, 255) if textured else UNCOLOURED
+    return (int(r), int(g), int(b), 110 if part.transparent else 255)
+
+
+def _texture(part: SourcePart, face_index: np.ndarray | None, f_cleaned: np.ndarray,
+             f_final: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The part's texture and its corner coordinates following the faces cleaning kept
+    (``face_index``) and the faces winding repair reversed (a reversed face's corners reverse)."""
+    uv = part.corner_uv
+    if uv is None or part.image is None:
+        return None, None
+    uv = np.asarray(uv, dtype=np.float32)
+    if uv.shape != (len(part.faces), 3, 2) or face_index is None:
+        return None, None  # coordinates that do not describe the faces: no texture
+    uv = uv[face_index]
+    # a repair reverses a face as (a, b, c) -> (c, b, a): the same on its corners
+    flipped = np.any(f_cleaned != f_final, axis=1)
+    uv[flipped] = uv[flipped][:, ::-1]
+    return np.ascontiguousarray(uv), np.ascontiguousarray(part.image, dtype=np.uint8)
+
+
 def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     """Standardize one source asset (frame, units, cleaning, validation; see the module doc).
     Returns the records and geometry, or a :class:`Rejection` for data that cannot be used."""
@@ -254,6 +285,7 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     closed: list[bool] = []
     for k, ((part, c, sid), v) in enumerate(zip(cleaned, placed)):
         f = c.faces
+        f_cleaned = f
         label = f"part {k} '{part.name}'"
         tight = is_watertight(f)
         if not tight and is_closed(f):
@@ -268,11 +300,11 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
             if bodies:
                 f = f2
                 notes.append(f"{label}: {bodies} inside-out bodies flipped outward")
-        r, g, b = taxonomy.by_id(sid).color
+        corner_uv, image = _texture(part, c.face_index, f_cleaned, f)
         mesh_parts.append(MeshPart(
             name=part.name or f"part_{k}", vertices=v, faces=f, semantic_id=sid,
             material=part.material, transparent=bool(part.transparent),
-            color=(r, g, b, 110 if part.transparent else 255),
+            color=_base_colour(part, image is not None), corner_uv=corner_uv, image=image,
         ))  # fmt: skip
         closed.append(tight)
 

@@ -153,20 +153,22 @@ def region_of_grid(grid: GridSpec, margin: float = 0.5) -> tuple[np.ndarray, np.
 # --------------------------------------------------------------------------------------------
 
 
-def _cull(V: np.ndarray, F: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _cull(V: np.ndarray, F: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Keep the triangles whose bounding box touches ``lo .. hi``; when some are dropped, keep
-    only the vertices the rest use (in ascending original order)."""
+    only the vertices the rest use (in ascending original order). Third: the kept triangles'
+    indices into ``F`` (None: all kept)."""
     keep = np.ones(len(F), dtype=bool)
     for axis in range(3):
         c = V[:, axis][F]  # (M, 3)
         keep &= (c.min(axis=1) <= hi[axis]) & (c.max(axis=1) >= lo[axis])
     if keep.all():
-        return V, F
-    F = F[keep]
+        return V, F, None
+    kept = np.flatnonzero(keep)
+    F = F[kept]
     if len(F) == 0:
-        return V[:0], F
+        return V[:0], F, kept
     used, inverse = np.unique(F, return_inverse=True)
-    return V[used], inverse.reshape(-1, 3).astype(np.int64)
+    return V[used], inverse.reshape(-1, 3).astype(np.int64), kept
 
 
 class _Prepared:
@@ -255,6 +257,7 @@ def _emit(
     out = []
     for k, (part, closed) in enumerate(zip(geom.parts, geom.part_closed, strict=True)):
         is_stuff = prep.stuff[k]
+        faces_of = None  # which of the part's triangles are kept (None: all, in order)
         if k in slot:
             j = slot[k]
             V, F = V_all[prep.starts[j] : prep.starts[j + 1]], part.faces
@@ -263,7 +266,7 @@ def _emit(
                     continue  # nothing of the part reaches the region
                 if not prep.whole[k]:
                     # a surface: drop the triangles lying wholly outside the region
-                    V, F = _cull(V, F, *region)
+                    V, F, faces_of = _cull(V, F, *region)
                 # a thing or filled stuff part reaching the region is kept whole
         elif k in prep.big:
             if region is None:
@@ -282,7 +285,8 @@ def _emit(
                 cand = np.flatnonzero(keep)
                 F = part.faces[cand]
                 used, inverse = np.unique(F, return_inverse=True)
-                V, F = _cull(transform_points(T, part.vertices[used]), inverse.reshape(-1, 3).astype(np.int64), *region)
+                V, F, kept = _cull(transform_points(T, part.vertices[used]), inverse.reshape(-1, 3).astype(np.int64), *region)
+                faces_of = cand if kept is None else cand[kept]
         else:
             continue  # a part without triangles
         if len(F) == 0:
@@ -293,6 +297,8 @@ def _emit(
             closed=bool(closed) and prep.whole[k], name=f"{name}/{part.name}",
             transparent=bool(part.transparent), asset_id=geom.asset_id, part=part.name,
             color=tuple(int(c) for c in part.color[:3]),
+            corner_uv=None if part.image is None else (part.corner_uv if faces_of is None else part.corner_uv[faces_of]),
+            image=part.image,
         ))  # fmt: skip
     return out
 
@@ -388,6 +394,11 @@ class PanopticMesh:
     instance: np.ndarray  # (M,) uint32, 0 for stuff
     transparent: np.ndarray  # (M,) bool
     color: np.ndarray | None = None  # (M, 3) uint8 base colour per triangle (None: grey)
+    # textures (None: no triangle has one): per triangle its image's index in ``images`` (-1:
+    # none) and its corners' texture coordinates (M, 3, 2) float32 (zeros where untextured)
+    texture: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    images: tuple[np.ndarray, ...] = ()
 
     def __post_init__(self) -> None:
         V = np.ascontiguousarray(self.vertices, dtype=np.float64).reshape(-1, 3)
@@ -405,6 +416,17 @@ class PanopticMesh:
                 raise ValueError(f"{name} has {len(a)} entries for {m} faces")
         if m and (F.min() < 0 or F.max() >= len(V)):
             raise ValueError(f"face index outside [0, {len(V)})")
+        if (self.texture is None) != (self.uv is None):
+            raise ValueError("textures need both the per-triangle image index and the coordinates")
+        if self.texture is not None:
+            tex = np.ascontiguousarray(self.texture, dtype=np.int32).reshape(-1)
+            uv = np.ascontiguousarray(self.uv, dtype=np.float32)
+            if len(tex) != m or uv.shape != (m, 3, 2):
+                raise ValueError(f"texture index {tex.shape} / coordinates {uv.shape} for {m} faces")
+            if m and (tex.min() < -1 or tex.max() >= len(self.images)):
+                raise ValueError(f"texture index outside [-1, {len(self.images)})")
+            object.__setattr__(self, "texture", tex)
+            object.__setattr__(self, "uv", uv)
         object.__setattr__(self, "vertices", V)
         object.__setattr__(self, "faces", F)
         for name, a in arrays.items():
@@ -420,6 +442,8 @@ def flatten(scene: Sequence[SceneMesh]) -> PanopticMesh:
     """Concatenate scene meshes into one mesh, in scene order, with each mesh's semantic id,
     instance id, transparent flag and base colour repeated on its triangles."""
     verts, faces, sem, inst, transp, color = [], [], [], [], [], []
+    textured = any(m.image is not None for m in scene)
+    tex, uvs, images, image_slot = [], [], [], {}  # one slot per image object (placements share it)
     offset = 0
     for pos, m in enumerate(scene):
         if not 0 <= int(m.semantic_id) <= 255:
@@ -433,12 +457,23 @@ def flatten(scene: Sequence[SceneMesh]) -> PanopticMesh:
         inst.append(np.full(n, m.instance_id, dtype=np.uint32))
         transp.append(np.full(n, bool(m.transparent)))
         color.append(np.tile(np.asarray(m.color[:3], np.uint8), (n, 1)))
+        if textured:
+            if m.image is None:
+                tex.append(np.full(n, -1, np.int32))
+                uvs.append(np.zeros((n, 3, 2), np.float32))
+            else:
+                slot = image_slot.setdefault(id(m.image), len(images))
+                if slot == len(images):
+                    images.append(m.image)
+                tex.append(np.full(n, slot, np.int32))
+                uvs.append(np.asarray(m.corner_uv, np.float32).reshape(n, 3, 2))
         offset += len(m.vertices)
     if not faces:
         return PanopticMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.uint8),
                             np.zeros(0, np.uint32), np.zeros(0, bool))  # fmt: skip
+    textures = {"texture": np.concatenate(tex), "uv": np.concatenate(uvs), "images": tuple(images)} if textured else {}
     return PanopticMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(sem),
-                        np.concatenate(inst), np.concatenate(transp), np.concatenate(color))  # fmt: skip
+                        np.concatenate(inst), np.concatenate(transp), np.concatenate(color), **textures)  # fmt: skip
 
 
 def town_mesh(placements: Sequence[PlacementRecord], geometry: Mapping[str, AssetGeometry],

@@ -357,7 +357,8 @@ class PedestrianRig:
         for k, p in enumerate(self.geometry.parts):
             v = V[self.part_offsets[k] : self.part_offsets[k + 1]].copy()
             v.flags.writeable = False
-            parts.append(MeshPart(p.name, v, p.faces, p.semantic_id, p.material, p.transparent, p.color))
+            parts.append(MeshPart(p.name, v, p.faces, p.semantic_id, p.material, p.transparent, p.color,
+                                  corner_uv=p.corner_uv, image=p.image))
         out = AssetGeometry(self.geometry.asset_id, tuple(parts), self.geometry.part_closed)
         self._cache[d] = out
         return out

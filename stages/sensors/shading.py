@@ -11,7 +11,9 @@ The model, per pixel:
    elevation;
 2. its base colour: the part's material colour (ADMesh ``parts.color``); parts that carry only
    the default grey (town ground meshes, sources without materials) take their class's
-   :data:`CLASS_BASE` colour (asphalt, paving, grass, paint...);
+   :data:`CLASS_BASE` colour (asphalt, paving, grass, paint...); a textured part's colour is its
+   texture at the hit (barycentric coordinates of the hit in its triangle interpolate the
+   corners' texture coordinates; the nearest texel, repeating) times its material colour;
 3. shading ``ambient + (1 - ambient) * max(0, n . sun) * lit``, with ``n`` the triangle's normal
    turned towards the camera and ``lit`` whether a ray from the point towards the sun escapes the
    scene (glass does not cast shadows);
@@ -29,8 +31,8 @@ import numpy as np
 
 from carlaocc.schemas import taxonomy
 
-__all__ = ["CLASS_BASE", "DEFAULT_GREY", "GLASS", "GLASS_OPACITY", "SKY_HORIZON", "SKY_ZENITH", "base_colours",
-           "face_normals", "render_rgb", "shade", "sun_direction"]
+__all__ = ["CLASS_BASE", "DEFAULT_GREY", "GLASS", "GLASS_OPACITY", "SKY_HORIZON", "SKY_ZENITH", "barycentric",
+           "base_colours", "face_normals", "render_rgb", "sample_texture", "shade", "sun_direction"]
 
 SKY_HORIZON = np.array([206.0, 222.0, 236.0])
 SKY_ZENITH = np.array([92.0, 142.0, 207.0])
@@ -87,6 +89,54 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return (n / norm[:, None]).astype(np.float32)
 
 
+def barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(N, 3) barycentric weights of points ``p`` (N, 3) in triangles ``tri`` (N, 3, 3), same
+    frame; points off a triangle's plane are projected onto it, weights clipped to the triangle
+    (a hit on an edge may land a rounding error outside) and summing to 1."""
+    tri = np.asarray(tri, dtype=np.float64)
+    a = tri[:, 0]
+    e1, e2, q = tri[:, 1] - a, tri[:, 2] - a, np.asarray(p, dtype=np.float64) - a
+    # the 2x2 normal equations of q = v * e1 + w * e2 (least squares: the plane's projection)
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    q1, q2 = (q * e1).sum(1), (q * e2).sum(1)
+    det = d11 * d22 - d12 * d12
+    det = np.where(det == 0.0, 1.0, det)  # degenerate triangles: the first corner
+    v = (d22 * q1 - d12 * q2) / det
+    w = (d11 * q2 - d12 * q1) / det
+    out = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, None)
+    s = out.sum(1, keepdims=True)
+    return np.where(s > 0, out / np.where(s > 0, s, 1.0), np.array([1.0, 0.0, 0.0]))
+
+
+def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, 3) float colours of ``image`` (H, W, 3) at texture coordinates ``uv`` (N, 2): u right,
+    v up from the bottom-left corner, repeating outside [0, 1]; the nearest texel."""
+    H, W = image.shape[:2]
+    u = np.mod(uv[:, 0], 1.0)
+    v = np.mod(uv[:, 1], 1.0)
+    x = np.minimum((u * W).astype(np.int64), W - 1)
+    y = np.minimum(((1.0 - v) * H).astype(np.int64), H - 1)  # row 0 is the image's top
+    return image[y, x].astype(np.float32)
+
+
+def textured_base(mesh, f: np.ndarray, points: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 base colours of hits at ``points`` (N, 3, the mesh's frame) on triangles
+    ``f``: ``base[f]``, times the texture at the hit where the triangle has one (``mesh`` a
+    :class:`~carlaocc.stages.scenes.assembly.PanopticMesh`)."""
+    out = base[f].astype(np.float32, copy=True)
+    if getattr(mesh, "texture", None) is None or not len(f):
+        return out
+    slot = mesh.texture[f]
+    for k in np.unique(slot[slot >= 0]):
+        sel = np.flatnonzero(slot == k)
+        ff = f[sel]
+        # where the hit lies in its triangle, and so in the texture
+        w = barycentric(mesh.vertices[mesh.faces[ff]], points[sel])
+        uv = np.einsum("nk,nkj->nj", w, mesh.uv[ff].astype(np.float64))
+        out[sel] *= sample_texture(mesh.images[k], uv) / np.float32(255.0)
+    return out
+
+
 def shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.ndarray, sun: np.ndarray,
           up: np.ndarray, ambient: float, normals: np.ndarray, base: np.ndarray | None = None,
           nthreads: int = 0) -> np.ndarray:
@@ -120,7 +170,11 @@ def shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.n
         _, blocker = scene.cast(p, np.broadcast_to(sun, p.shape), nthreads=nthreads)
         lit[facing] = (blocker < 0) | scene.transparent(blocker)
     light = np.float32(ambient) + np.float32(1.0 - ambient) * lambert * lit
-    out[hit] = base[f] * light[:, None]
+    if getattr(scene.mesh, "texture", None) is None:
+        colour = base[f]
+    else:  # the hits' points, where the texture is read
+        colour = textured_base(scene.mesh, f, origin + t[hit][:, None].astype(np.float64) * d, base)
+    out[hit] = colour * light[:, None]
     return out
 
 

@@ -220,3 +220,73 @@ def test_shapenet_model_in_its_own_frame_comes_out_upright_and_forward(tmp_path)
     assert extent[0] == pytest.approx(4.5, rel=0.15)  # a plausible car length
     assert extent[2] == pytest.approx(4.5 * 1.835 / 4.853, rel=0.05)  # upright: its height on Z
     assert "quarter" not in notes  # no correction needed: the declared frame was right
+
+
+def test_textures_come_through_ingest_and_colour_the_cameras(tmp_path):
+    """A Kenney house (glTF with an external colormap texture) and a milk truck (texture embedded
+    in the GLB): each asset's texture is stored beside its mesh, comes back with the geometry the
+    scenes use, and under flat light every camera pixel of the house is a colour of its texture."""
+    import shutil
+
+    from carlaocc.catalog.textures import TextureStore
+    from carlaocc.pipeline.tasks.frame import load_geometry
+    from carlaocc.schemas import taxonomy
+    from carlaocc.schemas.meshes import SceneMesh
+    from carlaocc.stages.scenes.assembly import flatten
+    from carlaocc.stages.sensors.raycast import RayScene, camera_ray_bundle, render_camera
+    from carlaocc.stages.sensors.shading import render_rgb
+
+    house = require(shared_path("meshes/kenney-suburban/building-type-a.glb"))
+    atlas = require(shared_path("meshes/kenney-suburban/Textures/colormap.png"))
+    truck = require(shared_path("meshes/cesium/CesiumMilkTruck.glb"))
+    src = tmp_path / "src"
+    (src / "houses" / "Textures").mkdir(parents=True)
+    (src / "trucks").mkdir()
+    shutil.copy(house, src / "houses" / house.name)
+    shutil.copy(atlas, src / "houses" / "Textures" / atlas.name)
+    shutil.copy(truck, src / "trucks" / truck.name)
+    cmap = tmp_path / "map.csv"
+    cmap.write_text("glob,category,subclass\nhouses/*.glb,Building,house\ntrucks/*.glb,Truck,box_truck\n")
+    root = Store(str(tmp_path / "data"))
+    r = _ingest(src, cmap, root.url)
+    assert r.exit_code == 0, r.output
+    _, rows = query(root, "SELECT asset_id, category, texture_path FROM assets ORDER BY category")
+    assert [c for _, c, _ in rows] == ["Building", "Truck"] and all(t for _, _, t in rows), rows
+    for aid, _, rel in rows:
+        assert rel == f"admesh/textures/{aid}.npz" and root.exists(rel)
+    house_id, truck_id = rows[0][0], rows[1][0]
+    # the truck's texture was embedded in its GLB; its two untextured parts keep their colours
+    truck_tex = TextureStore(root).load(rows[1][2])
+    _, parts = query(root, f"SELECT part_index, color FROM parts WHERE asset_id = '{truck_id}' ORDER BY 1")
+    untextured = [k for k, _ in parts if k not in truck_tex]
+    assert truck_tex and untextured and all(list(c) != [200, 200, 200, 255] for k, c in parts if k in untextured)
+
+    geometry = load_geometry(root, {house_id}, [])
+    (part,) = geometry[house_id].parts
+    atlas_rgb = np.asarray(__import__("PIL.Image", fromlist=["Image"]).open(atlas).convert("RGBA").convert("RGB"))
+    assert part.image is not None and np.array_equal(part.image, atlas_rgb)
+    assert part.corner_uv.shape == (len(part.faces), 3, 2)
+
+    # the house 14 m ahead of the front camera, under flat light (ambient 1: colour = texel)
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.sensors import camera_poses
+
+    V = part.vertices + [14.0, 0.0, -1.7]
+    rs = RayScene(flatten([SceneMesh(V, part.faces, taxonomy.by_name("Building").id, 0, True, True,
+                                     color=part.color[:3], corner_uv=part.corner_uv, image=part.image)]))
+    rig = RigConfig()
+    spec = next(c for c in rig.cameras if c.name == "camera_00")
+    pose = camera_poses(rig)[spec.name]
+    clean, _ = render_camera(rs, spec, pose, raw=False)
+    origin, dirs = camera_ray_bundle(spec, pose)
+    rgb = render_rgb(rs, origin, dirs, clean, None, np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0]), 1.0)
+    seen = rgb[clean.face >= 0].reshape(-1, 3)
+    assert len(seen) > 1000
+    palette = {tuple(c) for c in atlas_rgb.reshape(-1, 3)}
+    colours = {tuple(int(v) for v in c) for c in np.unique(seen, axis=0)}
+    assert colours <= palette and len(colours) >= 4, (len(colours), colours - palette)
+
+    # the item removed: its mesh and texture leave the library
+    (src / "houses" / house.name).unlink()
+    assert _ingest(src, cmap, root.url).exit_code == 0
+    assert sorted(root.glob("admesh/textures", ".npz")) == [rows[1][2]]

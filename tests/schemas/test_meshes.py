@@ -24,17 +24,20 @@ def _fields(cls) -> list[tuple[str, object]]:
 def test_fields_order_and_defaults():
     M = dataclasses.MISSING
     assert _fields(SourcePart) == [("name", M), ("vertices", M), ("faces", M), ("material", "default"),
-                                   ("transparent", False), ("texture", ""), ("semantic_id", None)]
+                                   ("transparent", False), ("texture", ""), ("semantic_id", None), ("color", None),
+                                   ("corner_uv", None), ("image", None)]
     assert _fields(SourceAsset) == [
         ("source", M), ("source_path", M), ("licence", M), ("category", M), ("subclass", M), ("parts", M),
         ("up", "+z"), ("forward", "+x"), ("units", "unknown"), ("normalized", False), ("target_length", None),
         ("licence_required", False), ("notes", ()),
     ]  # fmt: skip
     assert _fields(MeshPart) == [("name", M), ("vertices", M), ("faces", M), ("semantic_id", M),
-                                 ("material", "default"), ("transparent", False), ("color", (200, 200, 200, 255))]
+                                 ("material", "default"), ("transparent", False), ("color", (200, 200, 200, 255)),
+                                 ("corner_uv", None), ("image", None)]
     assert _fields(AssetGeometry) == [("asset_id", M), ("parts", M), ("part_closed", M)]
     assert [f for f, _ in _fields(SceneMesh)] == ["vertices", "faces", "semantic_id", "instance_id", "is_stuff",
-                                                  "closed", "name", "transparent", "asset_id", "part", "color"]
+                                                  "closed", "name", "transparent", "asset_id", "part", "color",
+                                                  "corner_uv", "image"]
 
 
 def test_frozen_and_arrays_coerced():

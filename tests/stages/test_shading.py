@@ -111,3 +111,81 @@ def test_same_scene_same_bytes_and_sun_in_the_scene_frame():
     R = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # world -> scene, a quarter turn
     assert np.allclose(sun_direction(90.0, 0.0, R), [1.0, 0.0, 0.0])
     assert np.allclose(sun_direction(0.0, 90.0, np.eye(3)), [0.0, 0.0, 1.0])
+
+
+# --------------------------------------------------------------------------------------------
+# textures
+# --------------------------------------------------------------------------------------------
+
+QUADRANTS = np.array([[[220, 30, 30], [30, 200, 40]],      # top row of the image: red, green
+                      [[30, 60, 220], [230, 210, 40]]], np.uint8)  # bottom row: blue, yellow  # fmt: skip
+
+
+def textured_wall(x=10.0, y=3.0, z0=-1.0, z1=3.0):
+    """A wall facing the camera (-x), u from left (+y) to right (-y), v from bottom to top, with
+    the 2x2 :data:`QUADRANTS` texture: its top-left texel should appear top-left in the image."""
+    V = np.array([[x, y, z0], [x, -y, z0], [x, -y, z1], [x, y, z1]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)[F]
+    return SceneMesh(V, F, BUILDING, 0, True, False, name="wall", color=(255, 255, 255), corner_uv=uv,
+                     image=QUADRANTS)
+
+
+def test_textures_appear_the_right_way_round_and_up():
+    rs = RayScene(flatten([SceneMesh(*ground(), ROAD, 0, True, False, name="road"), textured_wall(x=25.0)]))
+    rgb, clean = _render(rs, sun=(-1.0, 0.0, 0.3))
+    wall = clean.semantic == BUILDING
+    rows, cols = np.nonzero(wall)
+    # the whole wall in view (a plane facing the camera maps its middle to the image's middle)
+    assert rows.min() > 0 and cols.min() > 0 and rows.max() < wall.shape[0] - 1 and cols.max() < wall.shape[1] - 1
+    rm, cm = (rows.min() + rows.max()) / 2, (cols.min() + cols.max()) / 2
+    for (top, left), texel in (((True, True), QUADRANTS[0, 0]), ((True, False), QUADRANTS[0, 1]),
+                               ((False, True), QUADRANTS[1, 0]), ((False, False), QUADRANTS[1, 1])):
+        # (the pixels within 2 of a midline may see either texel)
+        r = np.arange(wall.shape[0])[:, None] - rm
+        c = np.arange(wall.shape[1])[None, :] - cm
+        sel = wall & ((r < -2) if top else (r > 2)) & ((c < -2) if left else (c > 2))
+        seen = rgb[sel].astype(float)
+        assert len(seen) > 50
+        # lit evenly (one plane): the texel's colour times one light factor, up to rounding
+        want = texel / texel.sum()
+        got = seen / seen.sum(axis=1, keepdims=True)
+        assert np.abs(got - want).max() < 0.02, (top, left, got.mean(axis=0), want)
+
+
+def test_texture_times_material_colour_and_untextured_meshes_unchanged():
+    plain = [SceneMesh(*ground(), ROAD, 0, True, False, name="road"),
+             SceneMesh(*box([8, -1, -1.73], [12, 1, -0.23]), CAR, 7, False, True, name="car", color=(200, 30, 30))]
+    a, _ = _render(RayScene(flatten(plain)), sun=(0.3, -0.2, 1.0))
+    # a textured mesh off camera: nothing else changes
+    far = textured_wall(x=-50.0)
+    b, _ = _render(RayScene(flatten(plain + [far])), sun=(0.3, -0.2, 1.0))
+    assert np.array_equal(a, b)
+    # the material colour multiplies the texture (a half-grey factor halves it)
+    white = textured_wall()
+    half = SceneMesh(white.vertices, white.faces, BUILDING, 0, True, False, name="wall", color=(128, 128, 128),
+                     corner_uv=white.corner_uv, image=white.image)
+    c, clean = _render(RayScene(flatten([white])), sun=(-1.0, 0.0, 0.3))
+    d, _ = _render(RayScene(flatten([half])), sun=(-1.0, 0.0, 0.3))
+    wall = clean.semantic == BUILDING
+    ratio = d[wall].astype(float).sum() / c[wall].astype(float).sum()
+    assert ratio == pytest.approx(128 / 255, abs=0.01)
+
+
+def test_barycentric_recovers_the_weights_and_sampling_repeats():
+    from carlaocc.stages.sensors.shading import barycentric, sample_texture
+
+    rng = np.random.default_rng(3)
+    tri = rng.normal(size=(200, 3, 3)) * 5.0
+    w = rng.dirichlet([1.0, 1.0, 1.0], size=200)
+    p = np.einsum("nk,nkj->nj", w, tri)
+    np.testing.assert_allclose(barycentric(tri, p), w, atol=1e-6)
+    # outside the triangle: clipped onto it, weights still sum to 1
+    out = barycentric(tri, p + np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))  # off the plane
+    np.testing.assert_allclose(out.sum(axis=1), 1.0)
+    np.testing.assert_allclose(out, w, atol=1e-6)  # the plane's projection is the same point
+    # u right, v up; u 1.25 repeats to 0.25
+    uv = np.array([[0.25, 0.75], [0.75, 0.75], [0.25, 0.25], [0.75, 0.25], [1.25, -0.25]])
+    got = sample_texture(QUADRANTS, uv)
+    np.testing.assert_array_equal(got[:4], QUADRANTS.reshape(4, 3))
+    np.testing.assert_array_equal(got[4], QUADRANTS[0, 0])  # v -0.25 repeats to 0.75: the top row

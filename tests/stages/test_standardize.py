@@ -164,7 +164,9 @@ def test_kenney_house_yup_game_units_scaled_to_a_plausible_house():
     assert 4.0 <= s.asset.extent[2] <= 15.0 and max(s.asset.extent[:2]) < 20.0
     assert s.asset.category == "Building" and s.asset.category_id == taxonomy.by_name("Building").id
     assert s.parts[0].texture == "Textures/colormap.png"  # kept by reference
-    assert s.geometry.parts[0].color[:3] == taxonomy.by_name("Building").color
+    # this reader passes no material colour or texture: the part is uncoloured (cameras shade it
+    # in its class's base colour)
+    assert s.geometry.parts[0].color[:3] == (200, 200, 200) and s.geometry.parts[0].image is None
     assert s.asset.mesh_path == "" and s.asset.aliases == []
     assert s.asset.face_count <= 1174 and s.asset.vertex_count <= 1870
 
@@ -382,7 +384,8 @@ def test_part_classes_materials_and_unknown_subclass():
                              units="unknown", target_length=4.0)))
     car, rid = taxonomy.by_name("Car"), taxonomy.by_name("Rider")
     assert [p.semantic_id for p in s.parts] == [car.id, car.id, rid.id]
-    assert [p.color[:3] for p in s.geometry.parts] == [car.color, car.color, rid.color]
+    # no material colours given: uncoloured (the cameras shade them in their class's colour)
+    assert [p.color for p in s.geometry.parts] == [(200, 200, 200, 255), (200, 200, 200, 110), (200, 200, 200, 255)]
     assert s.parts[1].transparent and s.parts[1].material == "glass" and s.parts[1].texture == "t/glass.png"
     assert s.asset.transparent_part_count == 1
     assert s.asset.subclass == "rocket_car"  # kept ...
@@ -547,3 +550,30 @@ def test_source_notes_come_first_in_the_record_notes():
     assert s.notes[0] == src_notes[0] and s.asset.notes.startswith(src_notes[0])
     plain = _ok(standardize(_raw([(box.vertices, box.faces)], category="Car", subclass="sedan")))
     assert plain.asset.notes == "" and s.asset.asset_id == plain.asset.asset_id  # notes are not identity
+
+
+def test_material_colour_and_texture_follow_cleaning_and_winding_repair():
+    v, f = _cube()
+    # a duplicate face and a degenerate one that cleaning drops; one face wound the wrong way
+    bad = np.vstack([f[:3], f[:1], [[0, 0, 1]], f[3:]])
+    bad[5] = bad[5][::-1]
+    m = len(bad)
+    # each input face's corners carry (face index, corner index): where they end up says it all
+    corner = np.stack([np.stack([np.full(3, k, np.float32), np.arange(3, dtype=np.float32)], 1)
+                       for k in range(m)])
+    image = np.zeros((4, 4, 3), np.uint8)
+    painted = SourcePart("body", v, bad, color=(10, 20, 30, 255))
+    textured = SourcePart("decal", v + [0, 0, 1.0], bad, corner_uv=corner, image=image)
+    s = _ok(standardize(_raw([painted, textured], category="Car", units="unknown", target_length=4.0)))
+    body, decal = s.geometry.parts
+    assert body.color == (10, 20, 30, 255) and body.image is None  # the material's colour
+    assert decal.color == (255, 255, 255, 255)  # a texture without a colour factor: the texture is the colour
+    assert decal.image is image or np.array_equal(decal.image, image)
+    assert decal.corner_uv.shape == (len(decal.faces), 3, 2) == (12, 3, 2)
+    kept = decal.corner_uv[:, 0, 0].astype(int)
+    assert 3 not in kept and 4 not in kept  # the duplicate and the degenerate face are gone
+    assert sorted(kept) == [k for k in range(m) if k not in (3, 4)]
+    # the repaired face's corners reversed with it: corner order (2, 1, 0)
+    fixed = np.flatnonzero(kept == 5)[0]
+    assert list(decal.corner_uv[fixed, :, 1]) == [2.0, 1.0, 0.0]
+    assert all(list(decal.corner_uv[j, :, 1]) == [0.0, 1.0, 2.0] for j in range(12) if j != fixed)

@@ -138,3 +138,43 @@ def test_malformed_json_is_listed_then_reported(export):
 def test_not_an_export(tmp_path):
     with pytest.raises(SourceError):
         CarlaAdapter().list_items(str(tmp_path))
+
+
+def test_textures_and_material_colours_come_with_their_corners(export):
+    """An OBJ with ``vt`` corners and an MTL ``map_Kd``: each triangle corner keeps the texture
+    coordinates of its own vertex through the frame change (which re-winds every triangle)."""
+    from PIL import Image
+
+    import trimesh
+
+    mesh = trimesh.creation.box(extents=(450.0, 180.0, 120.0))
+    v, f = np.asarray(mesh.vertices) + (0, 0, 90), np.asarray(mesh.faces)
+    u = (v[:, 0] + 225.0) / 450.0  # along the car, in Unreal's x
+    w = (v[:, 2] - 30.0) / 120.0  # up
+    lines = ["mtllib body.mtl", "usemtl paint"]
+    lines += [f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v]
+    lines += [f"vt {a:.6f} {b:.6f}" for a, b in zip(u, w)]
+    lines += [f"f {i + 1}/{i + 1} {j + 1}/{j + 1} {k + 1}/{k + 1}" for i, j, k in f]
+    (open(f"{export}/meshes/body.obj", "w")).write("\n".join(lines) + "\n")
+    open(f"{export}/meshes/body.mtl", "w").write("newmtl paint\nKd 1 1 1\nmap_Kd tex/paint.png\n")
+    import os
+
+    os.makedirs(f"{export}/meshes/tex")
+    Image.fromarray(np.array([[[200, 0, 0], [0, 0, 200]]], np.uint8)).save(f"{export}/meshes/tex/paint.png")
+    a = CarlaAdapter()
+    car = a.read(export, next(it for it in a.list_items(export) if it.key == "car"))
+    body = next(p for p in car.parts if p.name == "body")
+    assert body.texture == "tex/paint.png" and body.color == (255, 255, 255, 255)
+    assert body.image.shape == (1, 2, 3) and body.corner_uv.shape == (len(body.faces), 3, 2)
+    corners = body.vertices[body.faces]  # ours: metres, y mirrored; x and z as Unreal's / 100
+    np.testing.assert_allclose(body.corner_uv[..., 0], (corners[..., 0] * 100 + 225.0) / 450.0, atol=1e-5)
+    np.testing.assert_allclose(body.corner_uv[..., 1], (corners[..., 2] * 100 - 30.0) / 120.0, atol=1e-5)
+    assert signed_volume(body.vertices, body.faces) > 0  # still outward
+    # the windshield's MTL colour (Kd 0.6 0.7 0.8), no texture
+    shield = next(p for p in car.parts if p.name == "windshield")
+    assert shield.color == (153, 178, 204, 255) and shield.image is None
+    # a texture file that is missing: kept by reference, no image, no coordinates
+    os.remove(f"{export}/meshes/tex/paint.png")
+    body = next(p for p in a.read(export, next(it for it in a.list_items(export) if it.key == "car")).parts
+                if p.name == "body")
+    assert body.texture == "tex/paint.png" and body.image is None and body.corner_uv is None

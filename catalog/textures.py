@@ -1,0 +1,81 @@
+"""The textures of an ADMesh asset's parts: one ``.npz`` per textured asset, beside its GLB.
+
+Per textured part ``k`` (its index in the asset's part order) two members: ``uv_<k>``, the
+texture coordinates of every triangle corner, (M, 3, 2) float32 (u right, v up from the image's
+bottom-left corner, repeating outside [0, 1]), and ``image_<k>``, the base colour texture,
+(H, W, 3) uint8 RGB. Written deterministically (fixed zip timestamps), so the same textures give
+the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import typing
+
+import numpy as np
+
+from carlaocc.catalog.formats.carlaocc_npz import npz_bytes
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas.meshes import MeshPart
+
+__all__ = ["TextureStore", "has_texture", "texture_arrays", "textures_from_npz"]
+
+Texture = tuple[np.ndarray, np.ndarray]  # (corner uv (M, 3, 2) float32, image (H, W, 3) uint8)
+
+
+def has_texture(parts: typing.Sequence[MeshPart]) -> bool:
+    """Whether any of ``parts`` carries a texture."""
+    return any(p.image is not None for p in parts)
+
+
+def texture_arrays(parts: typing.Sequence[MeshPart]) -> dict[str, np.ndarray]:
+    """The npz members of the textured ``parts`` (see the module doc)."""
+    out: dict[str, np.ndarray] = {}
+    for k, p in enumerate(parts):
+        if p.image is not None:
+            out[f"uv_{k}"] = np.asarray(p.corner_uv, dtype=np.float32)
+            out[f"image_{k}"] = np.asarray(p.image, dtype=np.uint8)
+    return out
+
+
+def textures_from_npz(data: bytes, where: str = "textures") -> dict[int, Texture]:
+    """``part index -> (corner uv, image)`` of a texture file's bytes (``where`` names it in errors)."""
+    out: dict[int, Texture] = {}
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        names = set(z.files)
+        for name in sorted(names):
+            if not name.startswith("uv_"):
+                continue
+            k = name[3:]
+            if f"image_{k}" not in names or not k.isdigit():
+                raise StoreError(f"{where}: member {name} has no image_{k}")
+            uv, image = z[name], z[f"image_{k}"]
+            if uv.ndim != 3 or uv.shape[1:] != (3, 2) or image.ndim != 3 or image.shape[2] != 3:
+                raise StoreError(f"{where}: part {k} has coordinates {uv.shape} and image {image.shape}, "
+                                 "expected (M, 3, 2) and (H, W, 3)")
+            out[int(k)] = (uv.astype(np.float32), image.astype(np.uint8))
+    return out
+
+
+class TextureStore:
+    """Asset textures in a store, addressed by store-relative path."""
+
+    def __init__(self, store: Store):
+        self.store = store
+
+    def save(self, rel: str, parts: typing.Sequence[MeshPart]) -> str:
+        arrays = texture_arrays(parts)
+        if not arrays:
+            raise ValueError(f"{rel}: none of the parts has a texture")
+        return self.store.write_bytes(rel, npz_bytes(arrays, level=6))
+
+    def exists(self, rel: str) -> bool:
+        return self.store.exists(rel)
+
+    def load(self, rel: str) -> dict[int, Texture]:
+        try:
+            return textures_from_npz(self.store.read_bytes(rel), f"{self.store.url}/{rel}")
+        except StoreError:
+            raise
+        except Exception as exc:
+            raise StoreError(f"cannot read textures {rel} in {self.store.url}: {exc}") from None
