@@ -3,8 +3,9 @@
 Per textured part ``k`` (its index in the asset's part order) two members: ``uv_<k>``, the
 texture coordinates of every triangle corner, (M, 3, 2) float32 (u right, v up from the image's
 bottom-left corner, repeating outside [0, 1]), and ``image_<k>``, the base colour texture,
-(H, W, 3) uint8 RGB. Written deterministically (fixed zip timestamps), so the same textures give
-the same bytes.
+(H, W, 3) uint8 RGB -- or, when part ``j`` before it has the same image, ``same_<k>`` = ``j``
+(an atlas shared by the parts is stored once, and loaded as one array). Written
+deterministically (fixed zip timestamps), so the same textures give the same bytes.
 """
 
 from __future__ import annotations
@@ -31,29 +32,46 @@ def has_texture(parts: typing.Sequence[MeshPart]) -> bool:
 def texture_arrays(parts: typing.Sequence[MeshPart]) -> dict[str, np.ndarray]:
     """The npz members of the textured ``parts`` (see the module doc)."""
     out: dict[str, np.ndarray] = {}
+    stored: list[tuple[int, np.ndarray]] = []  # (part, image) written so far
     for k, p in enumerate(parts):
         if p.image is not None:
             out[f"uv_{k}"] = np.asarray(p.corner_uv, dtype=np.float32)
-            out[f"image_{k}"] = np.asarray(p.image, dtype=np.uint8)
+            image = np.asarray(p.image, dtype=np.uint8)
+            same = next((j for j, im in stored if im is image or (im.shape == image.shape and np.array_equal(im, image))),
+                        None)
+            if same is None:
+                out[f"image_{k}"] = image
+                stored.append((k, image))
+            else:
+                out[f"same_{k}"] = np.asarray(same, dtype=np.int64)
     return out
 
 
 def textures_from_npz(data: bytes, where: str = "textures") -> dict[int, Texture]:
     """``part index -> (corner uv, image)`` of a texture file's bytes (``where`` names it in errors)."""
     out: dict[int, Texture] = {}
+    images: dict[int, np.ndarray] = {}  # part -> its image array (shared by the parts that share it)
     with np.load(io.BytesIO(data), allow_pickle=False) as z:
         names = set(z.files)
         for name in sorted(names):
             if not name.startswith("uv_"):
                 continue
             k = name[3:]
-            if f"image_{k}" not in names or not k.isdigit():
+            if not k.isdigit() or (f"image_{k}" not in names and f"same_{k}" not in names):
                 raise StoreError(f"{where}: member {name} has no image_{k}")
-            uv, image = z[name], z[f"image_{k}"]
+            if f"image_{k}" in names:
+                image = z[f"image_{k}"]
+            else:
+                j = int(z[f"same_{k}"])
+                if f"image_{j}" not in names:
+                    raise StoreError(f"{where}: part {k} shares the image of part {j}, which has none")
+                image = images.setdefault(j, z[f"image_{j}"])
+            uv = z[name]
             if uv.ndim != 3 or uv.shape[1:] != (3, 2) or image.ndim != 3 or image.shape[2] != 3:
                 raise StoreError(f"{where}: part {k} has coordinates {uv.shape} and image {image.shape}, "
                                  "expected (M, 3, 2) and (H, W, 3)")
-            out[int(k)] = (uv.astype(np.float32), image.astype(np.uint8))
+            image = images.setdefault(int(k), image.astype(np.uint8, copy=False))
+            out[int(k)] = (uv.astype(np.float32), image)
     return out
 
 

@@ -445,28 +445,56 @@ def _check_compression(path: str, doc: dict) -> None:
                                     "(e.g. gltf-transform copy)")  # fmt: skip
 
 
-def sidecar_files(path: str) -> list[str]:
-    """Files besides ``path`` whose bytes define the mesh (for fingerprints): an OBJ's MTL
-    libraries, a .gltf's external buffers. Textures are kept by reference, not listed."""
+def texture_files(path: str) -> list[str]:
+    """Absolute paths of the existing texture files a mesh file references (an OBJ's MTL
+    ``map_Kd``; a glTF/GLB's external image URIs): their pixels are stored with the asset, so
+    they belong to the item's files (a changed or deleted texture re-ingests the item)."""
     ext = ext_of(path)
+    base = os.path.dirname(os.path.abspath(path))
+    refs: list[str] = []
     if ext == ".obj":
-        return [p for p in mtl_files(path) if p != path]
-    if ext == ".gltf":
+        try:
+            refs = [m.texture for m in obj_materials(path).values() if m.texture]
+        except OSError:
+            return []
+    elif ext in (".gltf", ".glb"):
+        try:
+            doc = _gltf_json(path)
+        except (SourceError, OSError, ValueError):
+            return []  # an unreadable file is reported by the reader, not here
+        for img in (doc.get("images", []) if isinstance(doc, dict) else []) or []:
+            uri = img.get("uri", "") if isinstance(img, dict) else ""
+            if isinstance(uri, str) and uri and not uri.startswith("data:"):
+                refs.append(unquote(uri))
+    out: list[str] = []
+    for ref in refs:
+        p = os.path.normpath(os.path.join(base, ref.replace("\\", "/")))
+        if os.path.isfile(p) and p not in out:
+            out.append(p)
+    return out
+
+
+def sidecar_files(path: str) -> list[str]:
+    """Files besides ``path`` whose bytes define the asset (for fingerprints): an OBJ's MTL
+    libraries, a .gltf's external buffers, and the textures either references."""
+    ext = ext_of(path)
+    out: list[str] = []
+    if ext == ".obj":
+        out = [p for p in mtl_files(path) if p != path]
+    elif ext == ".gltf":
         try:
             with open(path, encoding="utf-8") as f:
                 doc = json.load(f)
         except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            return []
+            doc = {}
         base = os.path.dirname(os.path.abspath(path))
-        out = []
         for b in (doc.get("buffers", []) if isinstance(doc, dict) else []) or []:
             uri = b.get("uri", "") if isinstance(b, dict) else ""
             if uri and not uri.startswith("data:"):
                 bp = os.path.normpath(os.path.join(base, unquote(uri)))
                 if os.path.isfile(bp) and bp not in out:
                     out.append(bp)
-        return out
-    return []
+    return out + [t for t in texture_files(path) if t not in out and t != path]
 
 
 def _gltf_materials(doc: dict, file_name: str) -> list[dict]:
@@ -590,6 +618,8 @@ def _load_trimesh(path: str, ext: str) -> list[SourcePart]:
         # so those parts are named after their (deterministic) geometry name instead
         label = str(node) if node_names is None or str(node) in node_names else str(gname)
         color, corner_uv, image = trimesh_appearance(geom, f, texture)
+        if ext == ".obj":  # trimesh invents a grey Kd where the MTL states none (or is missing): ours
+            color = mtl[name].color if name in mtl else None
         parts.append(make_part(_unique(label, taken), v, f, material=name, transparent=transparent,
                                texture=texture, color=color, corner_uv=corner_uv, image=image))  # fmt: skip
     return parts

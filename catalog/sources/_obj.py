@@ -62,6 +62,7 @@ class ObjData:
     groups: list[ObjGroup]  # in order of first appearance
     mtllibs: list[str]  # as written
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (T, 2) float64, the ``vt`` records
+    bad_uv_lines: list[int] = field(default_factory=list)  # faces whose texture index has no ``vt`` (untextured)
 
     def corner_uv(self, uv_index) -> np.ndarray | None:
         """(M, 3, 2) float32 texture coordinates of triangles with ``uv_index`` (M, 3) corners;
@@ -99,6 +100,7 @@ def parse_obj(text: str) -> ObjData:
     """Parse OBJ text. Raises :class:`ObjError` naming the line of a malformed record."""
     verts: list[tuple[float, float, float]] = []
     uvs: list[tuple[float, float]] = []
+    bad_uv: list[int] = []  # lines with a texture index out of range
     groups: dict[tuple[str, str, str], ObjGroup] = {}
     mtllibs: list[str] = []
     obj, grp, mat = "", "", ""
@@ -124,7 +126,8 @@ def parse_obj(text: str) -> ObjData:
                         t = int(fields[1])
                         t = t - 1 if t > 0 else nt + t
                         if not 0 <= t < nt:
-                            raise ObjError(f"line {no}: texture index {corner} out of range (1..{nt})")
+                            t = -1  # a texture index without its vt: the geometry stands, the part has no texture
+                            bad_uv.append(no)
                     tdx.append(t)
                 if len(idx) < 3:
                     raise ObjError(f"line {no}: a face needs 3 vertices, got {len(idx)}")
@@ -147,7 +150,8 @@ def parse_obj(text: str) -> ObjData:
                 raise
             raise ObjError(f"line {no}: malformed {tag!r} record") from None
     vertices = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    return ObjData(vertices, list(groups.values()), mtllibs, np.asarray(uvs, dtype=np.float64).reshape(-1, 2))
+    return ObjData(vertices, list(groups.values()), mtllibs, np.asarray(uvs, dtype=np.float64).reshape(-1, 2),
+                   bad_uv_lines=bad_uv)
 
 
 def read_obj(path: str) -> ObjData:

@@ -95,6 +95,7 @@ from carlaocc.catalog.sources._common import (
     obj_appearance,
     read_json_object,
     semantic_class,
+    texture_files,
 )
 from carlaocc.catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
 from carlaocc.catalog.sources.base import SourceError, SourceItem
@@ -225,7 +226,7 @@ class CarlaAdapter:
                 mesh = os.path.abspath(os.path.join(root, c["mesh"]))
                 if mesh not in files:
                     files.append(mesh)
-                    files += [m for m in mtl_files(mesh) if m not in files]
+                    files += [m for m in (*mtl_files(mesh), *texture_files(mesh)) if m not in files]
             items.append(SourceItem(key=os.path.splitext(name)[0], files=tuple(files), meta={}))
         items.sort(key=lambda it: it.key)
         return drop_excluded(items, exclude)

@@ -45,7 +45,8 @@ import json
 import os
 import re
 
-from carlaocc.catalog.sources._common import drop_excluded, load_parts, missing_file_notes, semantic_class
+from carlaocc.catalog.sources._common import (drop_excluded, load_parts, missing_file_notes, semantic_class,
+                                              texture_files)
 from carlaocc.catalog.sources._obj import mtl_files
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
@@ -216,7 +217,7 @@ class ShapeNetAdapter:
                 obj = os.path.join(sdir, model, MODEL_FILE)
                 if not os.path.isdir(os.path.join(sdir, model)):
                     continue
-                files = (obj, *mtl_files(obj)) if os.path.isfile(obj) else (obj,)
+                files = (obj, *mtl_files(obj), *texture_files(obj)) if os.path.isfile(obj) else (obj,)
                 items.append(SourceItem(key=f"{synset}/{model}", files=files,
                                         meta={"synset": synset, "model": model}))  # fmt: skip
         return drop_excluded(items, exclude)

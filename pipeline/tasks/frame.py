@@ -17,7 +17,7 @@ import numpy as np
 from carlaocc.catalog.meshes import load_glb_arrays
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.catalog.textures import TextureStore
+from carlaocc.catalog.textures import textures_from_npz
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, PartRecord, PlacementRecord, SequenceRecord
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.stages.geometry import is_watertight
@@ -66,11 +66,12 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
             recs = tuple(sorted(parts.get(aid, {}).values(), key=lambda r: r.part_index))
 
             tex_rel = assets[aid].texture_path
+            tex_bytes = store.read_bytes(tex_rel) if tex_rel else b""
 
-            def asset_geometry(arrays, aid=aid, recs=recs, tex_rel=tex_rel) -> AssetGeometry:
+            def asset_geometry(arrays, aid=aid, recs=recs, tex_rel=tex_rel, tex_bytes=tex_bytes) -> AssetGeometry:
                 if len(arrays) != len(recs):
                     raise StoreError(f"asset {aid}: mesh has {len(arrays)} parts, parts table {len(recs)}")
-                textures = TextureStore(store).load(tex_rel) if tex_rel else {}
+                textures = textures_from_npz(tex_bytes, f"{store.url}/{tex_rel}") if tex_rel else {}
                 parts = []
                 for k, (r, (v, f)) in enumerate(zip(recs, arrays)):
                     uv, image = textures.get(k, (None, None))
@@ -81,8 +82,8 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
                                           corner_uv=uv, image=image))
                 return AssetGeometry(asset_id=aid, parts=tuple(parts), part_closed=tuple(r.watertight for r in recs))
 
-            # the cache key: the parts' rows, hashable (their colour is a list), and the textures
-            key = (aid, tex_rel, tuple(r.model_dump_json() for r in recs))
+            # the cache key: the parts' rows, hashable (their colour is a list), and the textures' content
+            key = (aid, tex_rel, hashlib.sha256(tex_bytes).hexdigest(), tuple(r.model_dump_json() for r in recs))
             out[aid] = _mesh_geometry(store, assets[aid].mesh_path, key, asset_geometry)
         elif aid in stuff:
             pl = stuff[aid]

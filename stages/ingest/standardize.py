@@ -173,6 +173,21 @@ def _texture(part: SourcePart, face_index: np.ndarray | None, f_cleaned: np.ndar
     return np.ascontiguousarray(uv), np.ascontiguousarray(part.image, dtype=np.uint8)
 
 
+def _appearance_digest(parts: list[MeshPart]) -> str:
+    """``|`` and a digest of the parts' colours and textures, or "" when every part is uncoloured
+    and untextured (so assets without appearance keep the ids they always had)."""
+    plain = all(p.image is None and tuple(p.color[:3]) == UNCOLOURED for p in parts)
+    if plain:
+        return ""
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(bytes(int(c) for c in p.color))
+        if p.image is not None:
+            h.update(np.asarray(p.image.shape, np.int64).tobytes() + np.ascontiguousarray(p.image).tobytes())
+            h.update(np.ascontiguousarray(p.corner_uv, dtype=np.float32).tobytes())
+    return "|" + h.hexdigest()[:16]
+
+
 def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     """Standardize one source asset (frame, units, cleaning, validation; see the module doc).
     Returns the records and geometry, or a :class:`Rejection` for data that cannot be used."""
@@ -312,7 +327,10 @@ def standardize(raw: SourceAsset) -> StandardizedAsset | Rejection:
     # labels and surface properties are part of identity: two files are one asset only when
     # they agree on geometry, classes, materials and transparency
     ids = ",".join(f"{p.semantic_id}:{p.material}:{int(p.transparent)}" for p in mesh_parts)
-    aid = hashlib.sha256(f"{category}|{raw.subclass}|{ghash}|{ids}".encode()).hexdigest()[:16]
+    # ... and on appearance where the source gives one (colours, textures): two copies of a mesh
+    # painted or textured differently are two assets (the same bytes are always one)
+    look = _appearance_digest(mesh_parts)
+    aid = hashlib.sha256(f"{category}|{raw.subclass}|{ghash}|{ids}{look}".encode()).hexdigest()[:16]
     watertight = all(closed)
     geometry = AssetGeometry(asset_id=aid, parts=tuple(mesh_parts), part_closed=tuple(closed))
     # how the voxelizer fills it, and how much of its volume hole handling recovers

@@ -97,8 +97,8 @@ def barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     a = tri[:, 0]
     e1, e2, q = tri[:, 1] - a, tri[:, 2] - a, np.asarray(p, dtype=np.float64) - a
     # the 2x2 normal equations of q = v * e1 + w * e2 (least squares: the plane's projection)
-    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    q1, q2 = (q * e1).sum(1), (q * e2).sum(1)
+    d11, d12, d22 = (np.einsum("ij,ij->i", a_, b_) for a_, b_ in ((e1, e1), (e1, e2), (e2, e2)))
+    q1, q2 = np.einsum("ij,ij->i", q, e1), np.einsum("ij,ij->i", q, e2)
     det = d11 * d22 - d12 * d12
     det = np.where(det == 0.0, 1.0, det)  # degenerate triangles: the first corner
     v = (d22 * q1 - d12 * q2) / det

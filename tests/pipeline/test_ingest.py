@@ -286,6 +286,26 @@ def test_textures_come_through_ingest_and_colour_the_cameras(tmp_path):
     colours = {tuple(int(v) for v in c) for c in np.unique(seen, axis=0)}
     assert colours <= palette and len(colours) >= 4, (len(colours), colours - palette)
 
+    # the truck's three textured parts share one atlas: stored once, loaded as one array
+    import zipfile
+
+    members = zipfile.ZipFile(root.path(rows[1][2])).namelist()
+    assert sum(m.startswith("image_") for m in members) == 1 and sum(m.startswith("same_") for m in members) == 2
+    truck_parts = load_geometry(root, {truck_id}, [])[truck_id].parts
+    images = [p.image for p in truck_parts if p.image is not None]
+    assert len(images) == 3 and all(im is images[0] for im in images)
+
+    # a texture is part of the item: changed, the item is ingested again, as another asset (same
+    # geometry, another look); a copy of the house with the original atlas is a third asset
+    inverted = 255 - atlas_rgb
+    __import__("PIL.Image", fromlist=["Image"]).fromarray(inverted).save(src / "houses" / "Textures" / atlas.name)
+    r = _ingest(src, cmap, root.url)
+    assert "1 ingested now, 1 unchanged" in r.output, r.output
+    _, rows2 = query(root, "SELECT asset_id, texture_path FROM assets WHERE category = 'Building'")
+    (new_id, new_rel), = rows2
+    assert new_id != house_id and np.array_equal(TextureStore(root).load(new_rel)[0][1], inverted)
+    assert not root.exists(rows[0][2])  # the old texture left with its asset
+
     # the item removed: its mesh and texture leave the library
     (src / "houses" / house.name).unlink()
     assert _ingest(src, cmap, root.url).exit_code == 0

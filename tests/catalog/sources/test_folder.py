@@ -417,3 +417,13 @@ def test_excluded_directory_reached_through_a_link_is_still_excluded(tmp_path):
     link = tmp_path / "link"
     link.symlink_to(root)  # the source given through a link, the root by its real path
     assert [it.key for it in a.list_items(str(link), exclude=(str(root / "data"),))] == ["a.obj"]
+
+
+def test_obj_colours_are_the_mtl_kd_or_none():
+    """trimesh invents a grey diffuse for OBJ materials without Kd (or without an MTL): parts
+    carry the MTL's Kd, else no colour (the cameras then shade them in their class colour)."""
+    from carlaocc.catalog.sources._common import load_parts
+    from shared_data import require, shared_path
+
+    chair = require(shared_path("meshes/trimesh-models/chair_model.obj"))  # its MTL is missing
+    assert all(p.color is None for p in load_parts(str(chair)))

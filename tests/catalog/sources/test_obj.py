@@ -39,9 +39,13 @@ def test_a_corner_without_coordinates_means_no_texture_for_the_part():
     assert data.corner_uv(g.uv_index[:3]) is not None
 
 
-def test_a_texture_index_out_of_range_names_its_line():
-    with pytest.raises(ObjError, match="line 10: texture index 1/9 out of range"):
-        parse_obj(QUAD.replace("f 1/1 2/2", "f 1/9 2/2"))
+def test_a_texture_index_out_of_range_leaves_the_geometry_and_drops_the_texture():
+    data = parse_obj(QUAD.replace("f 1/1 2/2", "f 1/9 2/2"))
+    (g,) = data.groups
+    assert g.faces[0] == [0, 1, 2] and data.bad_uv_lines == [10]
+    assert data.corner_uv(g.uv_index) is None  # the part is untextured, not quarantined
+    with pytest.raises(ObjError, match="line 10: vertex index 9/1 out of range"):
+        parse_obj(QUAD.replace("f 1/1 2/2", "f 9/1 2/2"))
 
 
 def test_mtl_diffuse_colour():
