@@ -100,6 +100,21 @@ class OccupancyStore(FrameArrayStore):
             return None
         return GridSpec.model_validate(dict(arr.attrs)["grid_spec"])
 
+    def voxel_sizes(self, sequence_id: str) -> list[float]:
+        """The voxel sizes (m) a sequence has occupancy at, ascending (from the hierarchy's groups)."""
+        node = self._node(sequence_id)
+        if not isinstance(node, zarr.Group):
+            return []
+        out = []
+        for key in node.group_keys():
+            try:
+                size = float(key)
+            except ValueError:
+                continue
+            if self.stored_grid(sequence_id, size) is not None:
+                out.append(size)
+        return sorted(out)
+
     def attrs(self, sequence_id: str, grid: GridSpec, name: str = "semantic") -> dict:
         """The attributes of one array (grid spec, frame, taxonomy version, rig LiDAR pose...)."""
         return super().attrs(sequence_id, grid, name)

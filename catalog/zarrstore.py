@@ -360,6 +360,29 @@ class FrameArrayStore(ABC):
             out[xa:xa + bx, ya:ya + by] = block[:bx, :by]
         return out
 
+    def layout(self, sequence_id: str, group, name: str) -> tuple[tuple, tuple, np.dtype]:
+        """``(shape, chunks, dtype)`` of one array (ValueError naming it when it does not exist)."""
+        return self._layout(sequence_id, group, name)
+
+    def read_chunk(self, sequence_id: str, group, frame: int, name: str, ci: int, cj: int) -> np.ndarray | None:
+        """Chunk ``(ci, cj)`` (along the two axes after the frame) of one frame of one array, cut to
+        the array's bounds (edge chunks are padded on disk); None when it is not stored (all
+        zero). Reads that one object and nothing else. StoreError naming a damaged chunk."""
+        shape, chunks, dtype = self._layout(sequence_id, group, name)
+        where = self._where(self.array_path(sequence_id, group, name))
+        cx, cy = chunks[1], chunks[2]
+        if not 0 <= frame < shape[0] or not (0 <= ci * cx < shape[1] and 0 <= cj * cy < shape[2]):
+            raise ValueError(f"{where}: frame {frame} chunk ({ci}, {cj}) outside the array {shape}")
+        key = f"{where}/c/{frame}/{ci}/{cj}" + "/0" * (len(shape) - 3)
+        payload = get_object(self.store, key)
+        if payload is None:
+            return None
+        try:
+            block = decode_chunk(payload, dtype, chunks[1:])
+        except (RuntimeError, ValueError) as exc:
+            raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
+        return block[: min(cx, shape[1] - ci * cx), : min(cy, shape[2] - cj * cy)]
+
     def read_frame(self, sequence_id: str, group, frame: int, names: tuple[str, ...]) -> dict[str, np.ndarray]:
         """Whole frames of the named arrays (:meth:`read_tile` over the whole first axis)."""
         return {n: self.read_tile(sequence_id, group, frame, n, 0, self._layout(sequence_id, group, n)[0][1])

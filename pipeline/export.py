@@ -23,6 +23,9 @@ Layouts written under ``OUT``:
   encoding holds is refused (clear error) rather than wrapped.
 * ``carlaocc-release``: the official CarlaOcc release's folder layout
   (:mod:`carlaocc.pipeline.export_release`).
+* ``mmdet3d-infos``: per-sample info files (pickle and JSON) of the OpenMMLab occupancy
+  pipelines, with images, LiDAR sweeps and Occ3D ground truth as files
+  (:mod:`carlaocc.pipeline.export_infos`).
 
 Every export writes ``splits/{train,val,test}.txt`` beside its files: the dataset's splits
 (``<root>/splits/``) restricted to the exported sequences, one sequence id per line (the release
@@ -50,7 +53,7 @@ from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import SequenceRecord
 from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
 
-FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz", "carlaocc-release")
+FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz", "carlaocc-release", "mmdet3d-infos")
 
 SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
                                 SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
@@ -138,6 +141,11 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         from carlaocc.pipeline.export_release import export_release
 
         n_seq, n_frames, n_files = export_release(store, config, out, resolution, sequences, progress, encoding)
+        return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+    if fmt == "mmdet3d-infos":
+        from carlaocc.pipeline.export_infos import export_infos
+
+        n_seq, n_frames, n_files = export_infos(store, config, out, resolution, sequences, progress)
         return ExportSummary(fmt, n_seq, n_frames, n_files, out)
     from carlaocc.schemas.grid import resolution_key
 

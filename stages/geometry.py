@@ -101,6 +101,37 @@ def box_center(pose: np.ndarray, height: float) -> list[float]:
     return [float(v) for v in T[:3, 3] + T[:3, 2] * (height / 2)]
 
 
+def quaternion_wxyz(R: np.ndarray) -> list[float]:
+    """The unit quaternion ``[w, x, y, z]`` of a 3x3 rotation matrix (w >= 0; the nuScenes and
+    pyquaternion order), by Shepperd's method: the largest of the four squared components is
+    taken from the trace or a diagonal element, the others from off-diagonal sums (stable for
+    every rotation, 180 degree turns included)."""
+    R = np.asarray(R, dtype=np.float64)
+    m00, m11, m22 = R[0, 0], R[1, 1], R[2, 2]
+    # 4 * the squares of w, x, y, z
+    cand = np.array([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22])
+    k = int(np.argmax(cand))
+    s = 2.0 * np.sqrt(cand[k])  # 4 * the largest component
+    if k == 0:
+        q = [s / 4, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif k == 1:
+        q = [(R[2, 1] - R[1, 2]) / s, s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif k == 2:
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s]
+    else:
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4]
+    q = np.asarray(q) / np.linalg.norm(q)
+    return [float(v) for v in (q if q[0] >= 0 else -q)]
+
+
+def rotation_from_quaternion(q) -> np.ndarray:
+    """3x3 rotation matrix of a quaternion ``[w, x, y, z]`` (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def invert_pose(T: np.ndarray) -> np.ndarray:
     """Inverse of a rigid 4x4 transform (rotation transposed, translation rotated back)."""
     T = np.asarray(T, dtype=np.float64)

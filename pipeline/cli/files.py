@@ -58,7 +58,7 @@ def voxelize_files(
 
 @app.command("export")
 def export_cmd(
-    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz | carlaocc-release")],
+    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz | carlaocc-release | mmdet3d-infos")],
     out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
     res: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling; carlaocc-release: 0.1 by default, any size dividing 0.1)")] = None,
     root: RootOpt = "data",
@@ -73,7 +73,10 @@ def export_cmd(
     grid; labels semantic << 11 | instance as the release's code reads them, or --label-encoding
     decimal; ids renumbered per class where they would collide),
     carlaocc-release (the official release's layout: Town<NN>_Opt_Seq<NN>/occupancy/{vs_0_1,
-    vs_0_2_forward_view, vs_0_4_surround_view}, poses, calib, splits, camera maps, LiDAR).
+    vs_0_2_forward_view, vs_0_4_surround_view}, poses, calib, splits, camera maps, LiDAR),
+    mmdet3d-infos (carlaocc_infos_{train,val,test}.pkl/.json with the keys BEVDet / FlashOcc /
+    SparseOcc pipelines read, samples/<camera>/<token>.jpg, samples/LIDAR_TOP/<token>.bin,
+    gts/<scene>/<token>/labels.npz as Occ3D, grid.json; every path relative to --out).
     Every export writes the dataset's splits beside it (splits/{train,val,test}.txt)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 

@@ -22,25 +22,17 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 
 cli = CliRunner()
-FRAMES = 2
-# the embedded default with one of the six cameras (the export writes whichever were built)
-CONFIG = {"sensors": {"cameras": ["camera_00"]}}
+FRAMES = 2  # the built root's frames a sequence (tests/pipeline/conftest.py)
 
 
 @pytest.fixture(scope="module")
-def config_file(tmp_path_factory) -> str:
-    path = tmp_path_factory.mktemp("release_config") / "cfg.json"
-    path.write_text(json.dumps(CONFIG))
-    return str(path)
+def config_file(default_01_config) -> str:
+    return default_01_config
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory, config_file) -> Store:
-    root = tmp_path_factory.mktemp("release") / "data"
-    r = cli.invoke(app, ["run", "--res", "0.1", "--limit-frames", str(FRAMES), "--root", str(root), "--config",
-                         config_file, "--stages", "ingest,scenes,splits,voxelize,sensors", "--scheduler", "synchronous"])
-    assert r.exit_code == 0, r.output
-    return Store(str(root))
+def built(default_01) -> Store:
+    return default_01
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,409 @@
+"""Training data: a map-style dataset over a built carlaocc root, usable as a PyTorch ``Dataset``
+without importing torch.
+
+::
+
+    from carlaocc.data import CarlaOccDataset
+    ds = CarlaOccDataset("data", split="train", voxel_size=0.2)
+    sample = ds[0]            # a dict of numpy arrays (and a few str / int / float)
+    len(ds)                   # frames of the split's sequences voxelized at 0.2 m
+
+One sample is one frame of one sequence. Frames and units: everything geometric is in the
+frame's **LiDAR frame** (x forward, y left, z up, metres) unless its key says otherwise; poses
+are 4x4 float64 matrices ``A_to_B`` mapping points of A into B.
+
+=======================  ====================================================================
+key                      value
+=======================  ====================================================================
+``sequence_id``          str; ``frame_index`` int; ``timestamp`` float, s since the start
+``ego_pose``             (4, 4) ego-to-world; ``lidar_pose`` (4, 4) LiDAR-to-world;
+                         ``lidar_to_ego`` (4, 4)
+``voxel_size``           float, m; ``grid_origin`` (3,) float64, the grid's minimum corner (m,
+                         LiDAR frame); ``grid_shape`` (3,) int64 (x, y, z). Voxel ``(i, j, k)``
+                         has its centre at ``grid_origin + (ijk + 0.5) * voxel_size``
+``occ``                  ``occupancy="sparse"`` (the default): (N, 4) int32 rows ``i, j, k,
+                         semantic`` of the occupied voxels (C order); ``occ_instance`` (N,)
+                         uint32; ``occ_flow`` (N, 3) float32 (m/s, world motion in the LiDAR
+                         frame's axes); ``occ_mask_camera`` / ``occ_mask_lidar`` (N,) bool,
+                         whether each occupied voxel is observed
+``semantic``             ``occupancy="dense"`` or ``"crop"``: (X, Y, Z) uint8 (0 free);
+                         ``instance`` uint32; ``flow`` (X, Y, Z, 3) float32; ``mask_camera`` /
+                         ``mask_lidar`` bool; for a crop, ``crop_offset`` (3,) int64 is the
+                         crop's first voxel in the grid
+``images``               (C, H, W, 3) uint8 RGB of the rig's cameras (``camera_names``, list
+                         of str); ``cam_intrinsics`` (C, 3, 3) float64 (OpenCV: x right, y
+                         down, z forward); ``cam_to_lidar`` and ``cam_to_ego`` (C, 4, 4)
+``depth`` ...            the camera maps named in ``camera_maps`` ((C, H, W) each: ``depth``
+                         float32 m planar, ``semantic`` uint8, ``instance`` uint32, ``normal``)
+``points``               (P, 3) float32 LiDAR points; ``points_semantic`` (P,) uint8,
+                         ``points_instance`` (P,) uint32
+``boxes``                (M, 7) float32 ``x, y, z, length, width, height, yaw`` (centre, yaw
+                         about the LiDAR z from its x axis); ``box_pose`` (M, 4, 4) box-to-LiDAR
+                         (pitch and roll included); ``box_velocity`` (M, 3) float32 m/s (LiDAR
+                         axes); ``box_instance`` (M,) uint32 (the instance ids of ``occ`` and the
+                         camera maps); ``box_semantic`` (M,) uint8
+=======================  ====================================================================
+
+Reading: a sample reads only its own frame's chunks (every Zarr chunk holds one frame), the
+camera images, the frame's LiDAR file and, once per worker process and sequence, the
+sequence's frames and actors tables. Sparse occupancy is gathered chunk by chunk, so a 0.05 m
+frame (409 M voxels) never exists dense in memory; ``occupancy="dense"`` is refused above
+``dense_limit`` voxels with the advice to use sparse or a crop.
+
+Workers: the dataset holds the root's URL and an index of (sequence, frame) pairs; stores are
+opened lazily in each process, so a ``torch.utils.data.DataLoader`` with workers (fork or spawn)
+works on a directory or object-store root. A ``memory://`` root lives in one process: workers
+started by spawn see an empty one (use a directory). Batches of variable-size samples (points,
+boxes, sparse occupancy) need :func:`collate`, which stacks what has one shape and lists the rest.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["CarlaOccDataset", "DatasetError", "collate", "OCCUPANCY_MODES", "DENSE_LIMIT"]
+
+OCCUPANCY_MODES = ("sparse", "dense", "crop", "none")
+DENSE_LIMIT = 64 * 2**20
+"""Voxels above which ``occupancy="dense"`` is refused (a 0.2 m default grid has 2.6 M; 0.05 m, 409 M)."""
+CAMERA_MAPS = ("depth", "semantic", "instance", "normal")
+_CACHE = 4  # sequences whose tables a worker keeps
+
+
+class DatasetError(ValueError):
+    """The root, split, voxel size or an option cannot give the asked samples; the message says why."""
+
+
+class CarlaOccDataset:
+    """Frames of a built carlaocc root as samples (see the module doc for the keys).
+
+    ``root``: a directory or fsspec URL. ``split``: ``train`` / ``val`` / ``test`` (the root's
+    ``splits/``), or None for every sequence. ``voxel_size``: a built resolution (m).
+    ``occupancy``: ``sparse`` | ``dense`` | ``crop`` (with ``crop=((x0, y0, z0), (x1, y1, z1))``
+    metres in the LiDAR frame: the voxels whose centres lie inside) | ``none``. ``cameras``:
+    RGB images with their calibration; ``camera_maps``: which of the rendered maps to add;
+    ``lidar``, ``boxes``: include those. ``sequences``: restrict to these ids. ``voxel_size``
+    None: the finest voxel size every selected sequence was built at."""
+
+    def __init__(self, root: str = "data", split: str | None = None, voxel_size: float | None = None,
+                 occupancy: str = "sparse", crop: Sequence[Sequence[float]] | None = None, cameras: bool = True,
+                 camera_maps: Sequence[str] = (), lidar: bool = True, boxes: bool = True,
+                 sequences: Sequence[str] | None = None, dense_limit: int = DENSE_LIMIT) -> None:
+        from carlaocc.catalog.occupancy import OccupancyStore
+        from carlaocc.catalog.parquet import ParquetTable
+        from carlaocc.catalog.splits import SPLIT_NAMES, SplitStore
+        from carlaocc.catalog.store import Store, StoreError
+        from carlaocc.schemas.records import FrameRecord, SequenceRecord
+
+        if occupancy not in OCCUPANCY_MODES:
+            raise DatasetError(f"occupancy={occupancy!r}: one of {', '.join(OCCUPANCY_MODES)}")
+        if (occupancy == "crop") != (crop is not None):
+            raise DatasetError("occupancy='crop' takes crop=((x0, y0, z0), (x1, y1, z1)) in metres, and crop "
+                               "needs occupancy='crop'")
+        bad = [m for m in camera_maps if m not in CAMERA_MAPS]
+        if bad:
+            raise DatasetError(f"camera_maps {bad}: known maps are {', '.join(CAMERA_MAPS)}")
+        if split is not None and split not in SPLIT_NAMES:
+            raise DatasetError(f"split={split!r}: one of {', '.join(SPLIT_NAMES)} (or None for all)")
+        self.root = str(root)
+        self.occupancy, self.cameras, self.lidar, self.boxes = occupancy, bool(cameras), bool(lidar), bool(boxes)
+        self.camera_maps = tuple(camera_maps)
+        self.dense_limit = int(dense_limit)
+        self.crop = None if crop is None else (np.asarray(crop[0], float), np.asarray(crop[1], float))
+        self.split = split
+        store = Store(self.root)
+        try:
+            seqs = {s.sequence_id: s for s in ParquetTable(store, SequenceRecord).load()}
+        except StoreError as exc:
+            raise DatasetError(f"{self.root}: cannot read the sequences table ({exc})") from None
+        if not seqs:
+            raise DatasetError(f"{self.root} holds no built dataset (no sequences): run `carlaocc run --root "
+                               f"{self.root}`")
+        wanted = sorted(seqs) if sequences is None else list(sequences)
+        unknown = [s for s in wanted if s not in seqs]
+        if unknown:
+            raise DatasetError(f"{self.root}: unknown sequence(s) {unknown}")
+        if split is not None:
+            try:
+                assignment = SplitStore(store).load()
+            except StoreError as exc:
+                raise DatasetError(str(exc)) from None
+            wanted = [s for s in wanted if assignment.get(s) == split]
+        occ = OccupancyStore(store)
+        if voxel_size is None:
+            # the finest size every wanted sequence has (a sequence built at none is left out)
+            sizes = [set(occ.voxel_sizes(s)) for s in wanted]
+            common = set.intersection(*[z for z in sizes if z]) if any(sizes) else set()
+            if not common:
+                raise DatasetError(f"no voxel size is built for every sequence{f' of the {split} split' if split else ''} "
+                                   f"of {self.root}: run `carlaocc run --root {self.root} --res 0.2`, or pass voxel_size")
+            voxel_size = min(common)
+        self.voxel_size = float(voxel_size)
+        self._grids: dict[str, object] = {}
+        for s in wanted:
+            grid = occ.stored_grid(s, self.voxel_size)
+            if grid is not None:
+                self._grids[s] = grid
+        if not self._grids:
+            where = f"the {split} split of " if split else ""
+            raise DatasetError(f"no sequence of {where}{self.root} is voxelized at {self.voxel_size:g} m: run "
+                               f"`carlaocc run --root {self.root} --res {self.voxel_size:g}`")
+        frames = ParquetTable(store, FrameRecord).load_arrow(list(self._grids))
+        pairs = sorted(zip(frames["sequence_id"].to_pylist(), frames["frame_index"].to_pylist()))
+        self._samples: list[tuple[str, int]] = [(s, int(f)) for s, f in pairs]
+        self._camera_names = {s: None for s in self._grids}
+        if self.occupancy == "dense":
+            n = max(int(np.prod(g.shape)) for g in self._grids.values())
+            if n > self.dense_limit:
+                raise DatasetError(f"a dense frame at {self.voxel_size:g} m has {n:,} voxels (over dense_limit "
+                                   f"{self.dense_limit:,}): use occupancy='sparse' or a crop")
+        self._open: dict | None = None
+
+    # -- pickling: workers get the index, not the open stores or caches ----------------------------
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_open"] = None
+        return state
+
+    def _state(self) -> dict:
+        """This process's open stores and per-sequence caches."""
+        if self._open is None:
+            from carlaocc.catalog.occupancy import OccupancyStore
+            from carlaocc.catalog.sensors import LidarStore, SensorStore
+            from carlaocc.catalog.store import Store
+
+            store = Store(self.root)
+            self._open = {"store": store, "occ": OccupancyStore(store), "sensors": SensorStore(store),
+                          "lidar": LidarStore(store), "tables": OrderedDict()}
+        return self._open
+
+    # -- the sequence API -------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._samples)
+
+    @property
+    def samples(self) -> list[tuple[str, int]]:
+        """``(sequence_id, frame_index)`` of every sample, in order."""
+        return list(self._samples)
+
+    def __getitem__(self, index: int) -> dict:
+        n = len(self._samples)
+        if not -n <= int(index) < n:
+            raise IndexError(f"sample {index} outside [0, {n})")
+        seq, frame = self._samples[int(index)]
+        st = self._state()
+        grid = self._grids[seq]
+        frames, actors = self._tables(seq)
+        row = frames[frame]
+        lidar_pose = row["lidar_pose"]
+        out: dict = {"sequence_id": seq, "frame_index": frame, "timestamp": row["timestamp"],
+                     "ego_pose": row["ego_pose"], "lidar_pose": lidar_pose,
+                     "lidar_to_ego": np.linalg.inv(row["ego_pose"]) @ lidar_pose,
+                     "voxel_size": float(grid.voxel_size), "grid_origin": np.asarray(grid.region_min, np.float64),
+                     "grid_shape": np.asarray(grid.shape, np.int64)}
+        if self.occupancy != "none":
+            out.update(self._occupancy(st["occ"], seq, grid, frame))
+        if self.cameras or self.camera_maps:
+            out.update(self._cameras(st["sensors"], seq, frame))
+        if self.lidar:
+            pts = st["lidar"].load(seq, frame)
+            out["points"] = np.column_stack([pts["x"], pts["y"], pts["z"]]).astype(np.float32)
+            out["points_semantic"], out["points_instance"] = pts["semantic"], pts["instance"]
+        if self.boxes:
+            out.update(_boxes_in_lidar(actors.get(frame, []), lidar_pose))
+        return out
+
+    # -- per-sequence tables, cached per process --------------------------------------------------
+    def _tables(self, seq: str) -> tuple[dict, dict]:
+        from carlaocc.catalog.parquet import ParquetTable
+        from carlaocc.schemas.records import ActorStateRecord, FrameRecord
+
+        cache = self._state()["tables"]
+        if seq in cache:
+            cache.move_to_end(seq)
+            return cache[seq]
+        store = self._state()["store"]
+        t = ParquetTable(store, FrameRecord).load_arrow([seq]).to_pydict()
+        frames = {int(f): {"timestamp": float(ts), "ego_pose": np.asarray(e, np.float64).reshape(4, 4),
+                           "lidar_pose": np.asarray(lp, np.float64).reshape(4, 4)}
+                  for f, ts, e, lp in zip(t["frame_index"], t["timestamp"], t["ego_pose"], t["lidar_pose"])}
+        actors: dict[int, list] = {}
+        at = ParquetTable(store, ActorStateRecord)
+        if at.exists(seq):
+            a = at.load_arrow([seq]).to_pydict()
+            for k in range(len(a["frame_index"])):
+                actors.setdefault(int(a["frame_index"][k]), []).append(
+                    (a["instance_id"][k], a["semantic_id"][k], a["box_center"][k], a["box_size"][k], a["yaw"][k],
+                     a["pitch"][k], a["roll"][k], a["velocity"][k]))
+        cache[seq] = (frames, actors)
+        while len(cache) > _CACHE:
+            cache.popitem(last=False)
+        return cache[seq]
+
+    # -- occupancy --------------------------------------------------------------------------------
+    def _occupancy(self, occ, seq: str, grid, frame: int) -> dict:
+        names = [n for n in ("semantic", "instance", "flow", "mask_camera", "mask_lidar") if _has(occ, seq, grid, n)]
+        shape, chunks, _ = occ.layout(seq, grid, "semantic")
+        cx, cy = chunks[1], chunks[2]
+        X, Y, Z = shape[1:4]
+        if self.occupancy == "sparse":
+            return _sparse(occ, seq, grid, frame, names, cx, cy, X, Y)
+        if self.occupancy == "dense":
+            lo, hi = np.zeros(3, np.int64), np.array([X, Y, Z], np.int64)
+        else:
+            # the voxels whose centres lie in the crop box
+            vs, o = float(grid.voxel_size), np.asarray(grid.region_min, float)
+            lo = np.clip(np.ceil((self.crop[0] - o) / vs - 0.5), 0, [X, Y, Z]).astype(np.int64)
+            hi = np.clip(np.floor((self.crop[1] - o) / vs - 0.5) + 1, 0, [X, Y, Z]).astype(np.int64)
+            hi = np.maximum(hi, lo)
+        out = _dense_box(occ, seq, grid, frame, names, cx, cy, lo, hi)
+        if self.occupancy == "crop":
+            out["crop_offset"] = lo
+        return out
+
+    # -- cameras ----------------------------------------------------------------------------------
+    def _cameras(self, sensors, seq: str, frame: int) -> dict:
+        if self._camera_names.get(seq) is None:
+            self._camera_names[seq] = sensors.cameras(seq)
+        cams = self._camera_names[seq]
+        if not cams:
+            raise DatasetError(f"{self.root}: sequence {seq} has no camera maps: run the sensors stage")
+        out: dict = {"camera_names": list(cams)}
+        K, to_lidar, to_ego, images = [], [], [], []
+        maps: dict[str, list] = {m: [] for m in self.camera_maps}
+        for cam in cams:
+            attrs = sensors.attrs(seq, cam, "depth")
+            K.append(np.asarray(attrs["intrinsics"], np.float64))
+            to_lidar.append(np.asarray(attrs["camera_to_lidar"], np.float64))
+            to_ego.append(np.asarray(attrs["camera_to_ego"], np.float64))
+            if self.cameras:
+                if not sensors.exists(seq, cam, "rgb"):
+                    raise DatasetError(f"{self.root}: {seq}/{cam} has no RGB (built with sensors.rgb off?)")
+                images.append(sensors.read_image(seq, cam, frame, "rgb"))
+            for m in self.camera_maps:
+                maps[m].append(sensors.read_image(seq, cam, frame, m))
+        out["cam_intrinsics"], out["cam_to_lidar"], out["cam_to_ego"] = np.stack(K), np.stack(to_lidar), np.stack(to_ego)
+        if self.cameras:
+            out["images"] = np.stack(images)
+        for m, arrays in maps.items():
+            out[m] = np.stack(arrays)
+        return out
+
+
+def _has(occ, seq: str, grid, name: str) -> bool:
+    try:
+        occ.layout(seq, grid, name)
+        return True
+    except ValueError:
+        return False
+
+
+def _sparse(occ, seq: str, grid, frame: int, names: list[str], cx: int, cy: int, X: int, Y: int) -> dict:
+    """The occupied voxels of one frame, gathered chunk by chunk (never the dense frame)."""
+    rows, inst, flow, mcam, mlid = [], [], [], [], []
+    order_parts, start = [], 0
+    for ci in range(-(-X // cx)):
+        first = len(rows)
+        for cj in range(-(-Y // cy)):
+            sem = occ.read_chunk(seq, grid, frame, "semantic", ci, cj)
+            if sem is None:
+                continue
+            # the chunk's occupied voxels in C order within it, found on the flat chunk (a 1-D scan
+            # is several times faster than a 3-D nonzero); the other arrays read at the same places
+            sem = np.ascontiguousarray(sem)
+            bx, by, bz = sem.shape
+            flat = np.flatnonzero(sem)
+            if not len(flat):
+                continue
+            ii, rest = np.divmod(flat, by * bz)
+            jj, kk = np.divmod(rest, bz)
+            row = np.empty((len(flat), 4), np.int32)
+            row[:, 0], row[:, 1], row[:, 2], row[:, 3] = ii + ci * cx, jj + cj * cy, kk, sem.reshape(-1)[flat]
+            rows.append(row)
+            for name, acc, dtype, trailing in (("instance", inst, np.uint32, ()), ("flow", flow, np.float32, (3,)),
+                                               ("mask_camera", mcam, bool, ()), ("mask_lidar", mlid, bool, ())):
+                if name not in names:
+                    continue
+                block = occ.read_chunk(seq, grid, frame, name, ci, cj)
+                acc.append(np.zeros((len(flat), *trailing), dtype) if block is None else
+                           np.ascontiguousarray(block).reshape(len(sem.reshape(-1)), *trailing)[flat].astype(dtype))
+        # C order over the grid: within this row of chunks, rows are in (j, k) order per chunk
+        # and the chunks in j order, so a stable sort on i alone orders them (i, j, k)
+        if len(rows) > first:
+            i_col = np.concatenate([r[:, 0] for r in rows[first:]])
+            order_parts.append(start + np.argsort(i_col, kind="stable"))
+            start += len(i_col)
+    occ_rows = np.concatenate(rows) if rows else np.zeros((0, 4), np.int32)
+    order = np.concatenate(order_parts) if order_parts else np.zeros(0, np.int64)
+    out = {"occ": occ_rows[order]}
+    for key, name, acc, dtype, trailing in (("occ_instance", "instance", inst, np.uint32, ()),
+                                            ("occ_flow", "flow", flow, np.float32, (3,)),
+                                            ("occ_mask_camera", "mask_camera", mcam, bool, ()),
+                                            ("occ_mask_lidar", "mask_lidar", mlid, bool, ())):
+        if name in names:
+            out[key] = (np.concatenate(acc) if acc else np.zeros((0, *trailing), dtype))[order]
+    return out
+
+
+def _dense_box(occ, seq: str, grid, frame: int, names: list[str], cx: int, cy: int, lo: np.ndarray,
+               hi: np.ndarray) -> dict:
+    """Dense arrays of the voxel box ``[lo, hi)`` of one frame, reading only the chunks it reaches."""
+    size = tuple(int(v) for v in hi - lo)
+    dtypes = {"semantic": np.uint8, "instance": np.uint32, "flow": np.float32, "mask_camera": bool, "mask_lidar": bool}
+    out = {n: np.zeros(size + ((3,) if n == "flow" else ()), dtypes[n]) for n in names}
+    if 0 in size:
+        return out
+    for ci in range(lo[0] // cx, (hi[0] - 1) // cx + 1):
+        for cj in range(lo[1] // cy, (hi[1] - 1) // cy + 1):
+            # the part of this chunk inside the box, in chunk and in box coordinates
+            x0, x1 = max(lo[0], ci * cx), min(hi[0], (ci + 1) * cx)
+            y0, y1 = max(lo[1], cj * cy), min(hi[1], (cj + 1) * cy)
+            for n in names:
+                block = occ.read_chunk(seq, grid, frame, n, ci, cj)
+                if block is None:
+                    continue
+                out[n][x0 - lo[0]:x1 - lo[0], y0 - lo[1]:y1 - lo[1]] = \
+                    block[x0 - ci * cx:x1 - ci * cx, y0 - cj * cy:y1 - cj * cy, lo[2]:hi[2]]
+    return out
+
+
+def _boxes_in_lidar(rows: list, lidar_pose: np.ndarray) -> dict:
+    """The frame's actor boxes (world frame rows of the actors table) in the LiDAR frame."""
+    from carlaocc.stages.geometry import rotation_matrix
+
+    world_to_lidar = np.linalg.inv(lidar_pose)
+    R_wl, t_wl = world_to_lidar[:3, :3], world_to_lidar[:3, 3]
+    m = len(rows)
+    boxes = np.zeros((m, 7), np.float32)
+    pose = np.tile(np.eye(4), (m, 1, 1))
+    vel = np.zeros((m, 3), np.float32)
+    inst, sem = np.zeros(m, np.uint32), np.zeros(m, np.uint8)
+    for k, (iid, sid, c, size, yaw, pitch, roll, v) in enumerate(sorted(rows, key=lambda r: r[0])):
+        R = R_wl @ rotation_matrix(yaw, pitch, roll)
+        centre = R_wl @ np.asarray(c, float) + t_wl
+        pose[k, :3, :3], pose[k, :3, 3] = R, centre
+        boxes[k] = (*centre, *size, math.atan2(R[1, 0], R[0, 0]))
+        vel[k] = R_wl @ np.asarray(v, float)
+        inst[k], sem[k] = iid, sid
+    return {"boxes": boxes, "box_pose": pose, "box_velocity": vel, "box_instance": inst, "box_semantic": sem}
+
+
+def collate(batch: Sequence[dict]) -> dict:
+    """A batch of samples as one dict: numpy arrays of one shape across the batch stacked on a new
+    first axis, everything else (variable-size arrays, strings, lists) as a list per key. Pass it
+    as ``collate_fn`` to a ``torch.utils.data.DataLoader`` (torch turns neither into tensors here:
+    do it in your training step, or wrap this)."""
+    out: dict = {}
+    for key in batch[0]:
+        values = [b[key] for b in batch]
+        if all(isinstance(v, np.ndarray) for v in values) and len({v.shape for v in values}) == 1:
+            out[key] = np.stack(values)
+        elif all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) for v in values):
+            out[key] = np.asarray(values)
+        else:
+            out[key] = values
+    return out
