@@ -36,7 +36,7 @@ key                      value
 ``depth`` ...            the camera maps named in ``camera_maps`` ((C, H, W) each: ``depth``
                          float32 m planar, ``semantic`` uint8, ``instance`` uint32, ``normal``)
 ``points``               (P, 3) float32 LiDAR points; ``points_semantic`` (P,) uint8,
-                         ``points_instance`` (P,) uint32
+                         ``points_instance`` (P,) uint32, ``points_channel`` (P,) uint8 (beam, 0 top)
 ``boxes``                (M, 7) float32 ``x, y, z, length, width, height, yaw`` (centre, yaw
                          about the LiDAR z from its x axis); ``box_pose`` (M, 4, 4) box-to-LiDAR
                          (pitch and roll included); ``box_velocity`` (M, 3) float32 m/s (LiDAR
@@ -45,8 +45,8 @@ key                      value
 =======================  ====================================================================
 
 Reading: a sample reads only its own frame's chunks (every Zarr chunk holds one frame), the
-camera images, the frame's LiDAR file and, once per worker process and sequence, the
-sequence's frames and actors tables. Sparse occupancy is gathered chunk by chunk, so a 0.05 m
+camera images, the frame's LiDAR file and, once per worker process and sequence (the last 256
+kept), the sequence's frames and actors tables and the cameras' calibration. Sparse occupancy is gathered chunk by chunk, so a 0.05 m
 frame (409 M voxels) never exists dense in memory; ``occupancy="dense"`` is refused above
 ``dense_limit`` voxels with the advice to use sparse or a crop.
 
@@ -69,9 +69,9 @@ __all__ = ["CarlaOccDataset", "DatasetError", "collate", "OCCUPANCY_MODES", "DEN
 
 OCCUPANCY_MODES = ("sparse", "dense", "crop", "none")
 DENSE_LIMIT = 64 * 2**20
-"""Voxels above which ``occupancy="dense"`` is refused (a 0.2 m default grid has 2.6 M; 0.05 m, 409 M)."""
+"""Voxels above which ``occupancy="dense"`` (or a crop) is refused (a 0.2 m default grid has 6.4 M; 0.05 m, 409 M)."""
 CAMERA_MAPS = ("depth", "semantic", "instance", "normal")
-_CACHE = 4  # sequences whose tables a worker keeps
+_CACHE = 256  # sequences whose frames and actors tables a worker keeps (a few hundred KB each)
 
 
 class DatasetError(ValueError):
@@ -109,6 +109,18 @@ class CarlaOccDataset:
             raise DatasetError(f"camera_maps {bad}: known maps are {', '.join(CAMERA_MAPS)}")
         if split is not None and split not in SPLIT_NAMES:
             raise DatasetError(f"split={split!r}: one of {', '.join(SPLIT_NAMES)} (or None for all)")
+        if voxel_size is not None and not (isinstance(voxel_size, (int, float)) and voxel_size > 0):
+            raise DatasetError(f"voxel_size={voxel_size!r}: a positive size in metres (or None for the finest built)")
+        if isinstance(sequences, str):
+            sequences = [sequences]
+        if crop is not None:
+            try:
+                lo_, hi_ = (np.asarray(c, dtype=float) for c in crop)
+                ok = lo_.shape == hi_.shape == (3,) and bool(np.all(np.isfinite(lo_) & np.isfinite(hi_) & (hi_ > lo_)))
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise DatasetError(f"crop={crop!r}: ((x0, y0, z0), (x1, y1, z1)) in metres with x1 > x0, y1 > y0, z1 > z0")
         self.root = str(root)
         self.occupancy, self.cameras, self.lidar, self.boxes = occupancy, bool(cameras), bool(lidar), bool(boxes)
         self.camera_maps = tuple(camera_maps)
@@ -116,6 +128,8 @@ class CarlaOccDataset:
         self.crop = None if crop is None else (np.asarray(crop[0], float), np.asarray(crop[1], float))
         self.split = split
         store = Store(self.root)
+        if store.is_local and not store.fs.exists(store.path("")):
+            raise DatasetError(f"{self.root} does not exist: build it with `carlaocc run --root {self.root}`")
         try:
             seqs = {s.sequence_id: s for s in ParquetTable(store, SequenceRecord).load()}
         except StoreError as exc:
@@ -161,6 +175,11 @@ class CarlaOccDataset:
             if n > self.dense_limit:
                 raise DatasetError(f"a dense frame at {self.voxel_size:g} m has {n:,} voxels (over dense_limit "
                                    f"{self.dense_limit:,}): use occupancy='sparse' or a crop")
+        if self.occupancy == "crop":
+            n = max(int(np.prod(np.subtract(*reversed(_crop_box(g, self.crop))))) for g in self._grids.values())
+            if n > self.dense_limit:
+                raise DatasetError(f"the crop holds {n:,} voxels at {self.voxel_size:g} m (over dense_limit "
+                                   f"{self.dense_limit:,}): crop less, or use occupancy='sparse'")
         self._open: dict | None = None
 
     # -- pickling: workers get the index, not the open stores or caches ----------------------------
@@ -192,6 +211,9 @@ class CarlaOccDataset:
 
     def __getitem__(self, index: int) -> dict:
         n = len(self._samples)
+        if not isinstance(index, (int, np.integer)) and not (hasattr(index, "ndim") and index.ndim == 0
+                                                             and np.issubdtype(getattr(index, "dtype", float), np.integer)):
+            raise TypeError(f"sample index {index!r}: an integer")
         if not -n <= int(index) < n:
             raise IndexError(f"sample {index} outside [0, {n})")
         seq, frame = self._samples[int(index)]
@@ -213,6 +235,7 @@ class CarlaOccDataset:
             pts = st["lidar"].load(seq, frame)
             out["points"] = np.column_stack([pts["x"], pts["y"], pts["z"]]).astype(np.float32)
             out["points_semantic"], out["points_instance"] = pts["semantic"], pts["instance"]
+            out["points_channel"] = pts["channel"]
         if self.boxes:
             out.update(_boxes_in_lidar(actors.get(frame, []), lidar_pose))
         return out
@@ -255,11 +278,7 @@ class CarlaOccDataset:
         if self.occupancy == "dense":
             lo, hi = np.zeros(3, np.int64), np.array([X, Y, Z], np.int64)
         else:
-            # the voxels whose centres lie in the crop box
-            vs, o = float(grid.voxel_size), np.asarray(grid.region_min, float)
-            lo = np.clip(np.ceil((self.crop[0] - o) / vs - 0.5), 0, [X, Y, Z]).astype(np.int64)
-            hi = np.clip(np.floor((self.crop[1] - o) / vs - 0.5) + 1, 0, [X, Y, Z]).astype(np.int64)
-            hi = np.maximum(hi, lo)
+            lo, hi = _crop_box(grid, self.crop)
         out = _dense_box(occ, seq, grid, frame, names, cx, cy, lo, hi)
         if self.occupancy == "crop":
             out["crop_offset"] = lo
@@ -275,13 +294,19 @@ class CarlaOccDataset:
         out: dict = {"camera_names": list(cams)}
         K, to_lidar, to_ego, images = [], [], [], []
         maps: dict[str, list] = {m: [] for m in self.camera_maps}
+        calib = self._state().setdefault("calib", {})
         for cam in cams:
-            attrs = sensors.attrs(seq, cam, "depth")
-            K.append(np.asarray(attrs["intrinsics"], np.float64))
-            to_lidar.append(np.asarray(attrs["camera_to_lidar"], np.float64))
-            to_ego.append(np.asarray(attrs["camera_to_ego"], np.float64))
+            if (seq, cam) not in calib:  # once per worker: the calibration, and whether RGB exists
+                attrs = sensors.attrs(seq, cam, "depth")
+                calib[(seq, cam)] = (np.asarray(attrs["intrinsics"], np.float64),
+                                     np.asarray(attrs["camera_to_lidar"], np.float64),
+                                     np.asarray(attrs["camera_to_ego"], np.float64), sensors.exists(seq, cam, "rgb"))
+            k_, l_, e_, has_rgb = calib[(seq, cam)]
+            K.append(k_)
+            to_lidar.append(l_)
+            to_ego.append(e_)
             if self.cameras:
-                if not sensors.exists(seq, cam, "rgb"):
+                if not has_rgb:
                     raise DatasetError(f"{self.root}: {seq}/{cam} has no RGB (built with sensors.rgb off?)")
                 images.append(sensors.read_image(seq, cam, frame, "rgb"))
             for m in self.camera_maps:
@@ -292,6 +317,16 @@ class CarlaOccDataset:
         for m, arrays in maps.items():
             out[m] = np.stack(arrays)
         return out
+
+
+def _crop_box(grid, crop) -> tuple[np.ndarray, np.ndarray]:
+    """Voxel index box ``[lo, hi)`` of the voxels whose centres lie in the metre box ``crop``
+    (faces included, to a nanometre: a face on a voxel centre takes that voxel on every axis)."""
+    vs, o, shape = float(grid.voxel_size), np.asarray(grid.region_min, float), np.asarray(grid.shape)
+    eps = 1e-9 / vs
+    lo = np.clip(np.ceil((crop[0] - o) / vs - 0.5 - eps), 0, shape).astype(np.int64)
+    hi = np.clip(np.floor((crop[1] - o) / vs - 0.5 + eps) + 1, 0, shape).astype(np.int64)
+    return lo, np.maximum(hi, lo)
 
 
 def _has(occ, seq: str, grid, name: str) -> bool:

@@ -11,6 +11,11 @@ Layouts written under ``OUT``:
   raw SemanticKITTI label ids (``learning_map_inv``); ``.occluded`` = not observed by the LiDAR,
   ``.invalid`` = observed by neither the LiDAR nor a camera. Without masks (``voxelize.masks:
   false``) every target voxel inside our region counts as observed, the others as not.
+* ``sscbench-kitti360``: ``preprocess/labels/<sequence>/<frame:06d>_1_1.npy`` (256 x 256 x 32
+  uint8, SSCBench-KITTI-360 learning ids 0-18, voxels observed by neither the LiDAR nor a camera
+  255) and ``_1_8.npy`` (32 x 32 x 4: blocks of 8 mostly empty or unobserved take the more
+  frequent of 0 / 255, the others their most frequent class), the same forward grid as
+  semantickitti; ``data_2d_raw/<sequence>/image_00/data_rect/<frame:06d>.png`` the first camera.
 * ``surroundocc``: ``<sequence>/<frame:06d>.npy`` -- sparse (x, y, z, label) rows of the
   200 x 200 x 16 grid at 0.5 m (LiDAR frame, [-50, -50, -5, 50, 50, 3] m), Occ3D/nuScenes
   class ids 0-16.
@@ -26,6 +31,12 @@ Layouts written under ``OUT``:
 * ``mmdet3d-infos``: per-sample info files (pickle and JSON) of the OpenMMLab occupancy
   pipelines, with images, LiDAR sweeps and Occ3D ground truth as files
   (:mod:`carlaocc.pipeline.export_infos`).
+* ``openocc-v2`` / ``uniocc``: semantics, instances and flow in those layouts and units
+  (:mod:`carlaocc.pipeline.export_flow`).
+
+Every export writes ``grid.json``: the grid its files index (frame, origin, voxel size, shape,
+axis order, label names and free label, the label table it was built under) and the formula
+``centre = origin + (index + 0.5) * voxel_size``.
 
 Every export writes ``splits/{train,val,test}.txt`` beside its files: the dataset's splits
 (``<root>/splits/``) restricted to the exported sequences, one sequence id per line (the release
@@ -48,12 +59,14 @@ from carlaocc.catalog.formats import atomic_write
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import SequenceRecord
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, resample
+from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, downsample_ssc, resample
 
-FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "surroundocc", "carlaocc-npz", "carlaocc-release", "mmdet3d-infos")
+FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "sscbench-kitti360", "surroundocc", "carlaocc-npz",
+                             "carlaocc-release", "mmdet3d-infos", "openocc-v2", "uniocc")
 
 SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
                                 SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
@@ -78,6 +91,25 @@ def _coverage(target: TargetGrid, grid: GridSpec, grid_to_target: np.ndarray) ->
     p = centres @ inv[:3, :3].T + inv[:3, 3]
     inside = np.all((p >= np.asarray(grid.origin)) & (p < np.asarray(grid.effective_max)), axis=1)
     return inside.reshape(target.shape)
+
+
+def _write_image_00(store: Store, seq: str, frame: int, folder: Path) -> int:
+    """The rig's first camera's RGB as KITTI-360's ``image_00/data_rect/<frame:06d>.png`` (ours are
+    1408 x 376 like KITTI-360's); 0 files when the frame has no RGB."""
+    import io
+
+    from PIL import Image
+
+    from carlaocc.catalog.sensors import SensorStore
+
+    sensors = SensorStore(store)
+    cams = sensors.cameras(seq)
+    if not cams or not sensors.exists(seq, cams[0], "rgb"):
+        return 0
+    buf = io.BytesIO()
+    Image.fromarray(sensors.read_image(seq, cams[0], frame, "rgb")).save(buf, format="PNG")
+    atomic_write(folder / f"{frame:06d}.png", lambda fh, b=buf.getvalue(): fh.write(b))
+    return 1
 
 
 def actor_ids(store: Store, seq: str) -> set[int]:
@@ -147,6 +179,11 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
 
         n_seq, n_frames, n_files = export_infos(store, config, out, resolution, sequences, progress)
         return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+    if fmt in ("openocc-v2", "uniocc"):
+        from carlaocc.pipeline.export_flow import export_flow
+
+        n_seq, n_frames, n_files = export_flow(store, config, fmt, out, resolution, sequences, progress)
+        return ExportSummary(fmt, n_seq, n_frames, n_files, out)
     from carlaocc.schemas.grid import resolution_key
 
     occ = OccupancyStore(store)
@@ -188,6 +225,7 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
             continue
         # the target grid, and how our LiDAR frame maps into its frame
         target, to_target = {"occ3d": (OCC3D_NUSCENES, lidar_to_ego), "semantickitti": (SEMANTICKITTI_GRID, np.eye(4)),
+                             "sscbench-kitti360": (SSCBENCH_KITTI360, np.eye(4)),
                              "surroundocc": (SURROUNDOCC_GRID, np.eye(4))}[fmt]
         names = ("semantic", "mask_lidar", "mask_camera") if has_masks else ("semantic",)
         # without visibility masks, "observed" = inside our region: the same for every frame
@@ -208,12 +246,34 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
                                           occluded=~lidar_seen, labels=to_raw(labels))
                 save_semantickitti(out / "sequences" / seq / "voxels", f"{t:06d}", vox)
                 n_files += 4
+            elif fmt == "sscbench-kitti360":
+                # MonoScene-style targets: learning ids, voxels observed by neither sensor 255
+                ssc = labels.astype(np.uint8)
+                ssc[~(m["mask_lidar"] | m["mask_camera"])] = 255
+                base = out / "preprocess" / "labels" / seq
+                for name, arr in ((f"{t:06d}_1_1.npy", ssc), (f"{t:06d}_1_8.npy", downsample_ssc(ssc, 8))):
+                    atomic_write(base / name, lambda fh, a=arr: np.save(fh, a))
+                n_files += 2 + _write_image_00(store, seq, t, out / "data_2d_raw" / seq / "image_00" / "data_rect")
             else:  # surroundocc
                 save_surroundocc(out / seq / f"{t:06d}.npy", dense_to_surroundocc(labels, target.free_label))
                 n_files += 1
             n_frames += 1
             if progress:
                 progress(1)
+    # the grid the files index, and how an index becomes metres
+    from carlaocc.pipeline.export_flow import grid_manifest
+
+    if fmt == "carlaocc-npz":
+        g = todo[0][1]
+        manifest = {"format": fmt, "frame": "lidar (x forward, y left, z up)", "origin": list(g.origin),
+                    "voxel_size": g.voxel_size, "shape": list(g.shape), "axis_order": ["x", "y", "z"],
+                    "index_to_metre": "centre = origin + (index + 0.5) * voxel_size",
+                    "labels": [c.name for c in taxonomy.label_table(tables[todo[0][0]]).classes], "free_label": 0,
+                    "label_encoding": encoding, "built_from_label_table": tables[todo[0][0]]}
+    else:
+        manifest = grid_manifest(target, tables[todo[0][0]], fmt)
+    atomic_write(out / "grid.json", lambda fh: fh.write(json.dumps(manifest, indent=1).encode()))
+    n_files += 1
     # the dataset's splits, restricted to what was exported (none for a dataset built before splits)
     for split in SPLIT_NAMES if splits else ():
         ids = sorted(s for s, _, _ in todo if splits.get(s) == split)

@@ -4,17 +4,19 @@ BEVDet's additions), with the images, LiDAR sweeps and Occ3D-style ground truth 
 
 Layout under ``OUT`` (every path inside the infos is relative to ``OUT``)::
 
-    carlaocc_infos_{train,val,test}.pkl   {"infos": [info, ...], "metadata": {...}} (pickle)
+    carlaocc_infos_{train,val,test}.pkl   {"infos": [info, ...], "metadata": {...}} (pickle;
+                                           carlaocc_infos_all.pkl for a root built before splits)
     carlaocc_infos_{train,val,test}.json  the same for humans (arrays as lists)
     samples/<camera>/<token>.jpg           the rig's RGB (JPEG, quality 95)
-    samples/LIDAR_TOP/<token>.bin          float32 (N, 5): x, y, z, intensity (0), beam
+    samples/LIDAR_TOP/<token>.bin          float32 (N, 5): x, y, z, intensity (0), beam (0 = top)
     gts/<sequence>/<token>/labels.npz      Occ3D-nuScenes: semantics, mask_lidar, mask_camera
     grid.json                              the Occ3D grid: frame, origin, voxel size, axes, labels
     splits/{train,val,test}.txt            the sequences of each split
 
 ``token`` is ``<sequence>_<frame:06d>``; ``scene_name`` / ``scene_token`` the sequence id.
 Per info (``../shared/reference/training-formats.md`` section 4 lists the keys and their sources):
-``token``, ``timestamp`` (microseconds), ``frame_idx``, ``prev`` / ``next`` (``""`` at the ends),
+``token``, ``timestamp`` (microseconds; increasing over the export, see
+:data:`SEQUENCE_SPACING_US`), ``frame_idx``, ``prev`` / ``next`` (``""`` at the ends),
 ``scene_token``, ``scene_name``, ``lidar_path``, ``sweeps`` (empty), ``lidar2ego_translation`` /
 ``lidar2ego_rotation`` (quaternion w, x, y, z), ``ego2global_translation`` / ``_rotation``,
 ``cams[<camera>]`` (``data_path``, ``type``, ``sample_data_token``, ``sensor2ego_*``,
@@ -85,18 +87,27 @@ def _jpeg(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str) -> tuple[dict, dict[str, bytes]]:
+SEQUENCE_SPACING_US = 10**10
+"""Timestamps are the frame's time in its sequence plus the sequence's rank times this (10,000
+s): unique and increasing over the whole export, so consumers that sort infos by time (BEVDet /
+FlashOcc do, then take a frame's neighbours as its history) keep every sequence's frames together."""
+
+
+def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str,
+               sequence_rank: int = 0) -> tuple[dict, dict[str, bytes]]:
     """The info dict of one loader sample (:class:`carlaocc.data.CarlaOccDataset`) and the files it
-    names (relative path -> bytes) except the occupancy."""
+    names (relative path -> bytes) except the occupancy; ``sequence_rank`` places its sequence on
+    the export's time line (:data:`SEQUENCE_SPACING_US`)."""
     seq = sample["sequence_id"]
     ego, lidar = sample["ego_pose"], sample["lidar_pose"]
     lidar_to_ego = sample["lidar_to_ego"]
-    t_us = int(round(sample["timestamp"] * 1e6))
+    t_us = sequence_rank * SEQUENCE_SPACING_US + int(round(sample["timestamp"] * 1e6))
     files: dict[str, bytes] = {}
     lidar_path = f"samples/LIDAR_TOP/{token}.bin"
     pts = sample["points"]
     cloud = np.zeros((len(pts), 5), np.float32)
     cloud[:, :3] = pts
+    cloud[:, 4] = sample["points_channel"]
     files[lidar_path] = cloud.tobytes()
     cams = {}
     for k, cam in enumerate(sample["camera_names"]):
@@ -178,13 +189,15 @@ def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: flo
         assignment = {}
     by_split: dict[str, list] = {}
     n_files = 0
+    camera_names: list[str] = []
     order = ds.samples
     for idx, (seq, frame) in enumerate(order):
         token = f"{seq}_{frame:06d}"
         prev = f"{seq}_{order[idx - 1][1]:06d}" if idx and order[idx - 1][0] == seq else ""
         nxt = f"{seq}_{order[idx + 1][1]:06d}" if idx + 1 < len(order) and order[idx + 1][0] == seq else ""
         sample = ds[idx]
-        info, files = frame_info(sample, token, prev, nxt, label_table)
+        info, files = frame_info(sample, token, prev, nxt, label_table, seqs.index(seq))
+        camera_names = sample["camera_names"]
         for rel, data in files.items():
             atomic_write(out / rel, lambda fh, b=data: fh.write(b))
         # the Occ3D ground truth: our frame resampled into the ego grid, with its masks
@@ -201,7 +214,7 @@ def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: flo
         if progress:
             progress(1)
     metadata = {"version": INFO_VERSION, "voxel_size_built": ds.voxel_size, "label_table": label_table,
-                "detection_classes": list(DETECTION_CLASSES), "camera_names": ds[0]["camera_names"] if len(ds) else []}
+                "detection_classes": list(DETECTION_CLASSES), "camera_names": camera_names}
     for split, infos in by_split.items():
         doc = {"infos": infos, "metadata": metadata}
         atomic_write(out / f"carlaocc_infos_{split}.pkl", lambda fh, d=doc: pickle.dump(d, fh, protocol=4))

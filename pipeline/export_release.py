@@ -40,6 +40,7 @@ from carlaocc.catalog.formats import carlaocc_release as rel
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec, resolution_key
 from carlaocc.schemas.records import FrameRecord, SequenceRecord
@@ -245,7 +246,15 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
         atomic_write(out / "splits" / f"{split}.txt", lambda fh, b="".join(lines).encode(): fh.write(b))
     atomic_write(out / "calib" / "calib.yaml", lambda fh: fh.write(_calib(config).encode()))
     atomic_write(out / NOTE, lambda fh: fh.write(json.dumps(note, indent=1).encode()))
-    return len(todo), n_frames, n_files + len(SPLIT_NAMES) + 2
+    # grid.json: the three grids each frame's files index (LiDAR frame, the release's origins)
+    manifest = {"format": "carlaocc-release", "frame": "lidar (x forward, y left, z up)", "axis_order": ["x", "y", "z"],
+                "index_to_metre": "centre = voxel_origin + (index + 0.5) * voxel_size",
+                "labels": [c.name for c in taxonomy.label_table(note.get("label_table")).classes], "free_label": 0,
+                "label_encoding": encoding,
+                "grids": [{"folder": g.name, "voxel_size": g.voxel_size, "origin": list(g.voxel_origin),
+                           "shape": list(g.volume_size)} for g in rel.RELEASE_GRIDS]}
+    atomic_write(out / "grid.json", lambda fh: fh.write(json.dumps(manifest, indent=1).encode()))
+    return len(todo), n_frames, n_files + len(SPLIT_NAMES) + 3
 
 
 __all__ = ["export_release", "folder_names", "release_grid_spec"]

@@ -91,11 +91,45 @@ BENCHMARK15_NAMES: tuple[str, ...] = (
     "Vegetation", "Ground", "Person", "Car", "Truck", "OtherVehicle", "Other",
 )  # fmt: skip
 
+# Source: OpenDriveLab/OccNet ray_metrics.py and MCG-NJU/SparseOcc's openocc config (OpenOcc v2,
+# the CVPR-2024 occupancy-and-flow track): the nuScenes classes in another order, free = 16.
+OPENOCC_V2_NAMES: tuple[str, ...] = (
+    "car", "truck", "trailer", "bus", "construction_vehicle", "bicycle", "motorcycle", "pedestrian",
+    "traffic_cone", "barrier", "driveable_surface", "other_flat", "sidewalk", "terrain", "manmade",
+    "vegetation", "free",
+)  # fmt: skip
+# Source: tasl-lab/UniOcc uniocc_viz.py (0-10; 11-19 reserved).
+UNIOCC_NAMES: tuple[str, ...] = (
+    "other", "car", "bicycle", "motorcycle", "pedestrian", "traffic_cone", "vegetation", "road",
+    "terrain", "building", "free",
+)  # fmt: skip
+
 TARGETS: dict[str, tuple[str, ...]] = {
     "occ3d_nuscenes": OCC3D_NUSCENES_NAMES,
     "sscbench_kitti360": SSCBENCH_KITTI360_NAMES,
     "semantickitti": SEMANTICKITTI_NAMES,
     "benchmark15": BENCHMARK15_NAMES,
+    "openocc_v2": OPENOCC_V2_NAMES,
+    "uniocc": UNIOCC_NAMES,
+}
+
+# OpenOcc v2 ids follow from a class's Occ3D-nuScenes id by name (the same nuScenes classes);
+# Occ3D's "others" has no OpenOcc class and becomes manmade (a structure or prop, not free).
+_OCC3D_TO_OPENOCC_V2: tuple[int, ...] = tuple(
+    OPENOCC_V2_NAMES.index("manmade" if n == "others" else n) for n in OCC3D_NUSCENES_NAMES
+)
+# UniOcc ids from our class names: its road covers the paved flat ground (it has no sidewalk),
+# terrain the unpaved, building the walls too; poles, signs, fences and props are "other".
+_UNIOCC_OF_CLASS: dict[str, str] = {
+    "None": "free", "Sky": "free", "Road": "road", "RoadLine": "road", "Sidewalk": "road", "Ground": "road",
+    "RailTrack": "road", "Terrain": "terrain", "Rock": "terrain", "Water": "terrain", "Building": "building",
+    "Wall": "building", "Bridge": "building", "Vegetation": "vegetation", "Pedestrian": "pedestrian",
+    "Rider": "pedestrian", "Car": "car", "Truck": "car", "Bus": "car", "Train": "car", "Motorcycle": "motorcycle",
+    "Bicycle": "bicycle",
+}  # fmt: skip
+DERIVED_TARGETS = {
+    "openocc_v2": lambda c: _OCC3D_TO_OPENOCC_V2[c.occ3d_nuscenes],
+    "uniocc": lambda c: UNIOCC_NAMES.index(_UNIOCC_OF_CLASS.get(c.name, "other")),
 }
 
 
@@ -272,6 +306,8 @@ class LabelTable(BaseModel):
         """Lookup table of length 30: class id -> ``target`` id (see :data:`TARGETS`)."""
         if target not in TARGETS:
             raise ValueError(f"unknown target {target!r}; valid targets: {', '.join(TARGETS)}")
+        if target in DERIVED_TARGETS:
+            return tuple(DERIVED_TARGETS[target](c) for c in self.classes)
         return tuple(getattr(c, target) for c in self.classes)
 
     def table_rows(self) -> list[dict[str, object]]:

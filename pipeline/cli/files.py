@@ -58,7 +58,7 @@ def voxelize_files(
 
 @app.command("export")
 def export_cmd(
-    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | surroundocc | carlaocc-npz | carlaocc-release | mmdet3d-infos")],
+    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | sscbench-kitti360 | surroundocc | carlaocc-npz | carlaocc-release | mmdet3d-infos | openocc-v2 | uniocc")],
     out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
     res: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling; carlaocc-release: 0.1 by default, any size dividing 0.1)")] = None,
     root: RootOpt = "data",
@@ -68,7 +68,9 @@ def export_cmd(
 ) -> None:
     """Export the occupancy in the layouts models train on: occ3d (gts/<seq>/<frame>/labels.npz,
     200x200x16 at 0.4 m, ego frame, free 17, masks), semantickitti (sequences/<seq>/voxels/
-    <frame>.bin/.label/.invalid/.occluded, 256x256x32 at 0.2 m, forward), surroundocc
+    <frame>.bin/.label/.invalid/.occluded, 256x256x32 at 0.2 m, forward), sscbench-kitti360
+    (preprocess/labels/<seq>/<frame>_1_1.npy and _1_8.npy, KITTI-360 ids, unobserved 255;
+    data_2d_raw/<seq>/image_00/data_rect/<frame>.png), surroundocc
     (<seq>/<frame>.npy sparse rows, 200x200x16 at 0.5 m), carlaocc-npz (<seq>/<frame>.npz on our
     grid; labels semantic << 11 | instance as the release's code reads them, or --label-encoding
     decimal; ids renumbered per class where they would collide),
@@ -76,8 +78,12 @@ def export_cmd(
     vs_0_2_forward_view, vs_0_4_surround_view}, poses, calib, splits, camera maps, LiDAR),
     mmdet3d-infos (carlaocc_infos_{train,val,test}.pkl/.json with the keys BEVDet / FlashOcc /
     SparseOcc pipelines read, samples/<camera>/<token>.jpg, samples/LIDAR_TOP/<token>.bin,
-    gts/<scene>/<token>/labels.npz as Occ3D, grid.json; every path relative to --out).
-    Every export writes the dataset's splits beside it (splits/{train,val,test}.txt)."""
+    gts/<scene>/<token>/labels.npz as Occ3D, grid.json; every path relative to --out),
+    openocc-v2 (<seq>/<token>/labels.npz: semantics, instances, flow vx vy m/s, ego frame 0.4 m),
+    uniocc (scene_infos.pkl, <seq>/<frame>.npz: occ_label, occ_mask_camera, occ_flow_forward /
+    backward in voxels, ego pose, cameras, annotations). Every export writes grid.json (frame,
+    origin, voxel size, axes, labels, centre = origin + (index + 0.5) * voxel size) and the
+    dataset's splits beside it (splits/{train,val,test}.txt)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from carlaocc.catalog.formats import FormatError

@@ -608,3 +608,80 @@ def resample(
         for name, mk in mask_items.items()
     }
     return labels, out_masks
+
+
+def resample_panoptic(
+    semantic: np.ndarray,
+    instance: np.ndarray,
+    flow: np.ndarray | None,
+    grid: GridSpec,
+    target: TargetGrid,
+    grid_to_target: np.ndarray,
+    priority: np.ndarray | Sequence[int] | None = None,
+    label_table: str | LabelTable | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The instance ids and flow of a CarlaOcc frame on another dataset's grid, binned like
+    :func:`resample` bins the classes (the same voxel centres, the same class priority).
+
+    ``instance``: uint32 ``grid.shape`` (0 = stuff or free); ``flow``: ``grid.shape + (3,)`` (m/s,
+    our LiDAR frame's axes) or None. Returns ``(instances, flow)``: uint32 ``target.shape``, each
+    target voxel the largest instance id among the centres of its winning class (0 when that
+    class is stuff), and float32 ``target.shape + (3,)``: the mean flow of the centres with a
+    non-zero flow in the voxel (their moving material: the road users, which outrank what they
+    stand on), rotated into the target frame's axes (m/s); None without ``flow``.
+    """
+    _check_volume("semantic", semantic, grid.shape, np.uint8)
+    _check_volume("instance", np.asarray(instance), grid.shape)
+    m = _check_affine(grid_to_target)
+    lut = _label_lut(target, label_table)
+    prio = [int(c) for c in (DEFAULT_POOLING_PRIORITY if priority is None else priority)]
+    prio = [c for c in prio if lut[c] != target.free_label] + [c for c in prio if lut[c] == target.free_label]
+    rank, _ = rank_table(prio)
+    points = not np.array_equal(m[:3, :3], np.eye(3))
+    # 1. per target voxel, max of (class rank << 32 | instance): the winning class's largest id
+    key = (rank[semantic].astype(np.uint64) << np.uint64(32)) | np.asarray(instance, dtype=np.uint64)
+    best = _bin_reduce(key, lambda a: a, grid, m, target, np.maximum, np.uint64, points)
+    instances = (best & np.uint64(0xFFFFFFFF)).astype(np.uint32)
+    if flow is None:
+        return instances, None
+    flow = np.asarray(flow)
+    if flow.shape != (*grid.shape, 3):
+        raise ValueError(f"flow has shape {flow.shape}, expected {(*grid.shape, 3)}")
+    # 2. the mean of the non-zero flows per target voxel, component by component
+    moving = np.any(flow != 0, axis=-1)
+    count = _bin_reduce(moving.astype(np.uint32), lambda a: a, grid, m, target, np.add, np.uint32, points)
+    out = np.zeros((*target.shape, 3), np.float32)
+    for c in range(3):
+        comp = np.where(moving, flow[..., c].astype(np.float32), np.float32(0))
+        out[..., c] = _bin_reduce(comp, lambda a: a, grid, m, target, np.add, np.float64, points)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out /= np.maximum(count, 1)[..., None]
+    # 3. velocities are directions: the frame change rotates them, it does not move them
+    return instances, (out @ m[:3, :3].T.astype(np.float32)).astype(np.float32)
+
+
+def downsample_ssc(labels: np.ndarray, factor: int, empty: int = 0, invalid: int = 255,
+                   empty_fraction: float = 0.95) -> np.ndarray:
+    """The coarse SSC target MonoScene-style loaders read beside the full one (SSCBench's
+    ``_1_8.npy``): each ``factor``-cube block of ``labels`` (X, Y, Z, each divisible by
+    ``factor``) becomes ``empty`` or ``invalid`` -- whichever of the two is more frequent -- when
+    those two together fill more than ``empty_fraction`` of it, else its most frequent other
+    label (ties: the smallest id)."""
+    X, Y, Z = labels.shape
+    if X % factor or Y % factor or Z % factor:
+        raise ValueError(f"a {labels.shape} grid does not divide into blocks of {factor}")
+    # 1. one row of factor**3 labels per block, blocks in C order
+    blocks = labels.reshape(X // factor, factor, Y // factor, factor, Z // factor, factor)
+    blocks = blocks.transpose(0, 2, 4, 1, 3, 5).reshape(-1, factor ** 3)
+    n_empty = np.count_nonzero(blocks == empty, axis=1)
+    n_invalid = np.count_nonzero(blocks == invalid, axis=1)
+    # 2. the most frequent label among the others (counts per label id, argmax picks the smallest on ties)
+    other = np.where((blocks == empty) | (blocks == invalid), 0, blocks.astype(np.int64) + 1)
+    counts = np.zeros((len(blocks), int(other.max()) + 1), np.int64)
+    np.add.at(counts, (np.repeat(np.arange(len(blocks)), blocks.shape[1]), other.reshape(-1)), 1)
+    counts[:, 0] = 0
+    majority = (counts.argmax(axis=1) - 1).astype(labels.dtype)
+    # 3. mostly empty or unobserved blocks take the more frequent of the two
+    mostly_empty = (n_empty + n_invalid) > empty_fraction * factor ** 3
+    out = np.where(mostly_empty, np.where(n_empty > n_invalid, empty, invalid), majority)
+    return out.astype(labels.dtype).reshape(X // factor, Y // factor, Z // factor)

@@ -64,6 +64,16 @@ def test_sparse_occupancy_is_the_stored_frame_read_from_its_own_chunks(default_0
     np.testing.assert_allclose(s["grid_origin"], GridSpec(voxel_size=0.1).region_min)
 
 
+def test_crop_faces_on_voxel_centres_take_those_voxels_on_every_axis(default_01):
+    from carlaocc.data import _crop_box
+
+    g = GridSpec(voxel_size=0.2)
+    o = np.asarray(g.region_min)
+    # faces exactly on centres (index 3 and 6 on each axis)
+    lo, hi = _crop_box(g, (o + 3.5 * 0.2, o + 6.5 * 0.2))
+    assert lo.tolist() == [3, 3, 3] and hi.tolist() == [7, 7, 7]
+
+
 def test_a_crop_is_the_same_voxels_as_the_sparse_rows_inside_it(default_01, ds):
     crop = ((2.0, -6.0, -2.5), (14.3, 6.0, 1.0))
     c = CarlaOccDataset(default_01.url, occupancy="crop", crop=crop, cameras=False, lidar=False, boxes=False)[1]
@@ -126,6 +136,20 @@ def test_dense_is_refused_when_too_big_and_bad_options_say_why(default_01):
         CarlaOccDataset(default_01.url, occupancy="crop")
     with pytest.raises(DatasetError, match="camera_maps"):
         CarlaOccDataset(default_01.url, camera_maps=("lidar",))
+    with pytest.raises(DatasetError, match="voxel_size=-1"):
+        CarlaOccDataset(default_01.url, voxel_size=-1)
+    with pytest.raises(DatasetError, match="does not exist"):
+        CarlaOccDataset(default_01.url + "_nowhere")
+    for bad in ((0, 1), ((0, 0, 0), (1, 1)), ((5, 0, 0), (1, 1, 1))):
+        with pytest.raises(DatasetError, match="crop="):
+            CarlaOccDataset(default_01.url, occupancy="crop", crop=bad)
+    with pytest.raises(DatasetError, match="the crop holds"):
+        CarlaOccDataset(default_01.url, occupancy="crop", crop=((0, -20, -3), (50, 20, 9)), dense_limit=10**6)
+    one = CarlaOccDataset(default_01.url, sequences="town00_high_seq000", cameras=False, lidar=False)  # a str is one id
+    assert {s for s, _ in one.samples} == {"town00_high_seq000"}
+    with pytest.raises(TypeError):
+        one[1.7]
+    assert one[np.int64(0)]["frame_index"] == one.samples[0][1]
 
 
 def test_collate_stacks_same_shapes_and_lists_the_rest(ds):

@@ -59,6 +59,13 @@ def test_infos_load_and_every_path_exists(exported, default_01):
             nxt = by_token[info["next"]]
             assert nxt["prev"] == info["token"] and nxt["timestamp"] > info["timestamp"]
             assert nxt["scene_name"] == info["scene_name"]
+    # sorted by time (as BEVDet / FlashOcc sort them), every frame's neighbour in its scene is its prev
+    timeline = sorted(infos, key=lambda i: i["timestamp"])
+    assert len({i["timestamp"] for i in infos}) == len(infos)
+    for a, b in zip(timeline, timeline[1:]):
+        assert (b["prev"] == a["token"]) == (b["scene_name"] == a["scene_name"])
+    beams = np.fromfile(exported / infos[0]["lidar_path"], np.float32).reshape(-1, 5)[:, 4]
+    assert beams.min() == 0 and beams.max() == 31  # the 32-beam LiDAR's channels
     splits = {s: set((exported / "splits" / f"{s}.txt").read_text().split()) for s in ("train", "val", "test")}
     assert set.union(*splits.values()) == {i["scene_name"] for i in infos}
     grid = json.loads((exported / "grid.json").read_text())

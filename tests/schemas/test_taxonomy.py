@@ -189,7 +189,26 @@ def test_every_mapping_in_range(target: str) -> None:
         if target == "benchmark15" and tid == tx.IGNORE:
             continue
         assert 0 <= tid < len(names), (target, tx.by_id(cid).name, tid)
-    assert table == tuple(getattr(c, target) for c in tx.CLASSES)
+    if target in tx.DERIVED_TARGETS:  # derived from each class's row, not a column of it
+        assert table == tuple(tx.DERIVED_TARGETS[target](c) for c in tx.CLASSES)
+    else:
+        assert table == tuple(getattr(c, target) for c in tx.CLASSES)
+
+
+@pytest.mark.parametrize("table", ["release", "carlaocc-v1"])
+def test_openocc_v2_and_uniocc_maps(table: str) -> None:
+    o = dict(zip((c.name for c in tx.label_table(table).classes), tx.mapping("openocc_v2", table)))
+    u = dict(zip((c.name for c in tx.label_table(table).classes), tx.mapping("uniocc", table)))
+    on, un = tx.OPENOCC_V2_NAMES, tx.UNIOCC_NAMES
+    # the same nuScenes class as Occ3D, by name, in OpenOcc's order; free is 16 there
+    for name in ("Road", "Sidewalk", "Car", "Truck", "Bus", "Pedestrian", "Bicycle", "Motorcycle", "Vegetation", "Terrain"):
+        occ3d = tx.OCC3D_NUSCENES_NAMES[tx.mapping("occ3d_nuscenes", table)[tx.by_name(name).id]]
+        assert on[o[name]] == occ3d, name
+    assert on[o["None"]] == "free" and o["None"] == 16 and on[o["Building"]] == "manmade"
+    assert "others" not in on and on[o["Other"]] == "manmade"  # Occ3D's others has no OpenOcc class
+    assert [un[u[n]] for n in ("None", "Road", "Sidewalk", "Building", "Pole", "Car", "Rider", "Terrain")] == \
+        ["free", "road", "road", "building", "other", "car", "pedestrian", "terrain"]
+    assert u["None"] == 10 and len(un) == 11
 
 
 def test_target_name_tables_have_the_right_sizes() -> None:
@@ -197,7 +216,8 @@ def test_target_name_tables_have_the_right_sizes() -> None:
     assert len(tx.SSCBENCH_KITTI360_NAMES) == 19
     assert len(tx.SEMANTICKITTI_NAMES) == 20
     assert len(tx.BENCHMARK15_NAMES) == 15
-    expected = {"occ3d_nuscenes", "sscbench_kitti360", "semantickitti", "benchmark15"}
+    expected = {"occ3d_nuscenes", "sscbench_kitti360", "semantickitti", "benchmark15", "openocc_v2", "uniocc"}
+    assert len(tx.OPENOCC_V2_NAMES) == 17 and len(tx.UNIOCC_NAMES) == 11
     assert set(tx.TARGETS) == expected
     for names in tx.TARGETS.values():
         assert len(set(names)) == len(names)
