@@ -469,3 +469,176 @@ def det_cmd(
         typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}")
 
     _run(go)
+
+
+# -- ray-based metrics (SparseOcc's RayIoU / RayPQ) --------------------------------------------------
+
+RAY_CLASSES = {"occ3d": "occ3d_nuscenes", "openocc-v2": "openocc_v2"}
+# road users with one RayPQ segment per instance (SparseOcc's thing list), by class name
+RAY_THINGS = ("car", "truck", "construction_vehicle", "bus", "trailer", "motorcycle", "bicycle", "pedestrian")
+
+
+def ray_pairs(pred: Path, gt: Path) -> list[tuple[str, str, Path, Path]]:
+    """``(scene, token, pred_file, gt_file)`` of an Occ3D-layout ground-truth tree
+    (``<scene>/<token>/labels.npz``) and a prediction tree in the same layout or SparseOcc's flat
+    ``<token>.npz``; errors name what is missing."""
+    for opt, p in (("--pred", pred), ("--gt", gt)):
+        if not p.is_dir():
+            raise InputError(f"{opt} {p} is not a directory (an Occ3D-layout tree <scene>/<token>/labels.npz)")
+    gts = sorted(gt.glob("*/*/labels.npz"))
+    if not gts:
+        raise InputError(f"--gt {gt} holds no <scene>/<token>/labels.npz")
+    out = []
+    for g in gts:
+        scene, token = g.parent.parent.name, g.parent.name
+        cands = [pred / scene / token / "labels.npz", pred / f"{token}.npz"]
+        p = next((c for c in cands if c.is_file()), None)
+        if p is None:
+            raise InputError(f"no prediction for {g} (expected {cands[0]} or {cands[1]})")
+        out.append((scene, token, p, g))
+    return out
+
+
+def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
+    """``token -> (T, 3)`` ray origins (ego frame, m) from info pickles (ours or BEVDet's: per
+    info ``token``, ``scene_name``, ``timestamp``, ``lidar2ego_*`` and ``ego2global_*``
+    translation + quaternion w x y z): the LiDAR positions of the scene's frames in the sample's
+    ego frame (SparseOcc's ego_pose_dataset), then :func:`select_origins`."""
+    import pickle
+
+    from carlaocc.stages.evaluation.rays import select_origins
+    from carlaocc.stages.geometry import rotation_from_quaternion
+
+    def pose(t, q) -> np.ndarray:
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = rotation_from_quaternion(q), np.asarray(t, float)
+        return m
+
+    infos = []
+    for f in infos_files:
+        try:
+            with open(f, "rb") as fh:
+                doc = pickle.load(fh)
+        except (OSError, pickle.UnpicklingError, EOFError) as exc:
+            raise InputError(f"--infos {f}: unreadable ({exc})") from exc
+        items = doc.get("infos", doc.get("data_list")) if isinstance(doc, dict) else doc
+        if not isinstance(items, list):
+            raise InputError(f"--infos {f}: no list of infos ('infos' or 'data_list')")
+        infos += items
+    by_scene: dict[str, list] = {}
+    for info in infos:
+        try:
+            lidar_global = pose(info["ego2global_translation"], info["ego2global_rotation"]) @ \
+                pose(info["lidar2ego_translation"], info["lidar2ego_rotation"])
+            by_scene.setdefault(info["scene_name"], []).append(
+                (info["timestamp"], info["token"], lidar_global,
+                 pose(info["ego2global_translation"], info["ego2global_rotation"])))
+        except KeyError as exc:
+            raise InputError(f"--infos: an info lacks {exc} (needs token, scene_name, timestamp, lidar2ego_* and "
+                             "ego2global_*)") from None
+    out = {}
+    for frames in by_scene.values():
+        frames.sort(key=lambda r: r[0])
+        positions = np.stack([r[2][:3, 3] for r in frames])
+        for _, token, _, ego in frames:
+            world_to_ego = np.linalg.inv(ego)
+            out[token] = select_origins(positions @ world_to_ego[:3, :3].T + world_to_ego[:3, 3])
+    return out
+
+
+def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, relative: bool, origin: str,
+              panoptic: bool, json_out: Path | None) -> None:
+    from carlaocc.schemas import taxonomy
+    from carlaocc.stages.evaluation.rays import RayAccumulator
+
+    if classes not in RAY_CLASSES:
+        raise InputError(f"--classes {classes!r}: one of {', '.join(RAY_CLASSES)}")
+    names = list(taxonomy.TARGETS[RAY_CLASSES[classes]])
+    pairs = ray_pairs(pred, gt)
+    origins = ray_origins(infos) if infos else {}
+    fallback = None
+    if not infos:
+        try:
+            fallback = np.array([float(v) for v in origin.split(",")], float).reshape(1, 3)
+        except ValueError:
+            raise InputError(f"--origin {origin!r}: x,y,z in metres") from None
+        typer.echo(f"note: no --infos, so one ray origin at the LiDAR position {fallback[0].tolist()} m of each grid: "
+                   "NOT the standard protocol (SparseOcc casts from up to 8 ego positions of the scene's frames)", err=True)
+    acc = RayAccumulator(names, thing_classes=tuple(names.index(n) for n in RAY_THINGS), relative=relative)
+    grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
+    for scene, token, p, g in pairs:
+        g_arr, p_arr = _load_arrays(g), _load_arrays(p)
+        gsem = g_arr.get("semantics")
+        psem = p_arr.get("semantics", p_arr.get("pred", next(iter(p_arr.values())) if len(p_arr) == 1 else None))
+        if gsem is None or psem is None:
+            raise InputError(f"{g if gsem is None else p}: no 'semantics' (or 'pred') array")
+        if gsem.shape != (200, 200, 16) or psem.shape != gsem.shape:
+            raise InputError(f"{p}: shape {psem.shape} against the ground truth's {gsem.shape} (the 200 x 200 x 16 "
+                             "grid at 0.4 m)")
+        gi = pi = None
+        if panoptic:
+            gi, pi = g_arr.get("instances"), p_arr.get("instances", p_arr.get("pano_inst"))
+            if gi is None or pi is None:
+                raise InputError(f"{g if gi is None else p}: no 'instances' array (RayPQ needs them on both sides)")
+        if infos and token not in origins:
+            raise InputError(f"--infos has no sample {token} (of {g})")
+        try:
+            acc.update(gsem.astype(np.int64), psem.astype(np.int64), origins[token] if infos else fallback,
+                       grid_origin, voxel, gi, pi)
+        except ValueError as exc:
+            raise InputError(f"{p}: {exc}") from exc
+    iou = acc.ray_iou()
+    doc = {"samples": len(pairs), "rays": acc.rays, "classes": classes, "protocol": "sparseocc" if infos else
+           "single origin (not the standard protocol)", **iou.to_dict()}
+    rows = [("RayIoU", iou.by_threshold, iou.ray_iou)]
+    if panoptic:
+        pq = acc.ray_pq()
+        doc.update(pq.to_dict())
+        rows.append(("RayPQ", pq.by_threshold, pq.ray_pq))
+    typer.echo(f"{len(pairs)} samples, {acc.rays:,} rays kept ({iou.variant}{'' if infos else ', single origin'})")
+    typer.echo(f"{'class':22s} {'@1':>7s} {'@2':>7s} {'@4':>7s}  gt rays")
+    for i, c in enumerate(iou.classes):
+        if iou.gt_rays[i] or np.isfinite(iou.iou[:, i]).any():
+            typer.echo(f"{c:22s} " + " ".join(_pct(float(iou.iou[k, i])) + " " for k in range(3)) + f" {int(iou.gt_rays[i]):,}")
+    for name, by, mean in rows:
+        typer.echo(f"{name:22s} " + " ".join(_pct(by[t]) + " " for t in (1.0, 2.0, 4.0)) + f" mean {_pct(mean)}")
+    _write_json(json_out, _finite(doc))
+
+
+def _finite(obj):
+    """NaN -> None throughout (strict JSON)."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+InfosOpt = Annotated[Optional[list[Path]], typer.Option("--infos", help="info pickle(s) with the samples' poses (carlaocc export mmdet3d-infos, or BEVDet/SparseOcc infos): ray origins at up to 8 LiDAR positions of each scene, SparseOcc's protocol")]
+ClassesOpt = Annotated[str, typer.Option("--classes", help="occ3d (18, free 17) | openocc-v2 (17, free 16)")]
+RelativeOpt = Annotated[bool, typer.Option("--relative", help="OccNet's variant: a ray within 10 %% of the ground-truth depth is also a hit")]
+OriginOpt = Annotated[str, typer.Option("--origin", help="without --infos: the one ray origin, x,y,z m in the grid's (ego) frame")]
+
+
+@eval_app.command("rayiou")
+def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree: <scene>/<token>/labels.npz (semantics) or <token>.npz (pred)")],
+               gt: Annotated[Path, typer.Option("--gt", help="ground-truth Occ3D tree <scene>/<token>/labels.npz")],
+               infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
+               origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
+    """RayIoU (SparseOcc): per-class IoU of the first hits of 14,040 query rays from up to 8
+    origins per sample, a hit counting when the class agrees and the depth is within 1, 2 or 4 m;
+    RayIoU@1/@2/@4 and their mean."""
+    _run(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, False, json_out))
+
+
+@eval_app.command("raypq")
+def raypq_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree with semantics and instances")],
+              gt: Annotated[Path, typer.Option("--gt", help="ground-truth Occ3D tree with semantics and instances")],
+              infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
+              origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
+    """RayPQ (SparseOcc) beside RayIoU: ray segments (one per thing instance, one per stuff class
+    and sample) matched at IoU > 0.5 within each depth threshold; segments under 10 rays are never
+    counted as errors."""
+    _run(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, True, json_out))

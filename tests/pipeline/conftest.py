@@ -31,3 +31,22 @@ def default_01(tmp_path_factory, default_01_config) -> Store:
                                  "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     return Store(str(root))
+
+
+@pytest.fixture(scope="session")
+def infos_01(default_01, tmp_path_factory):
+    """``carlaocc export mmdet3d-infos`` of :func:`default_01` (read-only)."""
+    out = tmp_path_factory.mktemp("infos_01") / "infos"
+    r = CliRunner().invoke(app, ["export", "mmdet3d-infos", "--res", "0.1", "--root", default_01.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.fixture(scope="session")
+def openocc_01(default_01, tmp_path_factory):
+    """``carlaocc export openocc-v2`` of :func:`default_01`'s busiest sequence (read-only)."""
+    out = tmp_path_factory.mktemp("openocc_01") / "openocc"
+    r = CliRunner().invoke(app, ["export", "openocc-v2", "--res", "0.1", "--root", default_01.url, "--out", str(out),
+                                 "--sequence", "town00_high_seq000"])
+    assert r.exit_code == 0, r.output
+    return out

@@ -34,8 +34,8 @@ SEQ = "town00_high_seq000"  # the busiest sequence: moving vehicles in every fra
 
 
 @pytest.fixture(scope="module")
-def openocc(default_01, tmp_path_factory) -> Path:
-    return _export(default_01, "openocc-v2", tmp_path_factory, "--sequence", SEQ)
+def openocc(openocc_01) -> Path:
+    return openocc_01  # SEQ only
 
 
 @pytest.fixture(scope="module")

@@ -21,11 +21,8 @@ cli = CliRunner()
 
 
 @pytest.fixture(scope="module")
-def exported(default_01, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("infos") / "infos"
-    r = cli.invoke(app, ["export", "mmdet3d-infos", "--res", "0.1", "--root", default_01.url, "--out", str(out)])
-    assert r.exit_code == 0, r.output
-    return out
+def exported(infos_01) -> Path:
+    return infos_01
 
 
 def _infos(out: Path) -> list[dict]:

@@ -1,0 +1,75 @@
+"""`carlaocc eval rayiou | raypq` end to end on the shared built root's exports: the Occ3D ground
+truth against itself with the infos' origins scores 1 everywhere it has rays; a prediction that
+loses a class scores 0 there; RayPQ on the OpenOcc v2 export (instances) against itself is 1;
+without infos the command says it is not the standard protocol."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+from typer.testing import CliRunner
+
+from carlaocc.pipeline.cli import app
+from carlaocc.pipeline.cli.evaluate import ray_origins
+
+cli = CliRunner()
+
+
+def _pkls(infos_dir):
+    return [str(p) for p in sorted(infos_dir.glob("carlaocc_infos_*.pkl"))]
+
+
+def test_rayiou_of_the_ground_truth_against_itself_is_one(infos_01, tmp_path):
+    args = ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", str(infos_01 / "gts"),
+            "--json", str(tmp_path / "r.json")]
+    for p in _pkls(infos_01):
+        args += ["--infos", p]
+    r = cli.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["protocol"] == "sparseocc" and doc["samples"] == 6 and doc["rays"] > 100_000
+    assert doc["RayIoU"] == 1.0 and doc["RayIoU@1"] == doc["RayIoU@2"] == doc["RayIoU@4"] == 1.0
+    present = [c for c, v in doc["per_class"].items() if v["gt_rays"]]
+    assert {"driveable_surface", "manmade", "vegetation"} <= set(present)
+    assert "RayIoU" in r.output and "@1" in r.output  # the table
+
+
+def test_origins_come_from_the_scene_frames(infos_01):
+    origins = ray_origins([__import__("pathlib").Path(p) for p in _pkls(infos_01)])
+    assert len(origins) == 6
+    for o in origins.values():
+        # two frames a sequence: the sample's own LiDAR (1.73 m up) and its neighbour's
+        assert 1 <= len(o) <= 2 and np.any(np.all(np.isclose(o, [0.0, 0.0, 1.73], atol=1e-6), axis=1))
+
+
+def test_a_lost_class_scores_zero_and_no_infos_is_flagged(infos_01, tmp_path):
+    pred = tmp_path / "pred"
+    shutil.copytree(infos_01 / "gts", pred)
+    for f in pred.glob("*/*/labels.npz"):
+        z = dict(np.load(f))
+        z["semantics"] = np.where(z["semantics"] == 16, 17, z["semantics"]).astype(np.uint8)  # vegetation -> free
+        np.savez_compressed(f, **z)
+    r = cli.invoke(app, ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", str(pred), "--json",
+                         str(tmp_path / "r.json")])
+    assert r.exit_code == 0, r.output
+    assert "NOT the standard protocol" in r.output
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["per_class"]["vegetation"]["@4"] == 0.0 and doc["per_class"]["driveable_surface"]["@1"] < 1.0 + 1e-9
+    assert doc["protocol"].startswith("single origin")
+
+
+def test_raypq_on_the_openocc_export_against_itself(openocc_01, infos_01, tmp_path):
+    args = ["eval", "raypq", "--classes", "openocc-v2", "--gt", str(openocc_01), "--pred", str(openocc_01),
+            "--json", str(tmp_path / "p.json")]
+    for p in _pkls(infos_01):
+        args += ["--infos", p]
+    r = cli.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "p.json").read_text())
+    assert doc["RayPQ"] == 1.0 and doc["RayIoU"] == 1.0 and doc["samples"] == 2
+    assert any(v["@1"] == 1.0 for v in doc["per_class"].values())
+    # a missing instances array is a clear error
+    r = cli.invoke(app, ["eval", "raypq", "--gt", str(infos_01 / "gts"), "--pred", str(infos_01 / "gts")])
+    assert r.exit_code == 2 and "instances" in r.output
