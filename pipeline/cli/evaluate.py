@@ -564,7 +564,8 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
             raise InputError(f"--origin {origin!r}: x,y,z in metres") from None
         typer.echo(f"note: no --infos, so one ray origin at the LiDAR position {fallback[0].tolist()} m of each grid: "
                    "NOT the standard protocol (SparseOcc casts from up to 8 ego positions of the scene's frames)", err=True)
-    acc = RayAccumulator(names, thing_classes=tuple(names.index(n) for n in RAY_THINGS), relative=relative)
+    things = tuple(names.index(n) for n in RAY_THINGS)
+    acc = RayAccumulator(names, thing_classes=things, relative=relative, flow_classes=things)
     grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
     for scene, token, p, g in pairs:
         g_arr, p_arr = _load_arrays(g), _load_arrays(p)
@@ -582,9 +583,12 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
                 raise InputError(f"{g if gi is None else p}: no 'instances' array (RayPQ needs them on both sides)")
         if infos and token not in origins:
             raise InputError(f"--infos has no sample {token} (of {g})")
+        gf, pf = g_arr.get("flow"), p_arr.get("flow")  # OpenOcc v2: (X, Y, Z, 2) m/s
+        if (gf is None) != (pf is None) and gf is not None:
+            raise InputError(f"{p}: the ground truth has 'flow' and the prediction none (mAVE needs both)")
         try:
             acc.update(gsem.astype(np.int64), psem.astype(np.int64), origins[token] if infos else fallback,
-                       grid_origin, voxel, gi, pi)
+                       grid_origin, voxel, gi, pi, gf, pf)
         except ValueError as exc:
             raise InputError(f"{p}: {exc}") from exc
     iou = acc.ray_iou()
@@ -595,6 +599,11 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         pq = acc.ray_pq()
         doc.update(pq.to_dict())
         rows.append(("RayPQ", pq.by_threshold, pq.ray_pq))
+    flow_line = ""
+    if acc.has_flow:
+        m, per = acc.mave()
+        doc.update({"mAVE": m, "AVE_per_class": per, "occupancy_score": acc.occupancy_score()})
+        flow_line = f"mAVE {m:.4f} m/s (TP rays at 2 m of the road users), occupancy score {acc.occupancy_score():.4f}"
     typer.echo(f"{len(pairs)} samples, {acc.rays:,} rays kept ({iou.variant}{'' if infos else ', single origin'})")
     typer.echo(f"{'class':22s} {'@1':>7s} {'@2':>7s} {'@4':>7s}  gt rays")
     for i, c in enumerate(iou.classes):
@@ -602,6 +611,8 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
             typer.echo(f"{c:22s} " + " ".join(_pct(float(iou.iou[k, i])) + " " for k in range(3)) + f" {int(iou.gt_rays[i]):,}")
     for name, by, mean in rows:
         typer.echo(f"{name:22s} " + " ".join(_pct(by[t]) + " " for t in (1.0, 2.0, 4.0)) + f" mean {_pct(mean)}")
+    if flow_line:
+        typer.echo(flow_line)
     _write_json(json_out, _finite(doc))
 
 
@@ -629,7 +640,8 @@ def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tre
                origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
     """RayIoU (SparseOcc): per-class IoU of the first hits of 14,040 query rays from up to 8
     origins per sample, a hit counting when the class agrees and the depth is within 1, 2 or 4 m;
-    RayIoU@1/@2/@4 and their mean."""
+    RayIoU@1/@2/@4 and their mean. With a 'flow' array on both sides (OpenOcc v2), also mAVE and
+    the occupancy score 0.9 RayIoU + 0.1 max(1 - mAVE, 0)."""
     _run(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, False, json_out))
 
 

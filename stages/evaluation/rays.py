@@ -28,6 +28,10 @@ public sources), per evaluated sample:
    and threshold: segments are matched at IoU > 0.5, the intersection counting only rays within
    the depth threshold, the areas all the segment's rays; ``FP`` / ``FN`` are unmatched segments of
    at least 10 rays. ``PQ = sum IoU / (TP + FP/2 + FN/2)`` per class over the dataset.
+7. **Flow** (OccNet's occupancy-and-flow track), when both sides carry a 2-D flow per voxel:
+   ``mAVE`` = the mean over the moving classes of the mean L2 error (m/s) between the flows at
+   the hit voxels of the true-positive rays at 2 m; the occupancy score is
+   ``0.9 * RayIoU + 0.1 * max(1 - mAVE, 0)``.
 
 Frames and units: grids are ``(X, Y, Z)`` class ids indexed ``[x, y, z]``; a voxel ``(i, j, k)``
 spans ``origin + [i, i + 1) * voxel_size`` on each axis; ray origins are metres in the grid's
@@ -52,6 +56,7 @@ MIN_SEGMENT_RAYS = 10
 MAX_ORIGINS = 8
 ORIGIN_LIMIT = 39.0  # m: origins with |x| or |y| beyond are dropped
 RELATIVE = 0.1  # OccNet's relative depth error
+FLOW_THRESHOLD = 2.0  # m: the true-positive rays mAVE is measured on (OccNet)
 
 
 def query_directions() -> np.ndarray:
@@ -212,7 +217,10 @@ class RayAccumulator:
     _gt: np.ndarray = field(init=False)
     _pr: np.ndarray = field(init=False)
     _pq: np.ndarray = field(init=False)  # (T, C, 4): TP, FP, FN, sum IoU
+    _ave: np.ndarray = field(init=False)  # (C, 2): flow error sum, TP rays (at FLOW_THRESHOLD)
     rays: int = field(init=False, default=0)
+    has_flow: bool = field(init=False, default=False)
+    flow_classes: tuple[int, ...] = ()  # the moving classes mAVE is over (OccNet: the 8 road users)
 
     def __post_init__(self) -> None:
         n, t = len(self.classes), len(self.thresholds)
@@ -221,6 +229,7 @@ class RayAccumulator:
         self._gt = np.zeros(n, np.int64)
         self._pr = np.zeros(n, np.int64)
         self._pq = np.zeros((t, n, 4), np.float64)
+        self._ave = np.zeros((n, 2), np.float64)
 
     def cast(self, sem: np.ndarray, origins: np.ndarray, grid_origin, voxel_size: float,
              inst: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -235,8 +244,10 @@ class RayAccumulator:
         return np.where(miss, 0.0, depth), label, ids
 
     def update(self, gt_sem: np.ndarray, pred_sem: np.ndarray, origins: np.ndarray, grid_origin, voxel_size: float,
-               gt_inst: np.ndarray | None = None, pred_inst: np.ndarray | None = None) -> None:
-        """Score one sample: its ground truth and prediction (same grid), ray origins (m)."""
+               gt_inst: np.ndarray | None = None, pred_inst: np.ndarray | None = None,
+               gt_flow: np.ndarray | None = None, pred_flow: np.ndarray | None = None) -> None:
+        """Score one sample: its ground truth and prediction (same grid), ray origins (m), and
+        optionally instance ids (RayPQ) and 2-D flows ``(X, Y, Z, 2)`` m/s (mAVE)."""
         if gt_sem.shape != pred_sem.shape:
             raise ValueError(f"prediction {pred_sem.shape} and ground truth {gt_sem.shape} differ in shape")
         n = len(self.classes)
@@ -247,10 +258,21 @@ class RayAccumulator:
             return
         gd, gl, gi = self.cast(gt_sem, origins, grid_origin, voxel_size, gt_inst)
         pd, pl, pi = self.cast(pred_sem, origins, grid_origin, voxel_size, pred_inst)
-        self.add_rays(gd, gl, pd, pl, gi, pi)
+        gv = pv = None
+        if gt_flow is not None and pred_flow is not None:
+            # the flow at each ray's hit voxel (2-D, m/s)
+            gv = self._flow_at(gt_sem, gt_flow, origins, grid_origin, voxel_size)
+            pv = self._flow_at(pred_sem, pred_flow, origins, grid_origin, voxel_size)
+        self.add_rays(gd, gl, pd, pl, gi, pi, gv, pv)
+
+    def _flow_at(self, sem, flow, origins, grid_origin, voxel_size) -> np.ndarray:
+        _, lin = first_hits(sem != self.free, origins, self.directions, grid_origin, voxel_size)
+        f = np.asarray(flow, np.float64).reshape(-1, np.asarray(flow).shape[-1])[:, :2]
+        return np.where((lin >= 0)[:, None], f[np.maximum(lin, 0)], 0.0)
 
     def add_rays(self, gd: np.ndarray, gl: np.ndarray, pd: np.ndarray, pl: np.ndarray,
-                 gi: np.ndarray | None = None, pi: np.ndarray | None = None) -> None:
+                 gi: np.ndarray | None = None, pi: np.ndarray | None = None,
+                 gv: np.ndarray | None = None, pv: np.ndarray | None = None) -> None:
         """Score one sample's rays: ground-truth and predicted depth (m), label and (for RayPQ)
         instance id of every ray, in the same order."""
         n = len(self.classes)
@@ -269,8 +291,32 @@ class RayAccumulator:
             if self.relative:
                 ok |= err / np.maximum(gd, 1e-12) < RELATIVE
             self._tp[k] += np.bincount(gl[same & ok], minlength=n)
+        if gv is not None and pv is not None:
+            # OccNet's mAVE: the 2-D flow error on the true-positive rays at 2 m of the moving classes
+            tp = same & (err < FLOW_THRESHOLD)
+            if self.relative:
+                tp |= same & (err / np.maximum(gd, 1e-12) < RELATIVE)
+            e = np.linalg.norm(np.asarray(gv)[keep] - np.asarray(pv)[keep], axis=1)
+            np.add.at(self._ave, (gl[tp], 0), e[tp])
+            np.add.at(self._ave, (gl[tp], 1), 1.0)
+            self.has_flow = True
         if gi is not None and pi is not None:
             self._update_pq(gl, gd, np.asarray(gi, np.int64)[keep], pl, pd, np.asarray(pi, np.int64)[keep])
+
+    def mave(self) -> tuple[float, dict[str, float | None]]:
+        """(mAVE, per moving class mean flow error in m/s) over the true-positive rays at 2 m;
+        classes without such rays are left out (NaN when none has any)."""
+        per = {}
+        for c in self.flow_classes:
+            s, n = self._ave[c]
+            per[self.classes[c]] = float(s / n) if n else None
+        vals = [v for v in per.values() if v is not None]
+        return (float(np.mean(vals)) if vals else float("nan")), per
+
+    def occupancy_score(self) -> float:
+        """OccNet's occupancy-and-flow score ``0.9 * RayIoU + 0.1 * max(1 - mAVE, 0)``."""
+        m, _ = self.mave()
+        return 0.9 * self.ray_iou().ray_iou + 0.1 * max(1.0 - m, 0.0) if math.isfinite(m) else float("nan")
 
     def _update_pq(self, gl, gd, gi, pl, pd, pi) -> None:
         n = len(self.classes)

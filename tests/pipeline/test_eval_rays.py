@@ -69,6 +69,9 @@ def test_raypq_on_the_openocc_export_against_itself(openocc_01, infos_01, tmp_pa
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "p.json").read_text())
     assert doc["RayPQ"] == 1.0 and doc["RayIoU"] == 1.0 and doc["samples"] == 2
+    # the export carries flow: mAVE 0 over the moving classes' rays, occupancy score 1
+    assert doc["mAVE"] == 0.0 and doc["occupancy_score"] == 1.0 and doc["AVE_per_class"]["car"] == 0.0
+    assert "occupancy score" in r.output
     assert any(v["@1"] == 1.0 for v in doc["per_class"].values())
     # a missing instances array is a clear error
     r = cli.invoke(app, ["eval", "raypq", "--gt", str(infos_01 / "gts"), "--pred", str(infos_01 / "gts")])

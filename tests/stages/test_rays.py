@@ -222,3 +222,28 @@ def test_raypq_matching_boundary_and_small_segments():
     assert np.isnan(score(g4, p4)[0])
     # ... while a 10-ray one unmatched is an FN (PQ 0)
     assert score([5] * 10, [6] * 3 + [7] * 3 + [8] * 4)[0] == 0.0
+
+
+def test_mave_and_the_occupancy_score():
+    names = list(taxonomy.OPENOCC_V2_NAMES)  # free 16
+    car = names.index("car")
+    gt = np.full((200, 200, 16), 16, np.uint8)
+    gt[:, :, 0:2] = names.index("driveable_surface")
+    gt[120:130, 95:105, 2:6] = car
+    flow = np.zeros((*gt.shape, 2), np.float32)
+    flow[gt == car] = (3.0, 0.0)
+    o = np.array([[0.0, 0.0, 1.8]])
+    # the same flow: mAVE 0, score 0.9 * 1 + 0.1
+    acc = RayAccumulator(names, flow_classes=(car,))
+    acc.update(gt, gt, o, ORIGIN, VS, gt_flow=flow, pred_flow=flow)
+    assert acc.mave()[0] == 0.0 and acc.occupancy_score() == pytest.approx(1.0)
+    # a car predicted still: every TP car ray is 3 m/s off; mAVE 3 > 1 adds nothing
+    acc2 = RayAccumulator(names, flow_classes=(car,))
+    acc2.update(gt, gt, o, ORIGIN, VS, gt_flow=flow, pred_flow=np.zeros_like(flow))
+    m, per = acc2.mave()
+    assert m == pytest.approx(3.0) and per["car"] == pytest.approx(3.0)
+    assert acc2.occupancy_score() == pytest.approx(0.9)
+    # half the speed: mAVE 1.5 -> still 0.9; 0.5 m/s off -> 0.9 + 0.05
+    acc3 = RayAccumulator(names, flow_classes=(car,))
+    acc3.update(gt, gt, o, ORIGIN, VS, gt_flow=flow, pred_flow=flow * (2.5 / 3.0))
+    assert acc3.mave()[0] == pytest.approx(0.5, abs=1e-6) and acc3.occupancy_score() == pytest.approx(0.95)
