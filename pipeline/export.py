@@ -33,6 +33,8 @@ Layouts written under ``OUT``:
   (:mod:`carlaocc.pipeline.export_infos`).
 * ``openocc-v2`` / ``uniocc``: semantics, instances and flow in those layouts and units
   (:mod:`carlaocc.pipeline.export_flow`).
+* ``det-gt``: the ground-truth boxes in the nuScenes detection result layout, for
+  ``carlaocc eval det`` (:mod:`carlaocc.pipeline.export_detgt`).
 
 Every export writes ``grid.json``: the grid its files index (frame, origin, voxel size, shape,
 axis order, label names and free label, the label table it was built under) and the formula
@@ -66,7 +68,7 @@ from carlaocc.schemas.records import SequenceRecord
 from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, downsample_ssc, resample
 
 FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "sscbench-kitti360", "surroundocc", "carlaocc-npz",
-                             "carlaocc-release", "mmdet3d-infos", "openocc-v2", "uniocc")
+                             "carlaocc-release", "mmdet3d-infos", "openocc-v2", "uniocc", "det-gt")
 
 SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
                                 SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
@@ -178,6 +180,11 @@ def export(store: Store, config: DatasetConfig, fmt: str, resolution: float, out
         from carlaocc.pipeline.export_infos import export_infos
 
         n_seq, n_frames, n_files = export_infos(store, config, out, resolution, sequences, progress)
+        return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+    if fmt == "det-gt":
+        from carlaocc.pipeline.export_detgt import export_det_gt
+
+        n_seq, n_frames, n_files = export_det_gt(store, config, out, resolution, sequences, progress)
         return ExportSummary(fmt, n_seq, n_frames, n_files, out)
     if fmt in ("openocc-v2", "uniocc"):
         from carlaocc.pipeline.export_flow import export_flow

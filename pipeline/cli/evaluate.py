@@ -355,7 +355,7 @@ def depth_cmd(
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
-        _write_json(json_out, data)
+        _write_json(json_out, _finite(data))
         names = ("AbsRel", "SqRel", "RMSE", "RMSElog", "d<1.25", "d<1.25^2", "d<1.25^3")
         typer.echo(f"{'average':<8} " + " ".join(f"{n:>9}" for n in names))
         for avg in ("pixel", "image"):
@@ -389,8 +389,15 @@ def _box(obj: Any, where: str, need_score: bool):
             score = obj.get("detection_score")
         if need_score and score is None:
             raise InputError(f"{where}: a predicted box needs a score")
+        vel = obj.get("velocity")
+        vel = None if vel is None or not all(v is not None and math.isfinite(float(v)) for v in vel[:2]) else \
+            (float(vel[0]), float(vel[1]))
+        ego = obj.get("ego_translation")
+        ego_dist = math.hypot(float(ego[0]), float(ego[1])) if ego is not None else obj.get("ego_dist")
         return Box3D(tuple(float(v) for v in center), tuple(float(v) for v in size), float(yaw), str(label),
-                     1.0 if score is None else float(score))  # fmt: skip
+                     1.0 if score is None else float(score), vel, str(obj.get("attribute_name", obj.get("attribute", "")) or ""),
+                     int(obj.get("num_lidar_pts", obj.get("num_pts", -1))),
+                     None if ego_dist is None else float(ego_dist))  # fmt: skip
     except KeyError as exc:
         raise InputError(f"{where}: box lacks {exc}; expected center/size/yaw/label[/score] or "
                          f"translation/size/rotation/detection_name[/detection_score]") from None
@@ -426,10 +433,12 @@ def load_boxes(path: Path, need_score: bool, sample: str | None = None) -> dict[
 def det_cmd(
     pred: PredOpt, gt: GtOpt,
     classes: Annotated[Optional[str], typer.Option("--classes", help="comma-separated class names to score (default: those in the ground truth)")] = None,
+    nuscenes_filters: Annotated[bool, typer.Option("--nuscenes-filters", help="the devkit's filters: nuScenes classes beyond their range of the ego (ego_translation of a box, else its centre's distance from the origin) and ground-truth boxes with num_lidar_pts 0 are dropped")] = False,
     json_out: JsonOpt = None,
 ) -> None:  # fmt: skip
     """3D detection, nuScenes protocol: AP at BEV centre distances 0.5/1/2/4 m (101-point,
-    min recall/precision 0.1), mATE / mASE / mAOE at 2 m (no range filter, no velocity/attributes).
+    min recall/precision 0.1), mATE / mASE / mAOE / mAVE / mAAE at 2 m and NDS (velocity and
+    attribute_name from the boxes where given; the devkit's cone and barrier rules).
 
     Inputs: two JSON files {sample_id: [box, ...]} (or nuScenes' {"results": {...}}), both
     listing the same samples; or two directories of one JSON box list per sample, paired by
@@ -454,19 +463,22 @@ def det_cmd(
                 p_all |= load_boxes(pf, True, key)
                 g_all |= load_boxes(gf, False, key)
         cls = None if classes is None else tuple(c.strip() for c in classes.split(",") if c.strip())
-        acc = DetectionAccumulator(classes=cls or None)
+        acc = DetectionAccumulator(classes=cls or None, nuscenes_filters=nuscenes_filters)
         if not cls and not any(g_all.values()):
             raise InputError(f"--gt {gt} holds no boxes: nothing to score (name --classes to score false positives)")
         for s in g_all:
             acc.update(s, p_all[s], g_all[s])
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
-        _write_json(json_out, data)
-        typer.echo(f"{'class':<18} {'AP':>6} {'ATE m':>7} {'ASE':>6} {'AOE rad':>8} {'gt':>7} {'pred':>7}")
+        _write_json(json_out, _finite(data))
+        f3 = lambda v: "     -" if v is None or not math.isfinite(v) else f"{v:6.3f}"  # noqa: E731
+        typer.echo(f"{'class':<18} {'AP':>6} {'ATE m':>7} {'ASE':>6} {'AOE rad':>8} {'AVE m/s':>8} {'AAE':>6} {'gt':>7} {'pred':>7}")
         for r in data["classes"]:
-            typer.echo(f"{r['name']:<18} {r['ap']:6.3f} {r['ate']:7.3f} {r['ase']:6.3f} {r['aoe']:8.3f} {r['gt']:>7} {r['pred']:>7}")
-        typer.echo(f"{'mean':<18} {res.mean_ap:6.3f} {res.mate:7.3f} {res.mase:6.3f} {res.maoe:8.3f}")
-        typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}")
+            typer.echo(f"{r['name']:<18} {r['ap']:6.3f} {r['ate']:7.3f} {r['ase']:6.3f} {f3(r['aoe']):>8} {f3(r['ave']):>8} "
+                       f"{f3(r['aae']):>6} {r['gt']:>7} {r['pred']:>7}")
+        typer.echo(f"{'mean':<18} {res.mean_ap:6.3f} {res.mate:7.3f} {res.mase:6.3f} {f3(res.maoe):>8} {f3(res.mave):>8} {f3(res.maae):>6}")
+        typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}, "
+                   f"mAVE {res.mave:.4f}, mAAE {res.maae:.4f}, NDS {res.nds:.4f}")
 
     _run(go)
 

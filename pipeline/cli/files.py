@@ -58,7 +58,7 @@ def voxelize_files(
 
 @app.command("export")
 def export_cmd(
-    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | sscbench-kitti360 | surroundocc | carlaocc-npz | carlaocc-release | mmdet3d-infos | openocc-v2 | uniocc")],
+    fmt: Annotated[str, typer.Argument(help="occ3d | semantickitti | sscbench-kitti360 | surroundocc | carlaocc-npz | carlaocc-release | mmdet3d-infos | openocc-v2 | uniocc | det-gt")],
     out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
     res: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling; carlaocc-release: 0.1 by default, any size dividing 0.1)")] = None,
     root: RootOpt = "data",
@@ -81,7 +81,9 @@ def export_cmd(
     gts/<scene>/<token>/labels.npz as Occ3D, grid.json; every path relative to --out),
     openocc-v2 (<seq>/<token>/labels.npz: semantics, instances, flow vx vy m/s, ego frame 0.4 m),
     uniocc (scene_infos.pkl, <seq>/<frame>.npz: occ_label, occ_mask_camera, occ_flow_forward /
-    backward in voxels, ego pose, cameras, annotations). Every export writes grid.json (frame,
+    backward in voxels, ego pose, cameras, annotations), det-gt (det_gt.json: the boxes in the
+    nuScenes detection result layout with velocities, attributes and LiDAR point counts, for
+    carlaocc eval det). Every occupancy export writes grid.json (frame,
     origin, voxel size, axes, labels, centre = origin + (index + 0.5) * voxel size) and the
     dataset's splits beside it (splits/{train,val,test}.txt)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -93,6 +95,13 @@ def export_cmd(
         fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
     if label_encoding not in ("bits", "decimal"):
         fail(f"--label-encoding {label_encoding!r}: must be bits or decimal")
+    if res is None and fmt == "det-gt":  # boxes do not depend on it: the finest size built picks the frames
+        from carlaocc.data import CarlaOccDataset, DatasetError
+
+        try:
+            res = CarlaOccDataset(root, occupancy="none", cameras=False, lidar=False, boxes=False).voxel_size
+        except DatasetError as exc:
+            fail(exc)
     if res is None:
         if fmt != "carlaocc-release":
             fail(f"export {fmt} needs --voxel-size (the built resolution to export from)")

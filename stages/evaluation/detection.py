@@ -1,4 +1,5 @@
-"""3D object detection, nuScenes style: mAP over BEV centre distances, mATE, mASE, mAOE.
+"""3D object detection, nuScenes style: mAP over BEV centre distances, mATE, mASE, mAOE, mAVE,
+mAAE and the nuScenes detection score (NDS).
 
 The semantics are nuscenes-devkit's ``nuscenes.eval.detection.algo.accumulate`` / ``calc_ap`` /
 ``calc_tp`` (devkit 1.2), restated:
@@ -21,8 +22,18 @@ The semantics are nuscenes-devkit's ``nuscenes.eval.detection.algo.accumulate`` 
   ``no_predictions``). ``mAP`` = mean over classes of the mean AP over the thresholds; ``mATE``,
   ``mASE``, ``mAOE`` = means over classes.
 
-Not reproduced (no data for them here): the devkit's per-class range filter and bike-rack
-filter, velocity / attribute errors (mAVE, mAAE) and hence NDS, and the barrier's pi period.
+* ``vel_err`` = L2 distance of the 2-D velocities (m/s) and ``attr_err`` = 1 - (attributes
+  equal), where both boxes carry one (NaN otherwise: left out of the running means). Per the
+  devkit's class rules, ``traffic_cone`` has no orientation, velocity or attribute error (NaN),
+  ``barrier`` no velocity or attribute error and an orientation period of pi. ``mAVE`` / ``mAAE``
+  are the class means (NaN classes left out) and
+  ``NDS = (5 mAP + sum over the five TP errors of max(0, 1 - error)) / 10``.
+* Filters (``nuscenes_filters``, the devkit's ``filter_eval_boxes``): ground-truth boxes with
+  ``num_pts == 0`` are dropped (predictions carry -1 and are kept), and boxes of a class in
+  :data:`CLASS_RANGES` farther than its range from the ego -- ``ego_dist`` when the box carries
+  it, else the BEV distance of its centre from the origin (boxes in the ego or LiDAR frame).
+
+Not reproduced: the bike-rack filter (no racks here).
 Frames: boxes in any common frame (LiDAR or world), metres and radians, yaw about +z.
 """
 
@@ -34,14 +45,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["DIST_THS", "Box3D", "DetectionAccumulator", "DetectionResult", "MetricCurve", "accumulate", "calc_ap", "calc_tp"]
+__all__ = ["CLASS_RANGES", "DIST_THS", "Box3D", "DetectionAccumulator", "DetectionResult", "MetricCurve", "accumulate",
+           "calc_ap", "calc_tp", "nd_score"]
 
 DIST_THS: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
 DIST_TH_TP: float = 2.0
 MIN_RECALL: float = 0.1
 MIN_PRECISION: float = 0.1
 NELEM: int = 101
-TP_METRICS: tuple[str, ...] = ("trans_err", "scale_err", "orient_err")
+TP_METRICS: tuple[str, ...] = ("trans_err", "scale_err", "orient_err", "vel_err", "attr_err")
+MEAN_AP_WEIGHT = 5.0
+CLASS_RANGES: dict[str, float] = {
+    "car": 50.0, "truck": 50.0, "bus": 50.0, "trailer": 50.0, "construction_vehicle": 50.0,
+    "pedestrian": 40.0, "motorcycle": 40.0, "bicycle": 40.0, "traffic_cone": 30.0, "barrier": 30.0,
+}  # fmt: skip
+"""The nuScenes detection classes and their evaluation ranges (m; devkit ``cvpr_2019``)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +72,10 @@ class Box3D:
     yaw: float
     label: str
     score: float = 1.0
+    velocity: tuple[float, float] | None = None  # vx, vy m/s (the boxes' frame); None: unknown
+    attribute: str = ""  # nuScenes attribute name ("" : none)
+    num_pts: int = -1  # LiDAR (+ radar) points in a ground-truth box; -1: unknown (predictions)
+    ego_dist: float | None = None  # BEV distance from the ego (m), when the frame is not the ego's
 
     def __post_init__(self) -> None:
         if len(self.center) != 3 or not all(math.isfinite(v) for v in self.center):
@@ -74,6 +96,8 @@ class _Set:
     size: np.ndarray  # (k, 3)
     yaw: np.ndarray  # (k,)
     score: np.ndarray  # (k,)
+    vel: np.ndarray  # (k, 2), NaN where unknown
+    attr: tuple[str, ...]
 
 
 def _as_set(boxes: Sequence[Box3D]) -> _Set:
@@ -82,7 +106,18 @@ def _as_set(boxes: Sequence[Box3D]) -> _Set:
         np.array([b.size for b in boxes], dtype=np.float64).reshape(-1, 3),
         np.array([b.yaw for b in boxes], dtype=np.float64),
         np.array([b.score for b in boxes], dtype=np.float64),
+        np.array([b.velocity if b.velocity is not None else (np.nan, np.nan) for b in boxes], dtype=np.float64).reshape(-1, 2),
+        tuple(b.attribute for b in boxes),
     )
+
+
+def _in_range(b: Box3D) -> bool:
+    """Whether a box of a nuScenes class lies within its class range of the ego."""
+    rng = CLASS_RANGES.get(b.label)
+    if rng is None:
+        return True
+    d = b.ego_dist if b.ego_dist is not None else math.hypot(b.center[0], b.center[1])
+    return d <= rng
 
 
 @dataclass(frozen=True)
@@ -127,11 +162,13 @@ def _cummean(x: np.ndarray) -> np.ndarray:
     return np.divide(s, c, out=np.zeros_like(s), where=c != 0)
 
 
-def accumulate(gt: list[_Set], pred: list[_Set], dist_th: float) -> MetricCurve:
+def accumulate(gt: list[_Set], pred: list[_Set], dist_th: float, label: str = "") -> MetricCurve:
     """Match one class's predictions to its ground truth over all samples at ``dist_th`` metres.
 
-    ``gt[s]`` / ``pred[s]``: that class's boxes of sample ``s`` (samples in input order).
+    ``gt[s]`` / ``pred[s]``: that class's boxes of sample ``s`` (samples in input order);
+    ``label`` decides the devkit's class rules (cone, barrier).
     """
+    period = np.pi if label == "barrier" else 2 * np.pi
     npos = sum(len(g.yaw) for g in gt)
     if npos == 0:
         return MetricCurve.no_predictions()
@@ -160,7 +197,11 @@ def accumulate(gt: list[_Set], pred: list[_Set], dist_th: float) -> MetricCurve:
             m_conf.append(float(p.score[r]))
             errs["trans_err"].append(float(dist[k]))
             errs["scale_err"].append(1.0 - _scale_iou(g.size[k], p.size[r]))
-            errs["orient_err"].append(float(_yaw_diff(g.yaw[k], p.yaw[r])))
+            errs["orient_err"].append(np.nan if label == "traffic_cone" else float(_yaw_diff(g.yaw[k], p.yaw[r], period)))
+            no_motion = label in ("traffic_cone", "barrier")
+            errs["vel_err"].append(np.nan if no_motion else float(np.linalg.norm(g.vel[k] - p.vel[r])))
+            errs["attr_err"].append(np.nan if no_motion or not g.attr[k] or not p.attr[r]
+                                    else float(g.attr[k] != p.attr[r]))
     if not m_conf:
         return MetricCurve.no_predictions()
     # 3. precision / recall along the ranking, resampled at 101 recalls
@@ -195,6 +236,22 @@ def calc_tp(md: MetricCurve, metric: str, min_recall: float = MIN_RECALL) -> flo
     return float(np.mean(md.errors[metric][first : last + 1]))
 
 
+def _class_tp(md: MetricCurve, metric: str, label: str) -> float:
+    """The class's TP error, NaN where the devkit ignores the metric for the class."""
+    if label == "traffic_cone" and metric in ("orient_err", "vel_err", "attr_err"):
+        return float("nan")
+    if label == "barrier" and metric in ("vel_err", "attr_err"):
+        return float("nan")
+    return calc_tp(md, metric)
+
+
+def nd_score(mean_ap: float, tp_errors: dict[str, float]) -> float:
+    """``(5 mAP + sum over the five TP errors of max(0, 1 - error)) / 10``; an error no class
+    measured (NaN) counts as 1."""
+    scores = [max(0.0, 1.0 - (1.0 if not math.isfinite(e) else e)) for e in (tp_errors[m] for m in TP_METRICS)]
+    return (MEAN_AP_WEIGHT * mean_ap + sum(scores)) / (MEAN_AP_WEIGHT + len(TP_METRICS))
+
+
 @dataclass(frozen=True)
 class DetectionResult:
     """Per-class AP per threshold and TP errors, and their means."""
@@ -206,6 +263,9 @@ class DetectionResult:
     mate: float
     mase: float
     maoe: float
+    mave: float
+    maae: float
+    nds: float
     gt_counts: dict[str, int]
     pred_counts: dict[str, int]
     samples: int
@@ -215,11 +275,13 @@ class DetectionResult:
         return {
             "metric": "det", "samples": self.samples, "dist_ths": list(self.dist_ths),
             "mAP": self.mean_ap, "mATE": self.mate, "mASE": self.mase, "mAOE": self.maoe,
+            "mAVE": self.mave, "mAAE": self.maae, "NDS": self.nds,
             "classes": [
                 {"name": c, "ap": float(np.mean(list(self.ap[c].values()))),
                  "ap_by_distance": {str(d): v for d, v in self.ap[c].items()},
                  "ate": self.tp_errors[c]["trans_err"], "ase": self.tp_errors[c]["scale_err"],
-                 "aoe": self.tp_errors[c]["orient_err"], "gt": self.gt_counts[c], "pred": self.pred_counts[c]}
+                 "aoe": self.tp_errors[c]["orient_err"], "ave": self.tp_errors[c]["vel_err"],
+                 "aae": self.tp_errors[c]["attr_err"], "gt": self.gt_counts[c], "pred": self.pred_counts[c]}
                 for c in self.classes
             ],
         }  # fmt: skip
@@ -236,6 +298,7 @@ class DetectionAccumulator:
     classes: tuple[str, ...] | None = None
     dist_ths: tuple[float, ...] = DIST_THS
     dist_th_tp: float = DIST_TH_TP
+    nuscenes_filters: bool = False  # class ranges and GT boxes without points (see the module doc)
     samples: dict[str, tuple[list[Box3D], list[Box3D]]] = field(init=False, default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -250,22 +313,29 @@ class DetectionAccumulator:
 
     def result(self) -> DetectionResult:
         samples = list(self.samples.values())
+        if self.nuscenes_filters:
+            samples = [([b for b in p if _in_range(b)], [b for b in g if _in_range(b) and b.num_pts != 0])
+                       for p, g in samples]
         classes = self.classes or tuple(sorted({b.label for _, g in samples for b in g}))
         ap: dict[str, dict[float, float]] = {}
         tp_err: dict[str, dict[str, float]] = {}
         for c in classes:
             gt = [_as_set([b for b in g if b.label == c]) for _, g in samples]
             pr = [_as_set([b for b in p if b.label == c]) for p, _ in samples]
-            curves = {d: accumulate(gt, pr, d) for d in self.dist_ths}
+            curves = {d: accumulate(gt, pr, d, c) for d in self.dist_ths}
             ap[c] = {d: calc_ap(curves[d]) for d in self.dist_ths}
-            tp_err[c] = {m: calc_tp(curves[self.dist_th_tp], m) for m in TP_METRICS}
-        mean = lambda xs: float(np.nanmean(xs)) if len(xs) else float("nan")  # noqa: E731
+            tp_err[c] = {m: _class_tp(curves[self.dist_th_tp], m, c) for m in TP_METRICS}
+
+        def mean(xs) -> float:
+            xs = [x for x in xs if math.isfinite(x)]
+            return float(np.mean(xs)) if xs else float("nan")
+
+        m_ap = mean([np.mean(list(ap[c].values())) for c in classes])
+        means = {m: mean([tp_err[c][m] for c in classes]) for m in TP_METRICS}
         return DetectionResult(
-            classes=tuple(classes), ap=ap, tp_errors=tp_err,
-            mean_ap=mean([np.mean(list(ap[c].values())) for c in classes]),
-            mate=mean([tp_err[c]["trans_err"] for c in classes]),
-            mase=mean([tp_err[c]["scale_err"] for c in classes]),
-            maoe=mean([tp_err[c]["orient_err"] for c in classes]),
+            classes=tuple(classes), ap=ap, tp_errors=tp_err, mean_ap=m_ap,
+            mate=means["trans_err"], mase=means["scale_err"], maoe=means["orient_err"],
+            mave=means["vel_err"], maae=means["attr_err"], nds=nd_score(m_ap, means),
             gt_counts={c: sum(b.label == c for _, g in samples for b in g) for c in classes},
             pred_counts={c: sum(b.label == c for p, _ in samples for b in p) for c in classes},
             samples=len(samples), dist_ths=tuple(self.dist_ths),

@@ -9,6 +9,7 @@ import json
 import shutil
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from carlaocc.pipeline.cli import app
@@ -76,3 +77,42 @@ def test_raypq_on_the_openocc_export_against_itself(openocc_01, infos_01, tmp_pa
     # a missing instances array is a clear error
     r = cli.invoke(app, ["eval", "raypq", "--gt", str(infos_01 / "gts"), "--pred", str(infos_01 / "gts")])
     assert r.exit_code == 2 and "instances" in r.output
+
+
+def test_det_gt_export_scores_itself_perfectly_with_nds(default_01, tmp_path):
+    """`export det-gt` writes the nuScenes layout (global boxes, w l h, quaternions, velocities,
+    attributes, point counts); `eval det --nuscenes-filters` of it against itself: NDS 1."""
+    from carlaocc.data import CarlaOccDataset
+    from carlaocc.stages.geometry import rotation_from_quaternion
+
+    out = tmp_path / "det"
+    r = cli.invoke(app, ["export", "det-gt", "--root", default_01.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((out / "det_gt.json").read_text())
+    ds = CarlaOccDataset(default_01.url, occupancy="none", cameras=False)
+    assert sorted(doc["results"]) == sorted(f"{s}_{f:06d}" for s, f in ds.samples)
+    boxes = [b for bs in doc["results"].values() for b in bs]
+    assert boxes and {b["detection_name"] for b in boxes} <= set(doc["meta"]["classes"])
+    assert any(b["attribute_name"] == "vehicle.moving" for b in boxes) and any(b["num_lidar_pts"] > 0 for b in boxes)
+    # one box against the loader: global centre, yaw, w-l-h order and velocity
+    seq, frame = ds.samples[0]
+    s = ds[0]
+    b = next(x for x in doc["results"][f"{seq}_{frame:06d}"] if x["instance_id"] == int(s["box_instance"][0])) \
+        if any(x["instance_id"] == int(s["box_instance"][0]) for x in doc["results"][f"{seq}_{frame:06d}"]) else None
+    if b is not None:
+        world = s["lidar_pose"] @ s["box_pose"][0]
+        np.testing.assert_allclose(b["translation"], world[:3, 3], atol=1e-6)
+        np.testing.assert_allclose(rotation_from_quaternion(b["rotation"]), world[:3, :3], atol=1e-6)
+        assert b["size"] == [float(s["boxes"][0][4]), float(s["boxes"][0][3]), float(s["boxes"][0][5])]
+    # the devkit drops ground truth without LiDAR points, not predictions: a perfect detector
+    # reports the boxes it can see
+    pred = {"results": {t: [dict(x, num_lidar_pts=-1) for x in bs if x["num_lidar_pts"] > 0]
+                        for t, bs in doc["results"].items()}, "meta": doc["meta"]}
+    (tmp_path / "pred.json").write_text(json.dumps(pred))
+    assert sum(len(v) for v in pred["results"].values()) < len(boxes)  # some boxes are hidden
+    r = cli.invoke(app, ["eval", "det", "--pred", str(tmp_path / "pred.json"), "--gt", str(out / "det_gt.json"),
+                         "--nuscenes-filters", "--json", str(tmp_path / "d.json")])
+    assert r.exit_code == 0, r.output
+    res = json.loads((tmp_path / "d.json").read_text())
+    assert res["NDS"] == pytest.approx(1.0) and res["mAP"] == pytest.approx(1.0) and res["mAVE"] == 0.0 and res["mAAE"] == 0.0
+    assert "NDS 1.0000" in r.output

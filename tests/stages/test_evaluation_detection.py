@@ -147,7 +147,8 @@ def test_perfect_detections_and_missing_classes():
         acc.update(f"s{s}", [Box3D(b.center, b.size, b.yaw, b.label, 0.8) for b in g], g)
     r = acc.result()
     assert r.ap["Car"] == pytest.approx({t: 1.0 for t in THS})
-    assert r.tp_errors["Car"] == {"trans_err": 0.0, "scale_err": 0.0, "orient_err": 0.0}
+    # no velocities or attributes given: those errors are the devkit's 1 (nothing measured)
+    assert r.tp_errors["Car"] == {"trans_err": 0.0, "scale_err": 0.0, "orient_err": 0.0, "vel_err": 1.0, "attr_err": 1.0}
     # a listed class without ground truth: AP 0 and errors 1 (the devkit's no_predictions)
     assert r.ap["Bus"] == {t: 0.0 for t in THS} and r.tp_errors["Bus"]["trans_err"] == 1.0
     assert r.mean_ap == pytest.approx(0.5)
@@ -164,3 +165,61 @@ def test_bad_boxes_and_duplicate_samples():
     acc.update("a", [], [])
     with pytest.raises(ValueError, match="sample 'a' added twice"):
         acc.update("a", [], [])
+
+
+def _nd_boxes(rng, n=6, speed=5.0):
+    out = []
+    for _ in range(n):
+        v = tuple(rng.normal(0, speed, 2))
+        out.append(Box3D(tuple(rng.uniform(-30, 30, 3)), (4.0, 2.0, 1.5), float(rng.uniform(-3, 3)), "car", 1.0, v,
+                         "vehicle.moving", 10))
+    return out
+
+
+def test_nds_known_answers():
+    from carlaocc.stages.evaluation.detection import nd_score
+
+    # perfect boxes with velocities and attributes: every error 0, NDS 1
+    rng = np.random.default_rng(5)
+    acc = DetectionAccumulator(classes=("car",), nuscenes_filters=True)
+    for s in range(3):
+        g = _nd_boxes(rng)
+        acc.update(f"s{s}", [Box3D(b.center, b.size, b.yaw, b.label, 0.9, b.velocity, b.attribute) for b in g], g)
+    r = acc.result()
+    assert r.mean_ap == pytest.approx(1.0) and r.mave == 0.0 and r.maae == 0.0 and r.nds == pytest.approx(1.0)
+    # an empty submission: mAP 0, every TP error 1, NDS 0
+    acc0 = DetectionAccumulator(classes=("car",))
+    acc0.update("s0", [], _nd_boxes(rng))
+    r0 = acc0.result()
+    assert r0.mean_ap == 0.0 and r0.nds == 0.0 and r0.mave == 1.0
+    # the arithmetic: mAP 0.5 and every error 0.5 -> 0.5; an error above 1 adds 0, never less
+    half = dict.fromkeys(("trans_err", "scale_err", "orient_err", "vel_err", "attr_err"), 0.5)
+    assert nd_score(0.5, half) == pytest.approx(0.5)
+    assert nd_score(0.5, half | {"vel_err": 1.7}) == pytest.approx((2.5 + 0.5 * 4) / 10)
+    # velocities off by 1 m/s everywhere: mAVE 1; wrong attributes: mAAE 1
+    acc2 = DetectionAccumulator(classes=("car",))
+    g = _nd_boxes(rng)
+    acc2.update("s0", [Box3D(b.center, b.size, b.yaw, b.label, 0.9, (b.velocity[0] + 1.0, b.velocity[1]),
+                             "vehicle.stopped") for b in g], g)
+    r2 = acc2.result()
+    assert r2.mave == pytest.approx(1.0) and r2.maae == 1.0
+
+
+def test_class_rules_and_filters():
+    cone = Box3D((5, 0, 0), (0.4, 0.4, 0.8), 0.0, "traffic_cone", 1.0, (0.0, 0.0), "", 3)
+    barrier = Box3D((0, 6, 0), (2.0, 0.5, 1.0), 0.0, "barrier", 1.0, None, "", 4)
+    acc = DetectionAccumulator(classes=("traffic_cone", "barrier"), nuscenes_filters=True)
+    # the barrier predicted turned by pi: no orientation error (period pi); the cone turned: ignored
+    acc.update("s0", [Box3D(cone.center, cone.size, 2.0, "traffic_cone", 0.9),
+                      Box3D(barrier.center, barrier.size, math.pi, "barrier", 0.9)], [cone, barrier])
+    r = acc.result()
+    assert math.isnan(r.tp_errors["traffic_cone"]["orient_err"]) and math.isnan(r.tp_errors["traffic_cone"]["vel_err"])
+    assert r.tp_errors["barrier"]["orient_err"] == pytest.approx(0.0, abs=1e-12)
+    assert math.isnan(r.tp_errors["barrier"]["attr_err"])
+    # filters: a car beyond 50 m and a ground-truth box without points are dropped
+    far = Box3D((60, 0, 0), (4, 2, 1.5), 0.0, "car", 1.0, (0, 0), "vehicle.parked", 5)
+    empty = Box3D((10, 0, 0), (4, 2, 1.5), 0.0, "car", 1.0, (0, 0), "vehicle.parked", 0)
+    near = Box3D((20, 0, 0), (4, 2, 1.5), 0.0, "car", 1.0, (0, 0), "vehicle.parked", 5)
+    f = DetectionAccumulator(classes=("car",), nuscenes_filters=True)
+    f.update("s0", [Box3D(near.center, near.size, 0.0, "car", 0.9, (0, 0), "vehicle.parked")], [far, empty, near])
+    assert f.result().gt_counts["car"] == 1 and f.result().mean_ap == pytest.approx(1.0)

@@ -1,0 +1,101 @@
+"""``carlaocc export det-gt``: the ground-truth boxes of a built root in the nuScenes detection
+result layout, so ``carlaocc eval det`` (and nuScenes-style tools) score detectors on our data.
+
+``OUT/det_gt.json``: ``{"results": {token: [box, ...]}, "meta": {...}}`` with, per box (global
+frame, as the devkit's EvalBox): ``sample_token``, ``translation`` [3] m, ``size`` [w, l, h] m,
+``rotation`` [w, x, y, z], ``velocity`` [vx, vy] m/s, ``detection_name``, ``attribute_name``,
+``num_lidar_pts`` (our LiDAR's points inside the box), ``ego_translation`` (the box centre minus
+the ego position, global axes: its norm is the devkit's range), ``instance_id`` (ours) and
+``detection_score`` 1. Tokens are ``<sequence>_<frame:06d>`` (those of ``export mmdet3d-infos``);
+``meta.splits`` maps each sequence to its split.
+
+Classes: our road users with a nuScenes detection name (Car car, Truck truck, Bus bus,
+Pedestrian pedestrian, Motorcycle motorcycle, Bicycle bicycle); the others have no box class
+there and are left out (``meta.classes`` says which). Attributes from motion, where the devkit
+defines them: vehicles ``vehicle.moving`` above 0.5 m/s, else ``vehicle.stopped``; pedestrians
+``pedestrian.moving`` above 0.2 m/s, else ``pedestrian.standing``; two-wheelers
+``cycle.with_rider`` (ours are ridden in traffic) above 0.5 m/s, else ``cycle.without_rider``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from carlaocc.catalog.formats import atomic_write
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.schemas import taxonomy
+from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.stages.geometry import quaternion_wxyz
+
+DET_NAMES = {"Car": "car", "Truck": "truck", "Bus": "bus", "Pedestrian": "pedestrian", "Motorcycle": "motorcycle",
+             "Bicycle": "bicycle"}
+
+
+def attribute(det_name: str, speed: float) -> str:
+    """The nuScenes attribute a box's motion implies (see the module doc)."""
+    if det_name == "pedestrian":
+        return "pedestrian.moving" if speed > 0.2 else "pedestrian.standing"
+    if det_name in ("bicycle", "motorcycle"):
+        return "cycle.with_rider" if speed > 0.5 else "cycle.without_rider"
+    return "vehicle.moving" if speed > 0.5 else "vehicle.stopped"
+
+
+def sample_boxes(sample: dict, token: str) -> list[dict]:
+    """The nuScenes boxes of one loader sample (:class:`carlaocc.data.CarlaOccDataset`)."""
+    from carlaocc.pipeline.export_infos import _points_in_boxes
+
+    lidar, ego = sample["lidar_pose"], sample["ego_pose"]
+    pts = sample["points"].astype(np.float64) if "points" in sample else np.zeros((0, 3))
+    n_pts = _points_in_boxes(pts, sample["box_pose"], sample["boxes"])
+    out = []
+    for b, pose, v, iid, sid, n in zip(sample["boxes"], sample["box_pose"], sample["box_velocity"],
+                                       sample["box_instance"], sample["box_semantic"], n_pts):
+        name = DET_NAMES.get(taxonomy.by_id(int(sid)).name)
+        if name is None:
+            continue
+        world = lidar @ pose  # box -> world
+        vw = lidar[:3, :3] @ v.astype(np.float64)  # velocity in world axes
+        out.append({
+            "sample_token": token, "translation": world[:3, 3].tolist(),
+            "size": [float(b[4]), float(b[3]), float(b[5])],  # w, l, h
+            "rotation": quaternion_wxyz(world[:3, :3]), "velocity": [float(vw[0]), float(vw[1])],
+            "detection_name": name, "detection_score": 1.0,
+            "attribute_name": attribute(name, math.hypot(vw[0], vw[1])), "num_lidar_pts": int(n),
+            "ego_translation": (world[:3, 3] - ego[:3, 3]).tolist(), "instance_id": int(iid),
+        })  # fmt: skip
+    return out
+
+
+def export_det_gt(store: Store, config: DatasetConfig, out: Path, voxel_size: float | None,
+                  sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> tuple[int, int, int]:
+    """Write ``OUT/det_gt.json``; returns (sequences, frames, files)."""
+    from carlaocc.catalog.splits import SplitStore
+    from carlaocc.data import CarlaOccDataset, DatasetError
+
+    try:
+        ds = CarlaOccDataset(store.url, voxel_size=voxel_size, occupancy="none", cameras=False, sequences=sequences)
+    except DatasetError as exc:
+        raise StoreError(str(exc)) from None
+    results: dict[str, list] = {}
+    for k, (seq, frame) in enumerate(ds.samples):
+        token = f"{seq}_{frame:06d}"
+        results[token] = sample_boxes(ds[k], token)
+        if progress:
+            progress(1)
+    try:
+        splits = SplitStore(store).load()
+    except StoreError:
+        splits = {}
+    seqs = sorted({s for s, _ in ds.samples})
+    doc = {"results": results, "meta": {
+        "use_camera": True, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False,
+        "classes": sorted(set(DET_NAMES.values())), "frame": "global (the dataset's world frame)",
+        "splits": {s: splits.get(s, "") for s in seqs}, "source": "carlaocc export det-gt",
+    }}  # fmt: skip
+    atomic_write(out / "det_gt.json", lambda fh: fh.write(json.dumps(doc).encode()))
+    return len(seqs), len(ds.samples), 1
