@@ -548,6 +548,13 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
         except KeyError as exc:
             raise InputError(f"--infos: an info lacks {exc} (needs token, scene_name, timestamp, lidar2ego_* and "
                              "ego2global_*)") from None
+    return origins_from_poses(by_scene)
+
+
+def origins_from_poses(by_scene: dict[str, list]) -> dict[str, np.ndarray]:
+    """``token -> origins`` from ``scene -> [(timestamp, token, lidar_to_world, ego_to_world)]``."""
+    from carlaocc.stages.evaluation.rays import select_origins
+
     out = {}
     for frames in by_scene.values():
         frames.sort(key=lambda r: r[0])
@@ -555,6 +562,58 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
         for _, token, _, ego in frames:
             world_to_ego = np.linalg.inv(ego)
             out[token] = select_origins(positions @ world_to_ego[:3, :3].T + world_to_ego[:3, 3])
+    return out
+
+
+def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
+    """A carlaocc root as ground truth: ``(pairs, origins, loader)`` where each pair's ground truth
+    is resampled from the root's occupancy onto the Occ3D grid when scored (the prediction tree is
+    keyed by the tokens ``<sequence>_<frame:06d>``), origins from the root's poses."""
+    from carlaocc.data import CarlaOccDataset, DatasetError
+
+    try:
+        ds = CarlaOccDataset(str(gt), occupancy="none", cameras=False, lidar=False, boxes=False)
+    except DatasetError as exc:
+        raise InputError(f"--gt {gt}: {exc}") from None
+    pairs, by_scene = [], {}
+    for k, (seq, frame) in enumerate(ds.samples):
+        token = f"{seq}_{frame:06d}"
+        cands = [pred / seq / token / "labels.npz", pred / f"{token}.npz"]
+        p = next((c for c in cands if c.is_file()), None)
+        if p is None:
+            raise InputError(f"no prediction for {seq} frame {frame} (expected {cands[0]} or {cands[1]})")
+        s = ds[k]
+        pairs.append((seq, token, p, (ds, k)))
+        by_scene.setdefault(seq, []).append((s["timestamp"], token, s["lidar_pose"], s["ego_pose"]))
+    return pairs, origins_from_poses(by_scene)
+
+
+def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarray]:
+    """One root frame on the Occ3D grid (ego frame, 0.4 m) in ``classes``' ids: semantics, and
+    instances and flow (vx, vy m/s) for RayPQ / mAVE."""
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.store import Store
+    from carlaocc.pipeline.export import built_label_table, scenes_label_tables
+    from carlaocc.pipeline.export_flow import OPENOCC_V2
+    from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample, resample_panoptic
+
+    seq, frame = ds.samples[k]
+    store = Store(ds.root)
+    occ = OccupancyStore(store)
+    grid = ds._grids[seq]
+    table = built_label_table(occ, seq, grid, scenes_label_tables(store)[seq])
+    target = OCC3D_NUSCENES if classes == "occ3d" else OPENOCC_V2
+    names = tuple(n for n in ("semantic", "instance", "flow") if occ.exists(seq, grid, n))
+    data = occ.read_frame(seq, grid, frame, names)
+    to_ego = ds[k]["lidar_to_ego"]
+    labels, _ = resample(data["semantic"], grid, target, to_ego, label_table=table)
+    out = {"semantics": labels}
+    if panoptic or "flow" in data:
+        inst, flow = resample_panoptic(data["semantic"], data.get("instance", np.zeros(grid.shape, np.uint32)),
+                                       data.get("flow"), grid, target, to_ego, label_table=table)
+        out["instances"] = inst
+        if flow is not None and classes == "openocc-v2":
+            out["flow"] = flow[..., :2]
     return out
 
 
@@ -566,8 +625,13 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     if classes not in RAY_CLASSES:
         raise InputError(f"--classes {classes!r}: one of {', '.join(RAY_CLASSES)}")
     names = list(taxonomy.TARGETS[RAY_CLASSES[classes]])
-    pairs = ray_pairs(pred, gt)
-    origins = ray_origins(infos) if infos else {}
+    root_gt = (gt / "scenes" / "sequences").is_dir()  # a carlaocc root, not an Occ3D tree
+    if root_gt:
+        pairs, origins = _root_ground_truth(gt, pred, classes, panoptic)
+        infos = infos or [gt]  # the root's poses give the standard origins
+    else:
+        pairs = ray_pairs(pred, gt)
+        origins = ray_origins(infos) if infos else {}
     fallback = None
     if not infos:
         try:
@@ -580,7 +644,8 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     acc = RayAccumulator(names, thing_classes=things, relative=relative, flow_classes=things)
     grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
     for scene, token, p, g in pairs:
-        g_arr, p_arr = _load_arrays(g), _load_arrays(p)
+        g_arr = _root_frame(*g, classes, panoptic) if root_gt else _load_arrays(g)
+        p_arr = _load_arrays(p)
         gsem = g_arr.get("semantics")
         psem = p_arr.get("semantics", p_arr.get("pred", next(iter(p_arr.values())) if len(p_arr) == 1 else None))
         if gsem is None or psem is None:
@@ -647,7 +712,7 @@ OriginOpt = Annotated[str, typer.Option("--origin", help="without --infos: the o
 
 @eval_app.command("rayiou")
 def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree: <scene>/<token>/labels.npz (semantics) or <token>.npz (pred)")],
-               gt: Annotated[Path, typer.Option("--gt", help="ground-truth Occ3D tree <scene>/<token>/labels.npz")],
+               gt: Annotated[Path, typer.Option("--gt", help="ground truth: an Occ3D tree <scene>/<token>/labels.npz, or a carlaocc root (resampled onto the Occ3D grid, origins from its poses; predictions keyed <sequence>_<frame:06d>)")],
                infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
                origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
     """RayIoU (SparseOcc): per-class IoU of the first hits of 14,040 query rays from up to 8
@@ -659,7 +724,7 @@ def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tre
 
 @eval_app.command("raypq")
 def raypq_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree with semantics and instances")],
-              gt: Annotated[Path, typer.Option("--gt", help="ground-truth Occ3D tree with semantics and instances")],
+              gt: Annotated[Path, typer.Option("--gt", help="ground truth: an Occ3D tree with semantics and instances, or a carlaocc root")],
               infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
               origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
     """RayPQ (SparseOcc) beside RayIoU: ray segments (one per thing instance, one per stuff class

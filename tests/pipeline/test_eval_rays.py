@@ -116,3 +116,16 @@ def test_det_gt_export_scores_itself_perfectly_with_nds(default_01, tmp_path):
     res = json.loads((tmp_path / "d.json").read_text())
     assert res["NDS"] == pytest.approx(1.0) and res["mAP"] == pytest.approx(1.0) and res["mAVE"] == 0.0 and res["mAAE"] == 0.0
     assert "NDS 1.0000" in r.output
+
+
+def test_a_carlaocc_root_as_ground_truth(default_01, infos_01, tmp_path):
+    """--gt a built root: its frames resampled onto the Occ3D grid with origins from its poses;
+    the infos export's ground truth as the prediction scores 1 (the same resampling)."""
+    r = cli.invoke(app, ["eval", "rayiou", "--gt", default_01.root, "--pred", str(infos_01 / "gts"),
+                         "--json", str(tmp_path / "r.json")])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["protocol"] == "sparseocc" and doc["samples"] == 6 and doc["RayIoU"] == 1.0
+    # a missing prediction names the frame
+    r = cli.invoke(app, ["eval", "rayiou", "--gt", default_01.root, "--pred", str(tmp_path)])
+    assert r.exit_code == 2 and "no prediction for" in r.output
