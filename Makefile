@@ -23,6 +23,9 @@ $(BIN)/.installed: pyproject.toml | syslibs
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -e '.[test]'
+	# nuscenes-devkit for the NDS cross-check test only: it pins numpy<2, so it lives apart
+	# (--no-deps, its own directory on the test's PYTHONPATH), never beside carlaocc's packages
+	$(BIN)/pip install -q --no-deps --target $(VENV)/nuscenes-devkit nuscenes-devkit==1.2.0 pyquaternion==0.9.9
 	@touch $@
 
 venv: syslibs $(BIN)/.installed ## create .venv and install carlaocc with its test dependencies

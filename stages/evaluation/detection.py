@@ -22,8 +22,9 @@ The semantics are nuscenes-devkit's ``nuscenes.eval.detection.algo.accumulate`` 
   ``no_predictions``). ``mAP`` = mean over classes of the mean AP over the thresholds; ``mATE``,
   ``mASE``, ``mAOE`` = means over classes.
 
-* ``vel_err`` = L2 distance of the 2-D velocities (m/s) and ``attr_err`` = 1 - (attributes
-  equal), where both boxes carry one (NaN otherwise: left out of the running means). Per the
+* ``vel_err`` = L2 distance of the 2-D velocities (m/s; NaN where a box has none) and
+  ``attr_err`` = 1 - (attributes equal; NaN where the ground truth has none), NaN left out of
+  the running means. Per the
   devkit's class rules, ``traffic_cone`` has no orientation, velocity or attribute error (NaN),
   ``barrier`` no velocity or attribute error and an orientation period of pi. ``mAVE`` / ``mAAE``
   are the class means (NaN classes left out) and
@@ -200,8 +201,7 @@ def accumulate(gt: list[_Set], pred: list[_Set], dist_th: float, label: str = ""
             errs["orient_err"].append(np.nan if label == "traffic_cone" else float(_yaw_diff(g.yaw[k], p.yaw[r], period)))
             no_motion = label in ("traffic_cone", "barrier")
             errs["vel_err"].append(np.nan if no_motion else float(np.linalg.norm(g.vel[k] - p.vel[r])))
-            errs["attr_err"].append(np.nan if no_motion or not g.attr[k] or not p.attr[r]
-                                    else float(g.attr[k] != p.attr[r]))
+            errs["attr_err"].append(np.nan if no_motion or not g.attr[k] else float(g.attr[k] != p.attr[r]))
     if not m_conf:
         return MetricCurve.no_predictions()
     # 3. precision / recall along the ranking, resampled at 101 recalls
