@@ -490,25 +490,50 @@ RAY_CLASSES = {"occ3d": "occ3d_nuscenes", "openocc-v2": "openocc_v2"}
 RAY_THINGS = ("car", "truck", "construction_vehicle", "bus", "trailer", "motorcycle", "bicycle", "pedestrian")
 
 
-def ray_pairs(pred: Path, gt: Path) -> list[tuple[str, str, Path, Path]]:
-    """``(scene, token, pred_file, gt_file)`` of an Occ3D-layout ground-truth tree
-    (``<scene>/<token>/labels.npz``) and a prediction tree in the same layout or SparseOcc's flat
-    ``<token>.npz``; errors name what is missing."""
+def _is_root(path: Path) -> bool:
+    """A built carlaocc root (not an Occ3D tree)."""
+    return (path / "scenes" / "sequences").is_dir()
+
+
+def _root_index(path: Path, opt: str):
+    """``(dataset, {token: sample index})`` of a built root, tokens ``<sequence>_<frame:06d>``."""
+    from carlaocc.data import CarlaOccDataset, DatasetError
+
+    try:
+        ds = CarlaOccDataset(str(path), occupancy="none", cameras=False, lidar=False, boxes=False)
+    except DatasetError as exc:
+        raise InputError(f"{opt} {path}: {exc}") from None
+    return ds, {f"{s}_{f:06d}": k for k, (s, f) in enumerate(ds.samples)}
+
+
+def _prediction(pred: Path, scene: str, token: str, where: str, index=None):
+    """A sample's prediction: a file of an Occ3D tree (or SparseOcc's flat ``<token>.npz``), or
+    ``(dataset, k)`` of a prediction root (``index`` from :func:`_root_index`)."""
+    if index is not None:
+        ds, tokens = index
+        if token not in tokens:
+            raise InputError(f"no prediction for {where}: --pred root {pred} has no {token}")
+        return ds, tokens[token]
+    cands = [pred / scene / token / "labels.npz", pred / f"{token}.npz"]
+    p = next((c for c in cands if c.is_file()), None)
+    if p is None:
+        raise InputError(f"no prediction for {where} (expected {cands[0]} or {cands[1]})")
+    return p
+
+
+def ray_pairs(pred: Path, gt: Path) -> list[tuple[str, str, object, Path]]:
+    """``(scene, token, prediction, gt_file)`` of an Occ3D-layout ground-truth tree
+    (``<scene>/<token>/labels.npz``) and a prediction tree in the same layout, SparseOcc's flat
+    ``<token>.npz``, or a carlaocc root; errors name what is missing."""
     for opt, p in (("--pred", pred), ("--gt", gt)):
         if not p.is_dir():
             raise InputError(f"{opt} {p} is not a directory (an Occ3D-layout tree <scene>/<token>/labels.npz)")
     gts = sorted(gt.glob("*/*/labels.npz"))
     if not gts:
         raise InputError(f"--gt {gt} holds no <scene>/<token>/labels.npz")
-    out = []
-    for g in gts:
-        scene, token = g.parent.parent.name, g.parent.name
-        cands = [pred / scene / token / "labels.npz", pred / f"{token}.npz"]
-        p = next((c for c in cands if c.is_file()), None)
-        if p is None:
-            raise InputError(f"no prediction for {g} (expected {cands[0]} or {cands[1]})")
-        out.append((scene, token, p, g))
-    return out
+    index = _root_index(pred, "--pred") if _is_root(pred) else None
+    return [(g.parent.parent.name, g.parent.name, _prediction(pred, g.parent.parent.name, g.parent.name, str(g), index), g)
+            for g in gts]
 
 
 def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
@@ -576,12 +601,10 @@ def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
     except DatasetError as exc:
         raise InputError(f"--gt {gt}: {exc}") from None
     pairs, by_scene = [], {}
+    index = _root_index(pred, "--pred") if _is_root(pred) else None
     for k, (seq, frame) in enumerate(ds.samples):
         token = f"{seq}_{frame:06d}"
-        cands = [pred / seq / token / "labels.npz", pred / f"{token}.npz"]
-        p = next((c for c in cands if c.is_file()), None)
-        if p is None:
-            raise InputError(f"no prediction for {seq} frame {frame} (expected {cands[0]} or {cands[1]})")
+        p = _prediction(pred, seq, token, f"{seq} frame {frame}", index)
         s = ds[k]
         pairs.append((seq, token, p, (ds, k)))
         by_scene.setdefault(seq, []).append((s["timestamp"], token, s["lidar_pose"], s["ego_pose"]))
@@ -625,7 +648,7 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     if classes not in RAY_CLASSES:
         raise InputError(f"--classes {classes!r}: one of {', '.join(RAY_CLASSES)}")
     names = list(taxonomy.TARGETS[RAY_CLASSES[classes]])
-    root_gt = (gt / "scenes" / "sequences").is_dir()  # a carlaocc root, not an Occ3D tree
+    root_gt = _is_root(gt)  # a carlaocc root, not an Occ3D tree
     if root_gt:
         pairs, origins = _root_ground_truth(gt, pred, classes, panoptic)
         infos = infos or [gt]  # the root's poses give the standard origins
@@ -645,7 +668,7 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
     for scene, token, p, g in pairs:
         g_arr = _root_frame(*g, classes, panoptic) if root_gt else _load_arrays(g)
-        p_arr = _load_arrays(p)
+        p_arr = _root_frame(*p, classes, panoptic) if isinstance(p, tuple) else _load_arrays(p)
         gsem = g_arr.get("semantics")
         psem = p_arr.get("semantics", p_arr.get("pred", next(iter(p_arr.values())) if len(p_arr) == 1 else None))
         if gsem is None or psem is None:
@@ -711,7 +734,7 @@ OriginOpt = Annotated[str, typer.Option("--origin", help="without --infos: the o
 
 
 @eval_app.command("rayiou")
-def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree: <scene>/<token>/labels.npz (semantics) or <token>.npz (pred)")],
+def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="predictions: a tree <scene>/<token>/labels.npz (semantics) or <token>.npz (pred), or a carlaocc root")],
                gt: Annotated[Path, typer.Option("--gt", help="ground truth: an Occ3D tree <scene>/<token>/labels.npz, or a carlaocc root (resampled onto the Occ3D grid, origins from its poses; predictions keyed <sequence>_<frame:06d>)")],
                infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
                origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:

@@ -129,3 +129,13 @@ def test_a_carlaocc_root_as_ground_truth(default_01, infos_01, tmp_path):
     # a missing prediction names the frame
     r = cli.invoke(app, ["eval", "rayiou", "--gt", default_01.root, "--pred", str(tmp_path)])
     assert r.exit_code == 2 and "no prediction for" in r.output
+
+
+def test_a_carlaocc_root_as_prediction(default_01, infos_01, tmp_path):
+    """--pred a built root against its own Occ3D export: 1 (the same frames, the same resampling)."""
+    args = ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", default_01.root, "--json", str(tmp_path / "r.json")]
+    for p in _pkls(infos_01):
+        args += ["--infos", p]
+    r = cli.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert json.loads((tmp_path / "r.json").read_text())["RayIoU"] == 1.0
