@@ -11,10 +11,11 @@ the ego position, global axes: its norm is the devkit's range), ``instance_id`` 
 
 Classes: our road users with a nuScenes detection name (Car car, Truck truck, Bus bus,
 Pedestrian pedestrian, Motorcycle motorcycle, Bicycle bicycle); the others have no box class
-there and are left out (``meta.classes`` says which). Attributes from motion, where the devkit
-defines them: vehicles ``vehicle.moving`` above 0.5 m/s, else ``vehicle.stopped``; pedestrians
-``pedestrian.moving`` above 0.2 m/s, else ``pedestrian.standing``; two-wheelers
-``cycle.with_rider`` (ours are ridden in traffic) above 0.5 m/s, else ``cycle.without_rider``.
+there and are left out (``meta.classes`` says which). Attributes from motion, with
+mmdetection3d's 0.2 m/s threshold: vehicles ``vehicle.moving`` or ``vehicle.parked``,
+pedestrians ``pedestrian.moving`` or ``pedestrian.standing``, two-wheelers ``cycle.with_rider``
+(ours are always ridden). ``meta.ego_positions`` gives each sample's ego position (global), so
+``eval det --nuscenes-filters`` measures predictions' ranges from the ego.
 """
 
 from __future__ import annotations
@@ -36,13 +37,16 @@ DET_NAMES = {"Car": "car", "Truck": "truck", "Bus": "bus", "Pedestrian": "pedest
              "Bicycle": "bicycle"}
 
 
+MOVING = 0.2  # m/s: mmdetection3d's threshold for the motion attributes
+
+
 def attribute(det_name: str, speed: float) -> str:
     """The nuScenes attribute a box's motion implies (see the module doc)."""
     if det_name == "pedestrian":
-        return "pedestrian.moving" if speed > 0.2 else "pedestrian.standing"
+        return "pedestrian.moving" if speed > MOVING else "pedestrian.standing"
     if det_name in ("bicycle", "motorcycle"):
-        return "cycle.with_rider" if speed > 0.5 else "cycle.without_rider"
-    return "vehicle.moving" if speed > 0.5 else "vehicle.stopped"
+        return "cycle.with_rider"  # ours are always ridden
+    return "vehicle.moving" if speed > MOVING else "vehicle.parked"
 
 
 def sample_boxes(sample: dict, token: str) -> list[dict]:
@@ -82,9 +86,12 @@ def export_det_gt(store: Store, config: DatasetConfig, out: Path, voxel_size: fl
     except DatasetError as exc:
         raise StoreError(str(exc)) from None
     results: dict[str, list] = {}
+    egos: dict[str, list] = {}
     for k, (seq, frame) in enumerate(ds.samples):
         token = f"{seq}_{frame:06d}"
-        results[token] = sample_boxes(ds[k], token)
+        sample = ds[k]
+        results[token] = sample_boxes(sample, token)
+        egos[token] = sample["ego_pose"][:3, 3].tolist()
         if progress:
             progress(1)
     try:
@@ -95,7 +102,7 @@ def export_det_gt(store: Store, config: DatasetConfig, out: Path, voxel_size: fl
     doc = {"results": results, "meta": {
         "use_camera": True, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False,
         "classes": sorted(set(DET_NAMES.values())), "frame": "global (the dataset's world frame)",
-        "splits": {s: splits.get(s, "") for s in seqs}, "source": "carlaocc export det-gt",
+        "splits": {s: splits.get(s, "") for s in seqs}, "source": "carlaocc export det-gt", "ego_positions": egos,
     }}  # fmt: skip
     atomic_write(out / "det_gt.json", lambda fh: fh.write(json.dumps(doc).encode()))
     return len(seqs), len(ds.samples), 1

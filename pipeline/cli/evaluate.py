@@ -394,10 +394,11 @@ def _box(obj: Any, where: str, need_score: bool):
             (float(vel[0]), float(vel[1]))
         ego = obj.get("ego_translation")
         ego_dist = math.hypot(float(ego[0]), float(ego[1])) if ego is not None else obj.get("ego_dist")
+        ego_xy = None if ego is None else (float(center[0]) - float(ego[0]), float(center[1]) - float(ego[1]))
         return Box3D(tuple(float(v) for v in center), tuple(float(v) for v in size), float(yaw), str(label),
                      1.0 if score is None else float(score), vel, str(obj.get("attribute_name", obj.get("attribute", "")) or ""),
                      int(obj.get("num_lidar_pts", obj.get("num_pts", -1))),
-                     None if ego_dist is None else float(ego_dist))  # fmt: skip
+                     None if ego_dist is None else float(ego_dist), ego_xy)  # fmt: skip
     except KeyError as exc:
         raise InputError(f"{where}: box lacks {exc}; expected center/size/yaw/label[/score] or "
                          f"translation/size/rotation/detection_name[/detection_score]") from None
@@ -426,6 +427,39 @@ def load_boxes(path: Path, need_score: bool, sample: str | None = None) -> dict[
         if not isinstance(boxes, list):
             raise InputError(f"{path}: sample {s!r}: expected a list of boxes")
         out[str(s)] = [_box(b, f"{path}: sample {s!r} box {i}", need_score) for i, b in enumerate(boxes)]
+    return out
+
+
+def _with_ego_distance(p_all: dict, g_all: dict, gt: Path) -> dict:
+    """Predictions with their distance from the ego (the devkit recomputes it from the ego pose
+    for both sides): the ego's position per sample from the ground truth's ``ego_translation``
+    (or its ``meta.ego_positions``, ``export det-gt``); a prediction already carrying
+    ``ego_translation`` keeps its own."""
+    import dataclasses
+
+    egos: dict[str, tuple[float, float]] = {}
+    if gt.is_file():
+        try:
+            meta = json.loads(gt.read_text()).get("meta", {}) or {}
+        except (OSError, json.JSONDecodeError, AttributeError):
+            meta = {}
+        for tok, pos in (meta.get("ego_positions") or {}).items():
+            egos[str(tok)] = (float(pos[0]), float(pos[1]))
+    for s, boxes in g_all.items():
+        for b in boxes:
+            if s not in egos and b.ego_xy is not None:
+                egos[s] = b.ego_xy
+    out = {}
+    for s, boxes in p_all.items():
+        fixed = []
+        for b in boxes:
+            if b.ego_dist is None:
+                if s not in egos:
+                    raise InputError(f"--nuscenes-filters: sample {s!r} has no ego position (the ground truth's "
+                                     "ego_translation or meta.ego_positions) to measure the predictions' range from")
+                b = dataclasses.replace(b, ego_dist=math.hypot(b.center[0] - egos[s][0], b.center[1] - egos[s][1]))
+            fixed.append(b)
+        out[s] = fixed
     return out
 
 
@@ -463,6 +497,8 @@ def det_cmd(
                 p_all |= load_boxes(pf, True, key)
                 g_all |= load_boxes(gf, False, key)
         cls = None if classes is None else tuple(c.strip() for c in classes.split(",") if c.strip())
+        if nuscenes_filters:
+            p_all = _with_ego_distance(p_all, g_all, gt)
         acc = DetectionAccumulator(classes=cls or None, nuscenes_filters=nuscenes_filters)
         if not cls and not any(g_all.values()):
             raise InputError(f"--gt {gt} holds no boxes: nothing to score (name --classes to score false positives)")
@@ -547,8 +583,16 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
     from carlaocc.stages.geometry import rotation_from_quaternion
 
     def pose(t, q) -> np.ndarray:
+        try:
+            t, q = np.asarray(t, float).reshape(3), np.asarray(q, float).reshape(4)
+        except (TypeError, ValueError):
+            raise InputError(f"--infos: a pose has translation {t!r} and rotation {q!r}: expected 3 numbers and a "
+                             "quaternion w x y z") from None
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q)) and np.linalg.norm(q) > 0):
+            raise InputError(f"--infos: a pose has translation {t.tolist()} and rotation {q.tolist()}: not finite, or "
+                             "not a rotation")
         m = np.eye(4)
-        m[:3, :3], m[:3, 3] = rotation_from_quaternion(q), np.asarray(t, float)
+        m[:3, :3], m[:3, 3] = rotation_from_quaternion(q), t
         return m
 
     infos = []
@@ -564,6 +608,8 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
         infos += items
     by_scene: dict[str, list] = {}
     for info in infos:
+        if not isinstance(info, dict):
+            raise InputError(f"--infos: an entry is a {type(info).__name__}, not an info dict")
         try:
             lidar_global = pose(info["ego2global_translation"], info["ego2global_rotation"]) @ \
                 pose(info["lidar2ego_translation"], info["lidar2ego_rotation"])
@@ -673,6 +719,9 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         psem = p_arr.get("semantics", p_arr.get("pred", next(iter(p_arr.values())) if len(p_arr) == 1 else None))
         if gsem is None or psem is None:
             raise InputError(f"{g if gsem is None else p}: no 'semantics' (or 'pred') array")
+        for arr, f in ((gsem, g), (psem, p)):
+            if not np.issubdtype(arr.dtype, np.integer):
+                raise InputError(f"{f if not isinstance(f, tuple) else '--gt'}: semantics must be integers, got {arr.dtype}")
         if gsem.shape != (200, 200, 16) or psem.shape != gsem.shape:
             raise InputError(f"{p}: shape {psem.shape} against the ground truth's {gsem.shape} (the 200 x 200 x 16 "
                              "grid at 0.4 m)")
@@ -691,6 +740,9 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
                        grid_origin, voxel, gi, pi, gf, pf)
         except ValueError as exc:
             raise InputError(f"{p}: {exc}") from exc
+    if acc.rays == 0:
+        raise InputError("no ray of the ground truth hit anything: check the origins (--infos poses, --origin) and "
+                         "that the ground truth is not all free")
     iou = acc.ray_iou()
     doc = {"samples": len(pairs), "rays": acc.rays, "classes": classes, "protocol": "sparseocc" if infos else
            "single origin (not the standard protocol)", **iou.to_dict()}
@@ -704,6 +756,8 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         m, per = acc.mave()
         doc.update({"mAVE": m, "AVE_per_class": per, "occupancy_score": acc.occupancy_score()})
         flow_line = f"mAVE {m:.4f} m/s (TP rays at 2 m of the road users), occupancy score {acc.occupancy_score():.4f}"
+        if not relative:
+            flow_line += " (OccNet's challenge score also accepts 10 % relative depth errors: --relative)"
     typer.echo(f"{len(pairs)} samples, {acc.rays:,} rays kept ({iou.variant}{'' if infos else ', single origin'})")
     typer.echo(f"{'class':22s} {'@1':>7s} {'@2':>7s} {'@4':>7s}  gt rays")
     for i, c in enumerate(iou.classes):

@@ -77,6 +77,7 @@ class Box3D:
     attribute: str = ""  # nuScenes attribute name ("" : none)
     num_pts: int = -1  # LiDAR (+ radar) points in a ground-truth box; -1: unknown (predictions)
     ego_dist: float | None = None  # BEV distance from the ego (m), when the frame is not the ego's
+    ego_xy: tuple[float, float] | None = None  # the ego's position in the boxes' frame, when known
 
     def __post_init__(self) -> None:
         if len(self.center) != 3 or not all(math.isfinite(v) for v in self.center):
@@ -118,7 +119,7 @@ def _in_range(b: Box3D) -> bool:
     if rng is None:
         return True
     d = b.ego_dist if b.ego_dist is not None else math.hypot(b.center[0], b.center[1])
-    return d <= rng
+    return d < rng  # the devkit's strict test
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,8 @@ public sources), per evaluated sample:
    ``RayIoU`` = mean over thresholds and classes.
 6. **RayPQ**: each ray also carries the instance id of the voxel it hits. Ground-truth things
    (``thing_classes``) form one segment per instance (an instance whose rays carry more than one
-   class becomes free); every other class is one segment per class and sample. Per sample, class
+   class loses its id: its rays join their class's segment of rays without an instance); every
+   other class is one segment per class and sample. Per sample, class
    and threshold: segments are matched at IoU > 0.5, the intersection counting only rays within
    the depth threshold, the areas all the segment's rays; ``FP`` / ``FN`` are unmatched segments of
    at least 10 rays. ``PQ = sum IoU / (TP + FP/2 + FN/2)`` per class over the dataset.
@@ -252,8 +253,19 @@ class RayAccumulator:
             raise ValueError(f"prediction {pred_sem.shape} and ground truth {gt_sem.shape} differ in shape")
         n = len(self.classes)
         for what, a in (("ground truth", gt_sem), ("prediction", pred_sem)):
-            if a.size and (a.min() < 0 or a.max() >= n):
-                raise ValueError(f"{what} has label {int(a.max())} outside 0..{n - 1} ({n} classes, free {n - 1})")
+            bad = (a < 0) | (a >= n)
+            if a.size and bad.any():
+                raise ValueError(f"{what} has label {a[bad].flat[0]} outside 0..{n - 1} ({n} classes, free {n - 1})")
+        for what, a, trailing in (("ground-truth instances", gt_inst, ()), ("predicted instances", pred_inst, ()),
+                                  ("ground-truth flow", gt_flow, (2,)), ("predicted flow", pred_flow, (2,))):
+            if a is not None and np.shape(a)[:3] != gt_sem.shape or a is not None and np.shape(a)[3:] not in ((), trailing,
+                                                                                                             (3,)):
+                raise ValueError(f"{what} has shape {np.shape(a)}, expected {gt_sem.shape + trailing}")
+            if a is not None and not trailing and not np.issubdtype(np.asarray(a).dtype, np.integer):
+                raise ValueError(f"{what} must be integers, got {np.asarray(a).dtype}")
+        origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(origins)):
+            raise ValueError("ray origins are not finite (check the poses: translations and unit quaternions)")
         if len(origins) == 0:
             return
         gd, gl, gi = self.cast(gt_sem, origins, grid_origin, voxel_size, gt_inst)
@@ -323,14 +335,14 @@ class RayAccumulator:
         things = np.isin(np.arange(n), np.asarray(self.thing_classes, dtype=np.int64))
         # 1. ground-truth segments: things per instance (an instance over several classes: free),
         #    everything else one segment per class; the same for the prediction
-        gl = gl.copy()
+        gi = gi.copy()
         tg = things[gl] & (gi > 0)
         if tg.any():
             key = gi[tg]
             for iid in np.unique(key):
                 rows = np.flatnonzero(tg)[key == iid]
                 if len(np.unique(gl[rows])) > 1:
-                    gl[rows] = self.free
+                    gi[rows] = 0  # as SparseOcc: its rays keep their classes, in no instance's segment
         gseg = np.where(things[gl] & (gi > 0), gi + 1, 0)
         pseg = np.where(things[pl] & (pi > 0), pi + 1, 0)
         for c in range(n - 1):

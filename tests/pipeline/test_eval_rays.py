@@ -94,6 +94,7 @@ def test_det_gt_export_scores_itself_perfectly_with_nds(default_01, tmp_path):
     boxes = [b for bs in doc["results"].values() for b in bs]
     assert boxes and {b["detection_name"] for b in boxes} <= set(doc["meta"]["classes"])
     assert any(b["attribute_name"] == "vehicle.moving" for b in boxes) and any(b["num_lidar_pts"] > 0 for b in boxes)
+    assert sorted(doc["meta"]["ego_positions"]) == sorted(doc["results"])
     # one box against the loader: global centre, yaw, w-l-h order and velocity
     seq, frame = ds.samples[0]
     s = ds[0]
@@ -106,8 +107,10 @@ def test_det_gt_export_scores_itself_perfectly_with_nds(default_01, tmp_path):
         assert b["size"] == [float(s["boxes"][0][4]), float(s["boxes"][0][3]), float(s["boxes"][0][5])]
     # the devkit drops ground truth without LiDAR points, not predictions: a perfect detector
     # reports the boxes it can see
-    pred = {"results": {t: [dict(x, num_lidar_pts=-1) for x in bs if x["num_lidar_pts"] > 0]
-                        for t, bs in doc["results"].items()}, "meta": doc["meta"]}
+    # (a detector's output carries no ego_translation: the range comes from the ground truth's egos)
+    pred = {"results": {t: [{k: v for k, v in x.items() if k not in ("num_lidar_pts", "ego_translation")}
+                            for x in bs if x["num_lidar_pts"] > 0]
+                        for t, bs in doc["results"].items()}, "meta": {}}
     (tmp_path / "pred.json").write_text(json.dumps(pred))
     assert sum(len(v) for v in pred["results"].values()) < len(boxes)  # some boxes are hidden
     r = cli.invoke(app, ["eval", "det", "--pred", str(tmp_path / "pred.json"), "--gt", str(out / "det_gt.json"),
@@ -139,3 +142,19 @@ def test_a_carlaocc_root_as_prediction(default_01, infos_01, tmp_path):
     r = cli.invoke(app, args)
     assert r.exit_code == 0, r.output
     assert json.loads((tmp_path / "r.json").read_text())["RayIoU"] == 1.0
+
+
+def test_nuscenes_filters_measure_predictions_from_the_ego(tmp_path):
+    """World-frame predictions carry no ego_translation: the range is measured from the ego of
+    the ground truth (here 300 m from the world origin), not from the origin."""
+    gt = {"results": {"s0": [{"translation": [310.0, 0.0, 1.0], "size": [2.0, 4.5, 1.6], "rotation": [1, 0, 0, 0],
+                              "velocity": [1.0, 0.0], "detection_name": "car", "attribute_name": "vehicle.moving",
+                              "num_lidar_pts": 20, "ego_translation": [10.0, 0.0, 0.0]}]}}
+    pred = {"results": {"s0": [{k: v for k, v in gt["results"]["s0"][0].items()
+                                if k not in ("num_lidar_pts", "ego_translation")} | {"detection_score": 0.9}]}}
+    (tmp_path / "gt.json").write_text(json.dumps(gt))
+    (tmp_path / "pred.json").write_text(json.dumps(pred))
+    r = cli.invoke(app, ["eval", "det", "--pred", str(tmp_path / "pred.json"), "--gt", str(tmp_path / "gt.json"),
+                         "--nuscenes-filters", "--json", str(tmp_path / "d.json")])
+    assert r.exit_code == 0, r.output
+    assert json.loads((tmp_path / "d.json").read_text())["mAP"] == pytest.approx(1.0)

@@ -247,3 +247,15 @@ def test_mave_and_the_occupancy_score():
     acc3 = RayAccumulator(names, flow_classes=(car,))
     acc3.update(gt, gt, o, ORIGIN, VS, gt_flow=flow, pred_flow=flow * (2.5 / 3.0))
     assert acc3.mave()[0] == pytest.approx(0.5, abs=1e-6) and acc3.occupancy_score() == pytest.approx(0.95)
+
+
+def test_raypq_instance_over_two_classes_keeps_its_rays_in_their_classes():
+    """As SparseOcc: a ground-truth instance whose rays carry two classes loses its id, not its
+    rays -- 30 car + 5 truck rays of one instance, all predicted car of one instance: a car TP."""
+    car, truck = OCC3D.index("car"), OCC3D.index("truck")
+    acc = RayAccumulator(OCC3D, thing_classes=(car, truck))
+    d = np.full(35, 10.0)
+    gl = np.array([car] * 30 + [truck] * 5)
+    acc.add_rays(d, gl, d, np.full(35, car), np.ones(35, np.int64), np.ones(35, np.int64))
+    r = acc.ray_pq()
+    assert r.rq[0, r.classes.index("car")] == 1.0
