@@ -677,7 +677,7 @@ def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarra
     to_ego = ds[k]["lidar_to_ego"]
     labels, _ = resample(data["semantic"], grid, target, to_ego, label_table=table)
     out = {"semantics": labels}
-    if panoptic or "flow" in data:
+    if panoptic or (classes == "openocc-v2" and "flow" in data):  # (Occ3D has no flow: skip the work)
         inst, flow = resample_panoptic(data["semantic"], data.get("instance", np.zeros(grid.shape, np.uint32)),
                                        data.get("flow"), grid, target, to_ego, label_table=table)
         out["instances"] = inst

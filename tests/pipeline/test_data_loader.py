@@ -162,8 +162,9 @@ def test_collate_stacks_same_shapes_and_lists_the_rest(ds):
 
 def test_torch_dataloader_with_two_workers(default_01):
     torch = pytest.importorskip("torch") if not os.environ.get("CI") else __import__("torch")
-    ds = CarlaOccDataset(default_01.url, cameras=False, camera_maps=(), lidar=True)
-    loader = torch.utils.data.DataLoader(ds, batch_size=2, num_workers=2, collate_fn=collate,
+    # one sequence (two frames): a batch from each worker
+    ds = CarlaOccDataset(default_01.url, cameras=False, camera_maps=(), lidar=True, sequences=["town00_high_seq000"])
+    loader = torch.utils.data.DataLoader(ds, batch_size=1, num_workers=2, collate_fn=collate,
                                          multiprocessing_context="spawn")
     seen = []
     for batch in loader:
@@ -171,7 +172,7 @@ def test_torch_dataloader_with_two_workers(default_01):
             seen.append((seq, int(batch["frame_index"][k])))
             i = ds.samples.index(seen[-1])
             np.testing.assert_array_equal(batch["occ"][k], ds[i]["occ"])
-    assert seen == ds.samples
+    assert seen == ds.samples and len(seen) == 2
 
 
 def test_readme_snippet_runs_as_written(default_01, tmp_path):

@@ -74,7 +74,7 @@ def _brute(occ, o, d, vs, origin, step=2e-3):
     return None, None, False
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=12, deadline=None)
 @given(st.integers(0, 2**31 - 1))
 def test_first_hits_agree_with_a_brute_force_march(seed):
     rng = np.random.default_rng(seed)
