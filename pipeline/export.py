@@ -338,6 +338,26 @@ def built_label_table(occ: OccupancyStore, seq: str, grid: GridSpec, scenes_tabl
     return built
 
 
+def loader_and_label_table(store: Store, voxel_size: float | None, sequences: list[str] | None, **options):
+    """``(dataset, sequence ids, label table)`` of the frames an export writes: a
+    :class:`carlaocc.data.CarlaOccDataset` over the store (``options`` its keyword options), and
+    the one label table its sequences were built under (StoreError for no frames or two tables)."""
+    from carlaocc.data import CarlaOccDataset, DatasetError
+
+    try:
+        ds = CarlaOccDataset(store.url, voxel_size=voxel_size, occupancy="none", sequences=sequences, **options)
+    except DatasetError as exc:
+        raise StoreError(str(exc)) from None
+    occ = OccupancyStore(store)
+    seqs = sorted({s for s, _ in ds.samples})
+    scenes_tables = scenes_label_tables(store)
+    tables = {built_label_table(occ, s, ds._grids[s], scenes_tables[s]) for s in seqs}
+    if len(tables) > 1:
+        raise StoreError(f"the sequences were built under different label tables ({', '.join(sorted(tables))}): "
+                         "export them apart")
+    return ds, seqs, next(iter(tables))
+
+
 def scenes_label_tables(store: Store) -> dict[str, str]:
     """``{sequence id: label table}``: the table each sequence's town was built under."""
     from carlaocc.schemas.records import TownRecord

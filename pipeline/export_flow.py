@@ -92,23 +92,11 @@ def export_flow(store: Store, config: DatasetConfig, fmt: str, out: Path, voxel_
     """Write ``fmt`` (openocc-v2 | uniocc) for every frame built at ``voxel_size``; returns
     (sequences, frames, files)."""
     from carlaocc.catalog.splits import SPLIT_NAMES, SplitStore
-    from carlaocc.data import CarlaOccDataset, DatasetError
-    from carlaocc.pipeline.export import built_label_table, scenes_label_tables
+    from carlaocc.pipeline.export import loader_and_label_table
 
     target = GRIDS[fmt]
-    try:
-        ds = CarlaOccDataset(store.url, voxel_size=voxel_size, occupancy="none", lidar=False, cameras=False,
-                             sequences=sequences)
-    except DatasetError as exc:
-        raise StoreError(str(exc)) from None
+    ds, seqs, label_table = loader_and_label_table(store, voxel_size, sequences, lidar=False, cameras=False)
     occ = OccupancyStore(store)
-    seqs = sorted({s for s, _ in ds.samples})
-    scenes_tables = scenes_label_tables(store)
-    tables = {s: built_label_table(occ, s, ds._grids[s], scenes_tables[s]) for s in seqs}
-    if len(set(tables.values())) > 1:
-        raise StoreError(f"the sequences were built under different label tables ({', '.join(sorted(set(tables.values())))}):"
-                         " export them apart")
-    label_table = next(iter(tables.values()))
     cats = taxonomy.mapping("uniocc", label_table)
     n_files = 0
     scene_infos = []

@@ -168,21 +168,10 @@ def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: flo
     """Write the infos, images, sweeps and Occ3D ground truth of every frame built at
     ``voxel_size`` (or of ``sequences``); returns (sequences, frames, files)."""
     from carlaocc.catalog.splits import SPLIT_NAMES, SplitStore
-    from carlaocc.data import CarlaOccDataset, DatasetError
-    from carlaocc.pipeline.export import built_label_table, scenes_label_tables
+    from carlaocc.pipeline.export import loader_and_label_table
 
-    try:
-        ds = CarlaOccDataset(store.url, voxel_size=voxel_size, occupancy="none", sequences=sequences)
-    except DatasetError as exc:
-        raise StoreError(str(exc)) from None
+    ds, seqs, label_table = loader_and_label_table(store, voxel_size, sequences)
     occ = OccupancyStore(store)
-    seqs = sorted({s for s, _ in ds.samples})
-    scenes_tables = scenes_label_tables(store)
-    tables = {s: built_label_table(occ, s, ds._grids[s], scenes_tables[s]) for s in seqs}
-    if len(set(tables.values())) > 1:
-        raise StoreError(f"the sequences were built under different label tables ({', '.join(sorted(set(tables.values())))}):"
-                         " export them apart")
-    label_table = next(iter(tables.values()))
     try:
         assignment = SplitStore(store).load()
     except StoreError:

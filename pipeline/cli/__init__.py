@@ -23,6 +23,7 @@ import sys
 from carlaocc.pipeline.audit import audit_cli
 from carlaocc.pipeline.cli import build, files, query, scene_tools, show  # noqa: F401  (register commands)
 from carlaocc.pipeline.cli.app import app
+from carlaocc.pipeline.cli import evaluate_rays  # noqa: F401  (registers eval rayiou / raypq)
 from carlaocc.pipeline.cli.evaluate import eval_app
 
 app.add_typer(eval_app, name="eval")

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from carlaocc.pipeline.cli import app
-from carlaocc.pipeline.cli.evaluate import ray_origins
+from carlaocc.pipeline.cli.evaluate_rays import ray_origins
 
 cli = CliRunner()
 
