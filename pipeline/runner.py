@@ -22,8 +22,9 @@ from typing import Callable
 
 from carlaocc.catalog.lineage import DAMAGED_SUFFIX, LineageLog
 from carlaocc.catalog.parquet import parquet_problem
+from carlaocc.catalog.signatures import external_signature, output_signature, output_signatures
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.catalog.zarrio import frame_fingerprint, is_damaged, parse_frame_key
+from carlaocc.catalog.zarrio import ancestor_groups, frame_fingerprint, is_damaged, metadata_problem, parse_frame_key
 from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
 from carlaocc.pipeline.spec import Context, Partition, SelectionError, StageSpec, UpstreamMissing, cache_key
 from carlaocc.schemas.configs import DatasetConfig, StageConfig
@@ -48,6 +49,7 @@ class TaskResult:
     started_at: datetime
     ended_at: datetime
     host: str
+    signatures: dict[str, str] = field(default_factory=dict)  # output key -> stat signature
 
 
 def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, partition: Partition,
@@ -63,15 +65,19 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
 
         set_kernel_threads(kernel_threads)
     started = datetime.now(timezone.utc)
+    store, signatures = Store(store_url), {}
     try:
-        outputs = task(Store(store_url), cfg, partition)
+        outputs = task(store, cfg, partition)
+        # what the store says about each output just written (no bytes read): status trusts
+        # the fingerprints while these are unchanged
+        signatures = output_signatures(store, outputs)
         status, error = "completed", ""
     except Exception as exc:  # recorded in lineage and reported with its partition
         outputs, status = {}, "failed"
         tb = traceback.extract_tb(exc.__traceback__)[-1]
         error = f"{type(exc).__name__}: {exc} (at {os.path.basename(tb.filename)}:{tb.lineno})"
     return TaskResult(stage, partition.key, status, outputs, error, started,
-                      datetime.now(timezone.utc), socket.gethostname())
+                      datetime.now(timezone.utc), socket.gethostname(), signatures)
 
 
 # -- executors ------------------------------------------------------------------------------------
@@ -299,6 +305,7 @@ class PartitionPlan:
     cache_key: str
     input_fingerprints: dict[str, str]
     reason: str | None  # None: up to date
+    input_signatures: dict[str, str] = field(default_factory=dict)  # external file -> signature
 
 
 @dataclass
@@ -334,15 +341,35 @@ def file_fingerprint(path: str) -> str:
 
 
 def outputs_problem(store: Store, outputs: dict[str, str],
-                    checked: dict[str, str | None] | None = None) -> str | None:
+                    checked: dict[str, str | None] | None = None,
+                    signatures: dict[str, str] | None = None) -> str | None:
     """Why recorded outputs are not intact, or None when every one still has its recorded
     fingerprint (files by their bytes, Zarr frames by their encoded chunks): ``outputs damaged:
     <path> unreadable`` for a Zarr frame whose metadata (its array's, a group's above it) or a
     chunk cannot be read, or a Parquet file that cannot; else ``outputs missing or modified``.
-    ``checked`` caches the Zarr groups' verdicts between calls."""
+    ``checked`` caches the Zarr groups' verdicts between calls.
+
+    With the outputs' recorded stat ``signatures`` (:mod:`carlaocc.catalog.signatures`), an output
+    whose signature is unchanged keeps its recorded fingerprint without being read (a Zarr frame's
+    groups' small metadata are still checked); only the others are re-hashed."""
     modified = False
+    checked = {} if checked is None else checked
+    signatures = signatures or {}
     for key, fp in outputs.items():
         frame = parse_frame_key(key)  # a frame of an array of occupancy.zarr, sensors.zarr...
+        if key in signatures and output_signature(store, key) == signatures[key]:
+            if frame is None:
+                continue
+            problem = None
+            for group in ancestor_groups(frame[0], frame[1]):
+                if group not in checked:
+                    checked[group] = metadata_problem(store, group, "group")
+                if checked[group] is not None:
+                    problem = f"outputs damaged: {group}/zarr.json {checked[group]}"
+                    break
+            if problem is None:
+                continue
+            return problem
         try:
             current = store.fingerprint(key) if frame is None else frame_fingerprint(store, *frame, checked=checked)
         except OSError:  # a directory where a file was, no permission...
@@ -405,11 +432,21 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
             if up_key in stale_upstream.get(up_stage, set()):
                 waiting = waiting or f"upstream {up_stage}/{up_key} is stale"
             inputs[f"{up_stage}/{up_key}"] = _digest(rec.output_fingerprints)
-        # external input files (a source mesh, a category map) by their bytes
-        for path in p.files:
-            inputs[f"file:{path}"] = file_fingerprint(path)
-        key = cache_key(spec.name, code, chash, p, inputs)
+        # external input files (a source mesh, a category map) by their bytes, or by the
+        # fingerprint the last run recorded while the file's stat signature is unchanged
         rec = latest.get(p.key)
+        known_fp = json.loads(rec.input_fingerprints) if rec is not None and rec.input_signatures else {}
+        known_sig = json.loads(rec.input_signatures) if rec is not None and rec.input_signatures else {}
+        signatures = {}
+        for path in p.files:
+            name, sig = f"file:{path}", external_signature(path)
+            if sig is not None:
+                signatures[name] = sig
+            if sig is not None and known_sig.get(name) == sig and name in known_fp:
+                inputs[name] = known_fp[name]
+            else:
+                inputs[name] = file_fingerprint(path)
+        key = cache_key(spec.name, code, chash, p, inputs)
         if waiting:
             reason = waiting
         elif force:
@@ -419,14 +456,15 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
         elif rec.status != "completed":
             reason = f"last run failed: {rec.error}"
         elif rec.cache_key == key:
-            reason = outputs_problem(ctx.store, json.loads(rec.output_fingerprints), checked)
+            reason = outputs_problem(ctx.store, json.loads(rec.output_fingerprints), checked,
+                                     json.loads(rec.output_signatures) if rec.output_signatures else None)
         elif rec.code_version != code:
             reason = "code changed"
         elif rec.config_hash != chash:
             reason = "config changed"
         else:
             reason = "inputs changed"
-        plan.partitions.append(PartitionPlan(p, key, inputs, reason))
+        plan.partitions.append(PartitionPlan(p, key, inputs, reason, signatures))
     return plan
 
 
@@ -548,6 +586,8 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
                     output_fingerprints=json.dumps(res.outputs, sort_keys=True),
                     status=res.status, started_at=res.started_at, ended_at=res.ended_at,
                     host=res.host, error=res.error,
+                    output_signatures=json.dumps(res.signatures, sort_keys=True),
+                    input_signatures=json.dumps(pp.input_signatures, sort_keys=True),
                 ))
                 if res.status == "completed":
                     outcome.ran += 1

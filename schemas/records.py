@@ -323,6 +323,10 @@ class RunRecord(Record):
     ended_at: datetime
     host: str
     error: str = ""
+    # JSON objects: output key / input file -> stat signature (carlaocc.catalog.signatures) when
+    # recorded; a recorded fingerprint is trusted while its signature is unchanged
+    output_signatures: str = ""
+    input_signatures: str = ""
 
 
 PERSISTED: tuple[type[Record], ...] = (

@@ -231,6 +231,75 @@ def test_tampered_frame_is_detected_and_rebuilt(config_file, built, tmp_path):
                                   OccupancyStore(built).read_frame(seq, grid, 3)["semantic"])
 
 
+_OPENED: list[str] | None = None  # paths opened while recording (see _opened_files)
+
+
+def _audit(event: str, args) -> None:
+    if _OPENED is not None and event == "open" and isinstance(args[0], (str, bytes)):
+        _OPENED.append(args[0] if isinstance(args[0], str) else args[0].decode())
+
+
+def _opened_files(fn) -> list[str]:
+    """Every file this process opened while ``fn`` ran (Python's audit hook: builtins.open,
+    os.open, io.open_code...)."""
+    import sys
+
+    global _OPENED
+    if not getattr(_opened_files, "hooked", False):
+        sys.addaudithook(_audit)
+        _opened_files.hooked = True
+    _OPENED = []
+    try:
+        fn()
+        return list(_OPENED)
+    finally:
+        _OPENED = None
+
+
+def test_status_reads_no_chunk_data_and_verify_rehashes(config_file, built, tmp_path):
+    """``status`` on a built root trusts the fingerprints recorded at write time while the outputs'
+    stat signatures hold: it opens no chunk of any Zarr array (nor a LiDAR sweep, a mesh, a
+    picture). A copied root (new inodes) is re-hashed once by ``verify``, which records its
+    signatures; a chunk overwritten in place with garbage of the same size and time fools
+    ``status`` but not ``verify``, which drops the partition's signatures so ``run`` rebuilds it."""
+    import os
+    import shutil
+
+    copy = Store(str(tmp_path / "copy"))
+    shutil.copytree(built.root, copy.root)
+    status = lambda: cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", copy.url, "-v"])
+    r = cli.invoke(app, ["verify", "--root", copy.url])
+    assert r.exit_code == 0, r.output
+    assert "voxelize  24/24 partitions intact" in r.output and "signatures recorded anew for 24" in r.output
+    out = []
+    opened = _opened_files(lambda: out.append(status()))
+    assert out[0].exit_code == 0 and "stale" not in out[0].output, out[0].output
+    data = [p for p in opened if p.startswith(copy.root) and (
+        ".zarr/" in p and "/c/" in p or "/lidar/" in p or p.endswith((".glb", ".png", ".npz", ".html")))]
+    assert data == []
+    assert any(p.endswith(".parquet") for p in opened)  # it did look at the catalog
+    # a second verify finds every signature as recorded
+    r = cli.invoke(app, ["verify", "--root", copy.url, "--stages", "voxelize"])
+    assert r.exit_code == 0 and "recorded anew" not in r.output, r.output
+    # garbage in place, same size, same times: only verify sees it
+    grid = GridSpec(voxel_size=RES)
+    seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
+    victim = sorted(copy.fs.find(f"{copy.root}/occupancy.zarr/{seq}/{grid.key}/semantic/c/2"))[0]
+    st = os.stat(victim)
+    with open(victim, "r+b") as f:
+        f.write(b"\xff" * st.st_size)
+    os.utime(victim, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert "stale" not in status().output
+    r = cli.invoke(app, ["verify", "--root", copy.url, "-v"])
+    assert r.exit_code == 1 and f"{seq}/{grid.key}/0002: outputs damaged: occupancy.zarr/{seq}/{grid.key}/semantic" in r.output
+    after = status().output
+    assert "voxelize  stale 1/24" in after and f"    {seq}/{grid.key}/0002: outputs damaged" in after
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--stages", "voxelize",
+                         "--scheduler", "synchronous"])
+    assert r.exit_code == 0 and "voxelize: ran 1," in r.output, r.output
+    assert cli.invoke(app, ["verify", "--root", copy.url, "--stages", "voxelize"]).exit_code == 0
+
+
 def test_swap_makes_a_sequence_that_voxelizes(config_file, built, tmp_path):
     """``scenes swap`` on a copy: the edited sequence keeps the trajectories (same instances in
     the same places) with other car models, and the pipeline voxelizes it."""

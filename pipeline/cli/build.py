@@ -197,6 +197,59 @@ def status(
                 typer.echo(f"    {pp.partition.key}: {pp.reason}")
 
 
+@app.command()
+def verify(
+    root: RootOpt = "data",
+    stages: Annotated[Optional[str], typer.Option(
+        "--stages", help="comma-separated stages to verify (default: every stage in lineage)")] = None,
+    record: Annotated[bool, typer.Option(
+        "--record/--no-record", help="record the new stat signatures of intact outputs whose signature "
+                                     "moved (a copied or restored root), so `status` is cheap again")] = True,
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="list every partition found damaged")] = False,
+) -> None:
+    """Re-hash every recorded output against the fingerprint lineage holds for it (reads the
+    whole dataset). `status` and `run` trust recorded fingerprints while an output's size, time and
+    inode (or the object store's ETag) are unchanged; this is the full check. Exit code 1 when an
+    output is damaged, modified or missing: `carlaocc run` rebuilds those partitions."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from carlaocc.pipeline.verify import verify as verify_outputs
+
+    store = _store(root, writable=record)
+    names = tuple(s.strip() for s in stages.split(",") if s.strip()) if stages else ()
+    bars: dict[str, int] = {}
+    with Progress(TextColumn("verify {task.description:<9}"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("partitions"), TimeElapsedColumn(), transient=True) as bar:
+        def advance(stage: str, total: int) -> None:
+            if stage not in bars:
+                bars[stage] = bar.add_task(stage, total=total)
+            bar.advance(bars[stage])
+
+        found = verify_outputs(store, names, record=record, advance=advance)
+    if not found:
+        typer.echo(f"nothing recorded in {store.url}: no lineage to verify")
+        return
+    bad = 0
+    for v in found:
+        line = f"{v.stage:<9} {v.partitions - len(v.problems)}/{v.partitions} partitions intact ({v.outputs:,} outputs)"
+        if v.resigned:
+            line += f"; signatures recorded anew for {v.resigned}"
+        if v.problems:
+            reasons: dict[str, int] = {}
+            for why in v.problems.values():
+                kind = why.split(":")[0]
+                reasons[kind] = reasons.get(kind, 0) + 1
+            line += "; " + "; ".join(f"{n} {r}" for r, n in sorted(reasons.items()))
+        typer.echo(line)
+        if verbose:
+            for part, why in sorted(v.problems.items()):
+                typer.echo(f"    {part}: {why}")
+        bad += len(v.problems)
+    if bad:
+        typer.echo(f"{bad} partition(s) damaged or modified: `carlaocc run` rebuilds them", err=True)
+        raise typer.Exit(1)
+
+
 @app.command("stages")
 def list_stages() -> None:
     """List the registered stages, what they read and write."""
