@@ -45,7 +45,7 @@ def measure(res: str, extra: list[str] | None = None) -> dict:
     size = sum(f.stat().st_size for f in root.rglob("*") if f.is_file())
     shutil.rmtree(root.parent)
     return {"res": res, "seconds": seconds, "peak_gib": peak / 2**30, "store_mib": size / 2**20,
-            "summary": [ln for ln in out.splitlines() if ln.startswith(("ingest", "scenes", "voxelize", "sensors", "quality", "report")) and "tasks" not in ln]}
+            "summary": [ln for ln in out.splitlines() if ln.startswith(("ingest", "scenes", "voxelize", "sensors", "quality", "aggregate", "report")) and "tasks" not in ln]}
 
 
 def main(argv: list[str] | None = None) -> None:

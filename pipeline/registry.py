@@ -1,13 +1,13 @@
 """The registered stages, in dependency order: ingest -> scenes -> splits, voxelize, sensors ->
-quality -> report. Each stage's spec (partitions, prepare, task) lives in its wiring module,
+quality -> aggregate -> report. Each stage's spec (partitions, prepare, task) lives in its wiring module,
 ``carlaocc.pipeline.tasks.<stage>``; this module only lists them."""
 
 from __future__ import annotations
 
 from carlaocc.pipeline.spec import StageSpec
-from carlaocc.pipeline.tasks import ingest, quality, report, scenes, sensors, splits, voxelize
+from carlaocc.pipeline.tasks import aggregate, ingest, quality, report, scenes, sensors, splits, voxelize
 
 STAGES: dict[str, StageSpec] = {m.SPEC.name: m.SPEC for m in (ingest, scenes, splits, voxelize, sensors, quality,
-                                                                report)}
+                                                                aggregate, report)}
 # earlier stage names, still accepted by --stages
 STAGE_ALIASES: dict[str, str] = {"metrics": "quality"}

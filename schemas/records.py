@@ -281,8 +281,23 @@ class ClassQualityRecord(Record):
     isolated: int
 
 
+class FrameStatisticsRecord(Record):
+    """Voxels and instances of one class in one frame at one resolution (the quality stage's
+    per-frame statistics, summed per sequence by the aggregate stage into
+    :class:`ClassStatisticsRecord`): ``instance_ids`` are the distinct nonzero instance ids among
+    the class's voxels in the frame."""
+
+    TABLE: ClassVar[str] = "statistics_frames"
+    sequence_id: str
+    resolution: float
+    frame_index: int
+    semantic_id: int
+    voxels: int
+    instance_ids: list[int]
+
+
 class ClassStatisticsRecord(Record):
-    """Voxels and instances of one class in one sequence at one resolution (the report stage's
+    """Voxels and instances of one class in one sequence at one resolution (the aggregate stage's
     statistics: voxels summed over the sequence's frames; instances are distinct (instance id,
     class) pairs among its voxels, of which ``moving_instances`` are dynamic actors)."""
 
@@ -343,6 +358,7 @@ PERSISTED: tuple[type[Record], ...] = (
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,
+    FrameStatisticsRecord,
     ClassStatisticsRecord,
     AssetStatisticsRecord,
     RunRecord,

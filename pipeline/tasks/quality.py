@@ -1,6 +1,10 @@
-"""The quality stage: the dataset-quality scores of one (sequence, voxel size) per task —
-spatial continuity per frame, sequence and class, and temporal consistency per frame pair and
-sequence (paper 4.2) — into ``metrics/quality/`` and ``metrics/quality_classes/``.
+"""The quality stage (map): the dataset-quality scores and class statistics of a run of
+consecutive frames of one (sequence, voxel size) per task -- spatial continuity per frame and
+class, temporal consistency per frame pair (paper 4.2), and voxels and instance ids per class --
+into ``metrics/quality/<seq>/<res>/<first>.parquet``, ``metrics/quality_classes/...`` and
+``metrics/statistics_frames/...``. A task scores ``quality.frames_per_task`` frames and reads the
+next task's first frame for its last pair, so no task grows with the sequence; the aggregate
+stage sums the counts per sequence (:mod:`carlaocc.pipeline.tasks.aggregate`).
 """
 
 from __future__ import annotations
@@ -14,111 +18,179 @@ from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, QualityRecord
+from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, FrameStatisticsRecord, QualityRecord
+
+FRAME_TABLES = (QualityRecord, ClassQualityRecord, FrameStatisticsRecord)  # one file of each per task
+
+
+def frame_blocks(frame_count: int, frames_per_task: int) -> list[tuple[int, int]]:
+    """``[first, stop)`` frame ranges of the quality tasks of a sequence."""
+    return [(t, min(t + frames_per_task, frame_count)) for t in range(0, frame_count, frames_per_task)]
 
 
 def quality_partitions(ctx: Context) -> list[Partition]:
     out = []
-    vcfg = ctx.config.voxelize
+    vcfg, per_task = ctx.config.voxelize, ctx.config.quality.frames_per_task
     for seq in sequences(ctx):
         for voxel_size in ctx.voxel_sizes:
             grid = vcfg.grid(voxel_size)
-            # every frame's occupancy, and the town's scenes partition (the frames' LiDAR poses)
-            needs = tuple(("voxelize", f"{seq.sequence_id}/{grid.key}/{t:04d}") for t in range(seq.frame_count))
-            needs += (("scenes", seq.town),)
-            out.append(Partition(
-                f"{seq.sequence_id}/{grid.key}",
-                {"sequence_id": seq.sequence_id, "voxel_size": voxel_size, "grid": grid.model_dump(mode="json")},
-                needs=needs,
-            ))
+            for first, stop in frame_blocks(seq.frame_count, per_task):
+                # its frames' occupancy, the next one's (the last pair), and the town's scenes
+                # partition (the frames' LiDAR poses)
+                reads = range(first, min(stop + 1, seq.frame_count))
+                needs = tuple(("voxelize", f"{seq.sequence_id}/{grid.key}/{t:04d}") for t in reads)
+                out.append(Partition(
+                    f"{seq.sequence_id}/{grid.key}/{first:04d}",
+                    {"sequence_id": seq.sequence_id, "voxel_size": voxel_size, "grid": grid.model_dump(mode="json"),
+                     "first": first, "stop": stop},
+                    needs=needs + (("scenes", seq.town),),
+                ))
     return out
 
 
+def _quality_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
+    """Remove the per-task files of the (sequence, voxel size) groups about to be scored that no
+    partition owns any more (another ``frames_per_task``, fewer frames) and the whole-sequence
+    files an earlier layout wrote there, so the tables hold each frame's rows once."""
+    groups = {f"{p.params['sequence_id']}/{GridSpec.model_validate(p.params['grid']).key}" for p in to_run}
+    owned = {p.key for p in partitions}
+    for model in FRAME_TABLES:
+        table = ParquetTable(ctx.store, model)
+        for group in sorted(groups):
+            for rel in ctx.store.glob(f"{table.dir}/{group}", ".parquet"):
+                if rel[len(table.dir) + 1:-len(".parquet")] not in owned:
+                    ctx.store.remove(rel)
+    # an earlier layout's whole-sequence class rows (the sequence rows of quality/ are the
+    # aggregate stage's)
+    legacy = ParquetTable(ctx.store, ClassQualityRecord)
+    for group in sorted(groups):
+        if legacy.exists(group):
+            ctx.store.remove(legacy.path(group))
+    return set()
+
+
+def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, sem: np.ndarray,
+                      occupied: np.ndarray, with_instances: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Voxels per class and the (instance, class) pair keys of frame ``t``: the voxels from the
+    continuity counts (``occupied``, per class id), the pairs from the frame's stored instance
+    chunks only, each with its block of ``sem`` (an instance chunk that is not stored is all
+    zero: most of a frame, and never decoded)."""
+    from carlaocc.stages.report.statistics import N_CLASSES, SequenceStatistics
+
+    if occupied[N_CLASSES:].any():
+        bad = N_CLASSES + int(np.flatnonzero(occupied[N_CLASSES:])[0])
+        raise ValueError(f"frame {t} of {seq_id} holds class id {bad}, outside the taxonomy's 0..{N_CLASSES - 1}")
+    voxels = occupied[:N_CLASSES].astype(np.int64)
+    voxels[0] = sem.size - int(occupied[1:].sum())
+    stats = SequenceStatistics()
+    if with_instances:
+        cx, cy = occ.chunk_edges(seq_id, grid, "instance")
+        X, Y = sem.shape[:2]
+        for ci in range(-(-X // cx)):
+            for cj in range(-(-Y // cy)):
+                inst = occ.read_chunk(seq_id, grid, t, "instance", ci, cj)
+                if inst is not None:
+                    block = sem[ci * cx:ci * cx + inst.shape[0], cj * cy:cj * cy + inst.shape[1]]
+                    stats.add(block, inst, last_tile=False)
+    return voxels, stats.pairs
+
+
 def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
-    """Spatial continuity per frame and per sequence, per class counts, and temporal consistency
-    per frame pair and per sequence, into metrics/.
+    """Spatial continuity per frame and class, temporal consistency per frame pair, and voxels
+    and instances per class per frame, of frames ``[first, stop)`` of one sequence.
 
     Temporal consistency warps each frame t+1 into frame t with the frames' LiDAR poses (the grids
-    are in the LiDAR frame; ``scenes/frames``). Its visibility mask is ``mask_camera | mask_lidar``
-    (observed by any sensor of the rig): whichever of the two arrays the sequence has; no mask
-    when it has neither."""
-    from carlaocc.stages.quality import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
-                                temporal_consistency_counts)
+    are in the LiDAR frame; ``scenes/frames``): the pair (t, t+1) is this task's for t in
+    ``[first, stop)`` (frame ``stop`` is read for the last one). Its visibility mask is
+    ``mask_camera | mask_lidar`` (observed by any sensor of the rig): whichever of the two arrays
+    the sequence has; no mask when it has neither."""
+    from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
+    from carlaocc.stages.report.statistics import split_pairs
 
     seq_id, voxel_size = part.params["sequence_id"], part.params["voxel_size"]
+    first, stop = part.params["first"], part.params["stop"]
     grid = GridSpec.model_validate(part.params["grid"])
     occ = OccupancyStore(store)
     arr = occ.open(seq_id, grid, "semantic")
     n_frames = arr.shape[0]
-    # LiDAR-to-world pose of every frame
+    last = min(stop + 1, n_frames)  # one past the last frame read
+    # LiDAR-to-world pose of every frame read
     poses = {f.frame_index: np.asarray(f.lidar_pose, dtype=np.float64).reshape(4, 4)
-             for f in ParquetTable(store, FrameRecord).load([seq_id])}
-    missing = [t for t in range(n_frames) if t not in poses]
+             for f in ParquetTable(store, FrameRecord).load([seq_id]) if first <= f.frame_index < last}
+    missing = [t for t in range(first, last) if t not in poses]
     if missing and n_frames > 1:
         raise StoreError(f"sequence {seq_id}: no LiDAR pose for frame(s) {missing[:5]} in scenes/frames; "
                          f"re-run the scenes stage")
     masks = [n for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
-
-    def read(name: str, t: int) -> np.ndarray:
-        return occ.read_frame(seq_id, grid, t, (name,))[name]
+    with_instances = occ.exists(seq_id, grid, "instance")
+    X = arr.shape[1]
+    # two buffers each for the frames' semantic grids and masks, reused frame after frame (frames
+    # t - 1 and t are held; t + 1 goes where t - 1 was)
+    sem_buf = [np.empty(arr.shape[1:], np.uint8) for _ in range(2)]
+    mask_buf = [np.empty(arr.shape[1:], np.bool_) for _ in range(2)] if masks else []
 
     def observed(t: int) -> np.ndarray | None:
         if not masks:
             return None
-        # the stored masks are uint8 0/1: viewed as bool, OR-ed in place (no 0.05 m temporaries)
-        out = read(masks[0], t).view(np.bool_)
+        # the stored masks are uint8 0/1: read as bool, the second OR-ed in chunk by chunk
+        out = occ.read_tile(seq_id, grid, t, masks[0], 0, X, out=mask_buf[t % 2])
         for name in masks[1:]:
-            np.logical_or(out, read(name, t).view(np.bool_), out=out)
+            occ.read_tile(seq_id, grid, t, name, 0, X, out=out, combine=np.logical_or)
         return out
 
-    def continuity_row(counts, t: int | None) -> QualityRecord:
-        occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
-        return QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t, metric="spatial_continuity",
-                             value=counts.score, occupied=occupied, isolated=isolated,
-                             numerator=occupied - isolated, denominator=occupied)
-
-    def temporal_row(counts, t: int | None) -> QualityRecord:
-        return QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t, metric="temporal_consistency",
-                             value=counts.score, numerator=counts.total_intersection,
-                             denominator=counts.total_union)
-
-    per_frame, per_pair = [], []
-    quality, classes = [], []
+    quality: list[QualityRecord] = []
+    classes: list[ClassQualityRecord] = []
+    statistics: list[FrameStatisticsRecord] = []
     prev = None  # (semantic, observed mask, column ranges) of frame t - 1
-    for t in range(n_frames):
-        sem = read("semantic", t)
-        counts = spatial_continuity_counts(sem)
-        per_frame.append(counts)
-        quality.append(continuity_row(counts, t))
-        for c in np.flatnonzero(counts.occupied):
-            classes.append(ClassQualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
-                                              semantic_id=int(c), occupied=int(counts.occupied[c]),
-                                              isolated=int(counts.isolated[c])))
+    for t in range(first, last):
+        sem = occ.read_tile(seq_id, grid, t, "semantic", 0, X, out=sem_buf[t % 2])
+        # the frame's continuity counts and its columns' occupied z ranges, in one pass
+        counts, ranges = continuity_and_ranges(sem)
+        if t < stop:
+            # 1. spatial continuity of the frame, per class
+            occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
+            quality.append(QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
+                                         metric="spatial_continuity", value=counts.score, occupied=occupied,
+                                         isolated=isolated, numerator=occupied - isolated, denominator=occupied))
+            classes += [ClassQualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t, semantic_id=int(c),
+                                           occupied=int(counts.occupied[c]), isolated=int(counts.isolated[c]))
+                        for c in np.flatnonzero(counts.occupied)]
+            # 2. voxels and instances per class
+            voxels, pairs = _frame_statistics(occ, seq_id, grid, t, sem, counts.occupied, with_instances)
+            ids, cls = split_pairs(pairs)
+            statistics += [FrameStatisticsRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
+                                                 semantic_id=int(c), voxels=int(voxels[c]),
+                                                 instance_ids=ids[cls == c].astype(np.int64).tolist())
+                           for c in range(len(voxels)) if voxels[c] or (cls == c).any()]
         if n_frames < 2:
             continue
-        # each frame's column ranges serve both pairs it belongs to
-        cur = (sem, observed(t), column_ranges(sem))
+        # 3. temporal consistency of the pair (t - 1, t): frame t warped into frame t - 1; each
+        #    frame's mask and column ranges serve both pairs it belongs to
+        cur = (sem, observed(t), ranges)
         if prev is not None:
-            # the pair (t - 1, t): frame t warped into frame t - 1
             tc = temporal_consistency_counts(prev[0], sem, poses[t - 1], poses[t], grid.voxel_size, grid.origin,
                                              mask_t=prev[1], mask_t1=cur[1], ranges_t=prev[2], ranges_t1=cur[2])
-            per_pair.append(tc)
-            quality.append(temporal_row(tc, t - 1))
+            quality.append(QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t - 1,
+                                         metric="temporal_consistency", value=tc.score,
+                                         numerator=tc.total_intersection, denominator=tc.total_union))
         prev = cur
-    quality.append(continuity_row(sequence_continuity(per_frame), None))
-    quality.append(temporal_row(sequence_temporal(per_pair), None))
-    key = f"{seq_id}/{grid.key}"
-    t_q, t_c = ParquetTable(store, QualityRecord), ParquetTable(store, ClassQualityRecord)
-    return {t_q.path(key): t_q.save(key, quality), t_c.path(key): t_c.save(key, classes)}
+    key = part.key
+    out = {}
+    for model, rows in ((QualityRecord, quality), (ClassQualityRecord, classes), (FrameStatisticsRecord, statistics)):
+        table = ParquetTable(store, model)
+        out[table.path(key)] = table.save(key, rows)
+    return out
 
 
 SPEC = StageSpec(
     name="quality",
-    description="spatial continuity per frame, sequence and class; temporal consistency per frame pair "
-                "and sequence",
+    description="spatial continuity per frame and class, temporal consistency per frame pair, voxels and "
+                "instances per class per frame (runs of frames_per_task frames per task)",
     upstream=("voxelize", "scenes"),
     reads=("occupancy.zarr/", "scenes/frames/"),
-    writes=("metrics/quality/", "metrics/quality_classes/"),
+    writes=("metrics/quality/<seq>/<res>/", "metrics/quality_classes/<seq>/<res>/",
+            "metrics/statistics_frames/<seq>/<res>/"),
     partitions=quality_partitions,
     task=quality_task,
+    prepare=_quality_prepare,
 )

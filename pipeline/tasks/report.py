@@ -1,11 +1,10 @@
 """The report stage: dataset statistics (Parquet), their plots (PNG) and ``metrics/report.html``.
 
-One task over the whole dataset (the requested voxel sizes): it streams every occupancy frame
-once (voxels per class, distinct instances per class), counts the ADMesh library, reads the
-quality scores and the lineage, renders one frame (and its cameras when the sensors stage ran),
-and writes
+One task over the whole dataset (the requested voxel sizes). It reads only reduced tables: the
+sequences' class statistics and quality scores (the aggregate stage's, summed from the quality
+stage's per-frame counts), the ADMesh library and the lineage; and one frame, which it renders
+(with its cameras when the sensors stage ran). It writes
 
-* ``metrics/statistics_classes/dataset.parquet`` (:class:`ClassStatisticsRecord`),
 * ``metrics/statistics_assets/dataset.parquet`` (:class:`AssetStatisticsRecord`),
 * ``metrics/plots/*.png`` (class voxels, instances, static/dynamic share per voxel size; assets;
   quality; the rendered frame and camera sheet),
@@ -24,69 +23,18 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.usage import store_usage
 from carlaocc.pipeline.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
-from carlaocc.pipeline.tasks.quality import quality_partitions
+from carlaocc.pipeline.tasks.aggregate import aggregate_partitions
 from carlaocc.pipeline.tasks.report_page import PLOTS_DIR, REPORT_HTML, SENSOR_STEP, render_html, stage_lineage
 from carlaocc.pipeline.tasks.scenes import scenes_partitions
 from carlaocc.pipeline.tasks.sensors import sensors_partitions
 from carlaocc.schemas.configs import DatasetConfig, QualityConfig
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord,
-                                      QualityRecord, SequenceRecord)
+from carlaocc.schemas.records import (AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord, QualityRecord,
+                                      SequenceRecord)
 
 TABLE_KEY = "dataset"
 FRAME_HEIGHT = 380  # pixels of the rendered occupancy frame's panels
 RENDER_INSTANCE_VOXELS = 1 << 26  # larger frames are rendered by class (no instance grid in memory)
-TILE_VOXELS = 1 << 24  # occupancy is read in x-slabs of whole chunks of at most ~16 M voxels
-
-
-def _tiles(occ: OccupancyStore, seq: str, grid: GridSpec, instance: bool, voxels: int = TILE_VOXELS):
-    """(frame, semantic tile, instance tile or None, last tile of the frame) over every frame in
-    x-slabs of whole chunks of at most ~``voxels`` voxels (a 0.05 m frame is never whole in
-    memory), each read while the previous one is counted (the decoder and the counting kernel
-    release the GIL)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    arr = occ.open(seq, grid, "semantic")
-    n, X = arr.shape[0], arr.shape[1]
-    cx = arr.chunks[1]
-    slab = cx * max(1, voxels // max(1, cx * int(np.prod(arr.shape[2:]))))
-    reads = [(t, x0, min(slab, X - x0)) for t in range(n) for x0 in range(0, X, slab)]
-
-    def read(t: int, x0: int, nx: int):
-        return (occ.read_tile(seq, grid, t, "semantic", x0, nx),
-                occ.read_tile(seq, grid, t, "instance", x0, nx) if instance else None)
-
-    with ThreadPoolExecutor(1) as pool:
-        nxt = pool.submit(read, *reads[0]) if reads else None
-        for k, (t, x0, nx) in enumerate(reads):
-            sem, inst = nxt.result()
-            if k + 1 < len(reads):
-                nxt = pool.submit(read, *reads[k + 1])
-            yield t, sem, inst, x0 + nx == X
-
-
-def sequence_statistics(store: Store, seq: SequenceRecord, grid: GridSpec) -> list[ClassStatisticsRecord]:
-    """Class statistics of one sequence at one resolution: every frame streamed once, in tiles."""
-    from carlaocc.stages.report.statistics import SequenceStatistics
-
-    occ = OccupancyStore(store)
-    if not occ.exists(seq.sequence_id, grid, "semantic"):
-        raise StoreError(f"{seq.sequence_id} has no occupancy at {grid.key} m in {store.url}: run the voxelize stage")
-    tiles = _tiles(occ, seq.sequence_id, grid, occ.exists(seq.sequence_id, grid, "instance"))
-    stats = SequenceStatistics()
-    for _, sem, inst, last in tiles:
-        stats.add(sem, inst, last_tile=last)
-    # instances that are dynamic actors of the sequence (they have actor states)
-    actors = ParquetTable(store, ActorStateRecord)
-    actor_ids = (np.unique(actors.load_arrow([seq.sequence_id]).column("instance_id").to_numpy())
-                 if actors.exists(seq.sequence_id) else np.zeros(0, np.int64))
-    inst, moving = stats.instances(), stats.instances(actor_ids.tolist())
-    return [ClassStatisticsRecord(sequence_id=seq.sequence_id, resolution=float(grid.voxel_size), semantic_id=c,
-                                  frames=stats.frames, voxels=int(stats.voxels[c]), instances=int(inst[c]),
-                                  moving_instances=int(moving[c]))
-            for c in range(len(stats.voxels)) if stats.voxels[c] or inst[c]]
-
-
 def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     """The occupancy figure of one frame (BEV, 3D view, legend); instances coloured per object
     unless the grid is larger than :data:`RENDER_INSTANCE_VOXELS` (a 0.05 m instance frame is
@@ -138,10 +86,15 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
         raise StoreError(f"sequences {sorted(set(seq_ids) - {s.sequence_id for s in sequences})} are not in "
                          f"{store.url}: run the scenes stage")
     outputs: dict[str, str] = {}
-    # 1. class statistics: every frame of every sequence at every resolution, streamed
-    class_rows = [row for grid in grids for seq in sequences for row in sequence_statistics(store, seq, grid)]
+    # 1. class statistics of these sequences and resolutions (the aggregate stage's)
     t_cls = ParquetTable(store, ClassStatisticsRecord)
-    outputs[t_cls.path(TABLE_KEY)] = t_cls.save(TABLE_KEY, class_rows)
+    keys = [f"{s.sequence_id}/{g.key}" for g in grids for s in sequences]
+    missing = [k for k in keys if not t_cls.exists(k)]
+    if missing:
+        raise StoreError(f"{t_cls.path(missing[0])} is missing from {store.url}: run the aggregate stage")
+    class_rows = t_cls.load(keys)
+    if t_cls.exists(TABLE_KEY):  # the whole-dataset file an earlier layout wrote
+        store.remove(t_cls.path(TABLE_KEY))
     # 2. the ADMesh library per class and source (duplicates once, as the catalog views list it)
     asset_rows = asset_distribution(dedupe_assets(ParquetTable(store, AssetRecord).load()))
     t_ast = ParquetTable(store, AssetStatisticsRecord)
@@ -198,33 +151,39 @@ def report_config(config: DatasetConfig) -> QualityConfig:
 
 
 def _report_partitions(ctx: Context) -> list[Partition]:
-    """One partition over the whole dataset at the requested resolutions: it reads every metrics
-    partition and what they read (every occupancy frame), the scenes and ingest partitions, and
-    every sensors partition once the sensors stage has run (the report shows cameras then)."""
+    """One partition over the whole dataset at the requested resolutions: it reads every aggregate
+    partition (the sequences' statistics and scores), the scenes and ingest partitions, and the
+    frame it renders: its occupancy at the finest size, and its cameras once the sensors stage has
+    run."""
     from carlaocc.catalog.lineage import LineageLog
 
     needs: set[tuple[str, str]] = set()
     for p in scenes_partitions(ctx):
         needs |= {("scenes", p.key), *p.needs}
-    for p in quality_partitions(ctx):
-        needs |= {("quality", p.key), *p.needs}
+    needs |= {("aggregate", p.key) for p in aggregate_partitions(ctx)}
     lineage = LineageLog(ctx.store)
     # the ADMesh plot counts the whole library: every ingested item, whichever source
     needs |= {("ingest", k) for k, r in lineage.latest("ingest").items() if r.status == "completed"}
-    if lineage.latest("sensors"):
-        needs |= {("sensors", p.key) for p in sensors_partitions(ctx)}
+    seqs = sequences(ctx)
     grids = [ctx.config.voxelize.grid(res) for res in ctx.voxel_sizes]
+    if seqs and grids:
+        seq, finest = seqs[0], min(grids, key=lambda g: g.voxel_size)
+        frame = seq.frame_count // 2
+        needs.add(("voxelize", f"{seq.sequence_id}/{finest.key}/{frame:04d}"))
+        if lineage.latest("sensors"):
+            needs |= {("sensors", p.key) for p in sensors_partitions(ctx) if p.key == f"{seq.sequence_id}/{frame:04d}"}
     return [Partition("dataset", {"grids": [g.model_dump(mode="json") for g in grids],
-                                  "sequences": [s.sequence_id for s in sequences(ctx)]},
+                                  "sequences": [s.sequence_id for s in seqs]},
                       needs=tuple(sorted(needs)))]
 
 
 SPEC = StageSpec(
     name="report",
     description="statistics (voxels, instances, assets per class), plots and metrics/report.html",
-    upstream=("ingest", "scenes", "voxelize", "sensors", "quality"),
-    reads=("admesh/assets/", "scenes/", "occupancy.zarr/", "sensors.zarr/", "metrics/quality/", "catalog/runs/"),
-    writes=("metrics/statistics_classes/", "metrics/statistics_assets/", "metrics/plots/", "metrics/report.html"),
+    upstream=("ingest", "scenes", "voxelize", "sensors", "aggregate"),
+    reads=("admesh/assets/", "scenes/", "metrics/statistics_classes/", "metrics/quality/", "catalog/runs/",
+           "occupancy.zarr/ and sensors.zarr/ (the one frame rendered)"),
+    writes=("metrics/statistics_assets/", "metrics/plots/", "metrics/report.html"),
     partitions=_report_partitions,
     task=report_task,
     config_of=report_config,

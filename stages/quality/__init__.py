@@ -2,13 +2,16 @@
 
 from carlaocc.stages.quality.continuity import (
     ContinuityCounts,
+    continuity_and_ranges,
     isolated_mask_reference,
+    pooled_continuity,
     sequence_continuity,
     spatial_continuity_counts,
 )
 from carlaocc.stages.quality.temporal import (
     TemporalCounts,
     column_ranges,
+    pooled_temporal,
     relative_pose,
     sequence_temporal,
     static_table,
@@ -19,7 +22,10 @@ __all__ = [
     "ContinuityCounts",
     "TemporalCounts",
     "column_ranges",
+    "continuity_and_ranges",
     "isolated_mask_reference",
+    "pooled_continuity",
+    "pooled_temporal",
     "relative_pose",
     "sequence_continuity",
     "sequence_temporal",

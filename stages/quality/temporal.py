@@ -73,8 +73,7 @@ class TemporalCounts:
     @property
     def score(self) -> float:
         """The paper's ``s_tc``: pooled ``sum I / sum U`` over classes >= 1; NaN when ``U`` is 0."""
-        u = self.total_union
-        return float("nan") if u == 0 else self.total_intersection / u
+        return pooled_temporal(self.total_intersection, self.total_union)
 
     def class_iou(self) -> np.ndarray:
         """(256,) float64 IoU per class (NaN where the class's union is empty, and for class 0)."""
@@ -91,6 +90,12 @@ class TemporalCounts:
 
     def __add__(self, other: TemporalCounts) -> TemporalCounts:
         return TemporalCounts(self.intersection + other.intersection, self.union + other.union)
+
+
+def pooled_temporal(intersection: int, union: int) -> float:
+    """``sum I / sum U`` from counts summed over any classes and frame pairs (the one definition of
+    the score: a pair's, a sequence's and a dataset's); NaN when ``union`` is 0."""
+    return float("nan") if union == 0 else intersection / union
 
 
 def empty_temporal_counts() -> TemporalCounts:

@@ -131,6 +131,13 @@ def instance_class_pairs(semantic: np.ndarray, instance: np.ndarray) -> np.ndarr
     return frame_statistics(semantic, instance)[1]
 
 
+def pair_keys(instance_ids: np.ndarray, classes: np.ndarray) -> np.ndarray:
+    """(instance ids, class ids) -> sorted distinct pair keys ``id << 8 | class`` (the inverse of
+    :func:`split_pairs`)."""
+    ids = np.asarray(instance_ids, dtype=np.uint64)
+    return np.unique((ids << np.uint64(8)) | np.asarray(classes, dtype=np.uint64))
+
+
 def split_pairs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pair keys ``id << 8 | class`` -> (instance ids uint64, class ids int64)."""
     keys = np.asarray(keys, dtype=np.uint64)
@@ -167,12 +174,17 @@ class SequenceStatistics:
         """Count one frame, or one tile of a frame (``instance`` None: voxels only); the frame
         counts once its ``last_tile`` is added."""
         if instance is None:
-            self.voxels += class_voxel_counts(semantic)
+            self.add_counts(class_voxel_counts(semantic), None, last_tile=last_tile)
         else:
-            counts, pairs = frame_statistics(semantic, instance)
-            self.voxels += counts
+            self.add_counts(*frame_statistics(semantic, instance), last_tile=last_tile)
+
+    def add_counts(self, voxels: np.ndarray, pairs: np.ndarray | None, *, last_tile: bool = True) -> None:
+        """Add what :func:`frame_statistics` found in a frame or tile (voxels per class, pair keys):
+        the same as :meth:`add` on its grids, for counts computed elsewhere (per-frame tables)."""
+        self.voxels += np.asarray(voxels, np.int64)
+        if pairs is not None:
             # union of small sorted arrays: the pairs of a frame are a few thousand at most
-            self.pairs = np.union1d(self.pairs, pairs)
+            self.pairs = np.union1d(self.pairs, np.asarray(pairs, np.uint64))
         self.frames += int(last_tile)
 
     def instances(self, only_ids: Iterable[int] | None = None) -> np.ndarray:

@@ -135,7 +135,7 @@ def test_stage_names_and_the_earlier_metrics_name():
     from carlaocc.pipeline.registry import STAGES
     from carlaocc.pipeline.runner import PlanError, stage_order
 
-    assert list(STAGES) == ["ingest", "scenes", "splits", "voxelize", "sensors", "quality", "report"]
+    assert list(STAGES) == ["ingest", "scenes", "splits", "voxelize", "sensors", "quality", "aggregate", "report"]
     assert [s.name for s in stage_order(["metrics", "voxelize"])] == ["voxelize", "quality"]
     with pytest.raises(PlanError, match="unknown stage 'metric'"):
         stage_order(["metric"])

@@ -1,5 +1,6 @@
-"""The report stage on a tiny synthetic store: statistics against hand counts, the plots, a
-self-contained report page, its partition's needs, and the lineage and size sections."""
+"""The report stage on a tiny synthetic store: statistics (the quality stage's per-frame counts
+summed by the aggregate stage) against hand counts, the plots, a self-contained report page, its
+partition's needs, and the lineage and size sections."""
 
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ from carlaocc.pipeline.registry import STAGES
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig, QualityConfig
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, QualityRecord, RunRecord,
-                             SequenceRecord)
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, ClassStatisticsRecord, FrameRecord, QualityRecord,
+                                      RunRecord, SequenceRecord)
 
 CAR, BUILDING, ROAD = (taxonomy.by_name(n).id for n in ("Car", "Building", "Road"))
 GRID = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(6.4, 6.4, 1.6), voxel_size=0.4)  # 16 x 16 x 4
@@ -69,6 +70,8 @@ def small(store: Store, make_asset) -> Store:
         for t in range(FRAMES):
             sem, inst = _frame(t, i)
             occ.write_frame(seq, GRID, t, {"semantic": sem, "instance": inst})
+        ParquetTable(store, FrameRecord).save(seq, [FrameRecord(sequence_id=seq, frame_index=t, timestamp=0.1 * t,
+                                                                ego_pose=POSE, lidar_pose=POSE) for t in range(FRAMES)])
         actors.save(seq, [ActorStateRecord(sequence_id=seq, frame_index=t, instance_id=10, asset_id="car",
                                            semantic_id=CAR, pose=POSE, box_center=[0.0, 0.0, 0.0],
                                            box_size=[4.0, 2.0, 1.5], yaw=0.0, velocity=[1.0, 0.0, 0.0],
@@ -80,6 +83,20 @@ def small(store: Store, make_asset) -> Store:
     ParquetTable(store, QualityRecord).save("q", [
         QualityRecord(sequence_id=s, resolution=0.4, frame_index=f, metric=m, value=v, occupied=10, isolated=0)
         for s in SEQS for f in (None, 0, 1) for m, v in (("spatial_continuity", 0.99), ("temporal_consistency", 0.95))])
+    # the statistics: the quality stage's per-frame counts in two tasks a sequence (frames 0-1, 2),
+    # summed by the aggregate stage
+    from carlaocc.pipeline.tasks.aggregate import aggregate_task
+    from carlaocc.pipeline.tasks.quality import quality_task
+
+    for seq in SEQS:
+        keys = []
+        for first, stop in ((0, 2), (2, 3)):
+            keys.append(f"{seq}/{GRID.key}/{first:04d}")
+            quality_task(store, QualityConfig(), Partition(keys[-1], {
+                "sequence_id": seq, "voxel_size": 0.4, "grid": GRID.model_dump(mode="json"), "first": first,
+                "stop": stop}))
+        aggregate_task(store, QualityConfig(), Partition(f"{seq}/{GRID.key}", {
+            "sequence_id": seq, "voxel_size": 0.4, "resolution_key": GRID.key, "quality_keys": keys}))
     LineageLog(store).append("voxelize", "r1", [
         _run("voxelize", f"{s}/0.4/{t:04d}", {f"occupancy.zarr/{s}/0.4/semantic[{t}]": "sha256:aa",
                                                f"occupancy.zarr/{s}/0.4/instance[{t}]": "sha256:bb"},
@@ -144,24 +161,25 @@ def test_report_page_is_self_contained(small):
 
 
 def test_report_partition_needs_every_upstream_output(small):
+    """The report reads the sequences' aggregates, not their frames: its needs are the aggregate
+    partitions, the scenes and ingest partitions, and the one frame it renders (with its cameras
+    once the sensors stage ran)."""
     ctx = Context(small, DatasetConfig(), (0.4,))
-    assert list(STAGES)[-1] == "report" and STAGES["report"].upstream[-1] == "quality"
+    assert list(STAGES)[-1] == "report" and STAGES["report"].upstream[-1] == "aggregate"
     (part,) = STAGES["report"].partitions(ctx)
     needs = set(part.needs)
     for seq in SEQS:
-        assert ("quality", f"{seq}/0.4") in needs
-        assert {("voxelize", f"{seq}/0.4/{t:04d}") for t in range(FRAMES)} <= needs
+        assert ("aggregate", f"{seq}/0.4") in needs
+    first = sorted(SEQS)[0]
+    assert {n for n in needs if n[0] == "voxelize"} == {("voxelize", f"{first}/0.4/{FRAMES // 2:04d}")}
+    assert not any(s == "quality" for s, _ in needs)
     assert ("scenes", "town00") in needs and ("ingest", "procedural") in needs
     assert not any(s == "sensors" for s, _ in needs)
     assert part.params["sequences"] == sorted(SEQS)
-    # once the sensors stage has run, the report reads its frames too
+    # once the sensors stage has run, the report reads the rendered frame's cameras too
     LineageLog(small).append("sensors", "r2", [_run("sensors", f"{SEQS[0]}/0000", {})])
     (part,) = STAGES["report"].partitions(ctx)
-    assert {("sensors", f"{s}/{t:04d}") for s in SEQS for t in range(FRAMES)} <= set(part.needs)
-    # an item ingested from another source (not one the scenes use) is in the library plot too
-    LineageLog(small).append("ingest", "r3", [_run("ingest", "folder:abc123/chair.obj", {})])
-    (part,) = STAGES["report"].partitions(ctx)
-    assert ("ingest", "folder:abc123/chair.obj") in set(part.needs)
+    assert {n for n in part.needs if n[0] == "sensors"} == {("sensors", f"{first}/{FRAMES // 2:04d}")}
 
 
 def test_read_tile_agrees_with_zarr(small):

@@ -85,9 +85,16 @@ def _run_metrics(store, grid, seq="seq0"):
     from carlaocc.schemas.configs import QualityConfig
     from carlaocc.schemas.records import QualityRecord
 
-    part = Partition(f"{seq}/{grid.key}", {"sequence_id": seq, "voxel_size": grid.voxel_size,
-                                            "grid": grid.model_dump(mode="json")})
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.pipeline.tasks.aggregate import aggregate_task
+
+    # the map (one task over every frame), then the reduce (the sequence rows)
+    n = OccupancyStore(store).open(seq, grid, "semantic").shape[0]
+    part = Partition(f"{seq}/{grid.key}/0000", {"sequence_id": seq, "voxel_size": grid.voxel_size,
+                                                 "grid": grid.model_dump(mode="json"), "first": 0, "stop": n})
     quality_task(store, QualityConfig(), part)
+    aggregate_task(store, QualityConfig(), Partition(f"{seq}/{grid.key}", {
+        "sequence_id": seq, "voxel_size": grid.voxel_size, "resolution_key": grid.key, "quality_keys": [part.key]}))
     rows = ParquetTable(store, QualityRecord).load()
     return {(r.metric, r.frame_index): r for r in rows}
 
