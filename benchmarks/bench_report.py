@@ -22,7 +22,7 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.report.statistics import frame_statistics
+from carlaocc.stages.quality.statistics import frame_statistics
 
 REPEAT = 3
 

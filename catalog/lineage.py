@@ -1,4 +1,11 @@
-"""Lineage records: one Parquet file per (stage, run) under ``catalog/runs/stage=<stage>/``.
+"""Lineage records: Parquet files under ``catalog/runs/stage=<stage>/``.
+
+The driver writes what finished every few seconds (one file per flush, never one per task), then
+merges a stage's files of the run into one (:meth:`LineageLog.compact_run`); once a stage holds
+more than :data:`COMPACT_FILES` files, they are merged into one as well (:meth:`LineageLog.compact`),
+so 100 K tasks and many runs stay a handful of files. Merging keeps every record: the merged file
+is written (atomically) before its sources are removed, so a crash in between leaves records
+twice, which :meth:`LineageLog.latest` reads as once.
 
 A lineage file that cannot be read (truncated, garbage bytes) never stops a run or ``status``:
 it is left out of what is loaded and listed in :attr:`LineageLog.damaged` (its path and why), so
@@ -16,6 +23,7 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.records import RunRecord
 
 DAMAGED_SUFFIX = ".damaged"
+COMPACT_FILES = 64  # a stage with more lineage files than this has them merged into one
 
 
 class LineageLog:
@@ -67,6 +75,48 @@ class LineageLog:
                 moved.append(target)
             del self.damaged[path]
         return moved
+
+    def _files(self, stage: str) -> list[str]:
+        """Store-relative paths of a stage's readable-looking lineage files."""
+        prefix = self._stage_dir(stage)
+        return [p for p in self.table.paths() if p.startswith(prefix)]
+
+    def _merge(self, stage: str, paths: list[str], key: str) -> str | None:
+        """Write the records of ``paths`` to ``stage=<stage>/<key>``, then remove the sources
+        (an unreadable one is left alone for :meth:`set_aside`)."""
+        records, merged = [], []
+        for path in paths:
+            try:
+                records.extend(self.table.load([path[len(self.table.dir) + 1:-len(".parquet")]]))
+                merged.append(path)
+            except (StoreError, ValueError):
+                continue
+        if len(merged) < 2:
+            return None
+        records.sort(key=lambda r: (r.run_id, r.partition))
+        written = self.table.save(f"stage={stage}/{key}", records)
+        target = self.table.path(f"stage={stage}/{key}")
+        for path in merged:
+            if path != target:
+                self.table.store.remove(path)
+        return written
+
+    def compact_run(self, stage: str, run_id: str) -> None:
+        """Merge the files one run wrote for a stage (one per flush) into ``<run_id>.parquet``,
+        then the stage's files into one when there are more than :data:`COMPACT_FILES`."""
+        prefix = f"{self._stage_dir(stage)}{run_id}-"
+        self._merge(stage, [p for p in self._files(stage) if p.startswith(prefix)], run_id)
+        self.compact(stage)
+
+    def compact(self, stage: str, max_files: int = COMPACT_FILES) -> bool:
+        """Merge a stage's lineage files into one (``compacted-<last run id>.parquet``) when it has
+        more than ``max_files``; every record is kept. True when it merged."""
+        files = self._files(stage)
+        if len(files) <= max_files:
+            return False
+        # the merged file is named after the newest run it holds, so names keep their order
+        last = max(files).rsplit("/", 1)[-1].removesuffix(".parquet")
+        return self._merge(stage, files, f"compacted-{last}") is not None
 
     def latest(self, stage: str) -> dict[str, RunRecord]:
         """The most recent record of every partition of a stage (completed or failed), ordered by

@@ -369,7 +369,8 @@ class FrameArrayStore(ABC):
                     out[xa:xa + bx, ya:ya + by] = 0
                 continue
             try:
-                block = decode_chunk(payload, dtype, chunks[1:])
+                # into a reused buffer: the block is copied into out at once
+                block = decode_chunk(payload, dtype, chunks[1:], scratch=True)
             except (RuntimeError, ValueError) as exc:  # zstd error, or the wrong decoded size
                 raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
             if combine is None:

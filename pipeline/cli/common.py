@@ -305,11 +305,14 @@ class _RichProgress:
     def __init__(self) -> None:
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                   TimeElapsedColumn)
+                                   TimeElapsedColumn, TimeRemainingColumn)
 
+        # one line per stage however many tasks it has (100 K at the paper's scale): done/total,
+        # elapsed, and the time left at the rate so far
         self._progress = Progress(
             TextColumn("{task.description:<9}"), BarColumn(), MofNCompleteColumn(),
-            TextColumn("tasks"), TimeElapsedColumn(), console=Console(stderr=True),
+            TextColumn("tasks"), TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(),
+            console=Console(stderr=True),
         )
         self._tasks: dict[str, int] = {}
 

@@ -48,7 +48,7 @@ def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[st
     """The sequence rows of the quality table and the sequence's class statistics, from the
     per-frame rows of its quality tasks."""
     from carlaocc.stages.quality import pooled_continuity, pooled_temporal
-    from carlaocc.stages.report.statistics import SequenceStatistics, pair_keys
+    from carlaocc.stages.quality.statistics import SequenceStatistics, pair_keys
 
     seq_id, voxel_size, keys = part.params["sequence_id"], part.params["voxel_size"], part.params["quality_keys"]
     frame_rows = [r for r in _load(store, QualityRecord, keys) if r.frame_index is not None]

@@ -75,7 +75,7 @@ def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, 
     continuity counts (``occupied``, per class id), the pairs from the frame's stored instance
     chunks only, each with its block of ``sem`` (an instance chunk that is not stored is all
     zero: most of a frame, and never decoded)."""
-    from carlaocc.stages.report.statistics import N_CLASSES, SequenceStatistics
+    from carlaocc.stages.quality.statistics import N_CLASSES, SequenceStatistics
 
     if occupied[N_CLASSES:].any():
         bad = N_CLASSES + int(np.flatnonzero(occupied[N_CLASSES:])[0])
@@ -105,7 +105,7 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     ``mask_camera | mask_lidar`` (observed by any sensor of the rig): whichever of the two arrays
     the sequence has; no mask when it has neither."""
     from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
-    from carlaocc.stages.report.statistics import split_pairs
+    from carlaocc.stages.quality.statistics import split_pairs
 
     seq_id, voxel_size = part.params["sequence_id"], part.params["voxel_size"]
     first, stop = part.params["first"], part.params["stop"]

@@ -181,3 +181,95 @@ def test_dask_address_and_threaded_local_cluster(store, monkeypatch):
     monkeypatch.delenv("DASK_SCHEDULER_ADDRESS")
     out = {o.stage: o for o in runner.run(store, DatasetConfig(), (0.2,), force=True)}  # LocalCluster
     assert (out["ingest"].ran, out["scenes"].ran) == (2, 2)
+
+
+_LIVE = {"now": 0, "peak": 0}  # tasks running at once in the bounded-window test (threads)
+
+
+def _counted_task(store, cfg, part):
+    import time
+
+    _LIVE["now"] += 1
+    _LIVE["peak"] = max(_LIVE["peak"], _LIVE["now"])
+    time.sleep(0.01)
+    _LIVE["now"] -= 1
+    return {}
+
+
+def test_partitions_are_submitted_in_a_bounded_window():
+    """The driver keeps at most ``in_flight()`` tasks in the scheduler: 40 partitions through a
+    window of 3 never have more than 3 submitted and unfinished, and every one is done once."""
+    from distributed import LocalCluster
+
+    from carlaocc.pipeline.spec import Partition, StageSpec
+
+    spec = StageSpec("x", "", (), (), (), partitions=lambda ctx: [], task=_counted_task)
+    parts = [Partition(f"p{i:02d}") for i in range(40)]
+    seen, submitted = [], []
+    with LocalCluster(n_workers=1, threads_per_worker=8, processes=False, dashboard_address=None,
+                      scheduler_kwargs={"dashboard": False}) as cluster:
+        ex = runner.DaskExecutor(cluster.scheduler_address, processes=False, max_in_flight=3)
+        real_submit = ex._get_client().submit
+
+        def counting_submit(*args, **kwargs):
+            unfinished = sum(not f.done() for f in submitted)
+            assert unfinished < 3, unfinished  # room for this one
+            fut = real_submit(*args, **kwargs)
+            submitted.append(fut)
+            return fut
+
+        ex._client.submit = counting_submit
+        try:
+            ex.map(spec, "memory://bounded", DatasetConfig().scenes, parts, seen.append)
+        finally:
+            ex.close()
+    assert sorted(r.partition for r in seen) == [p.key for p in parts] and {r.status for r in seen} == {"completed"}
+    assert _LIVE["peak"] <= 3 and len(submitted) == 40
+
+
+def test_lineage_is_compacted(store):
+    """A run's flush files become one file per stage; past COMPACT_FILES the stage's files are
+    merged into one; every record is kept and the latest per partition is unchanged."""
+    from datetime import datetime, timezone
+
+    from carlaocc.catalog import lineage as lineage_mod
+    from carlaocc.schemas.records import RunRecord
+
+    t = datetime(2026, 1, 1, tzinfo=timezone.utc)
+
+    def rec(run_id, part, status="completed"):
+        return RunRecord(run_id=run_id, stage="s", partition=part, code_version="c", config_hash="h", cache_key="k",
+                         input_fingerprints="{}", output_fingerprints="{}", status=status, started_at=t, ended_at=t,
+                         host="w")
+
+    log = LineageLog(store)
+    run = "20260101T000000000000Z-aaaaaa"
+    for i in range(3):  # three flushes of one run
+        log.append("s", f"{run}-{i:04d}", [rec(run, f"p{i}")])
+    log.compact_run("s", run)
+    assert [p.rsplit("/", 1)[1] for p in log._files("s")] == [f"{run}.parquet"]
+    assert sorted(log.latest("s")) == ["p0", "p1", "p2"]
+    # many runs: merged once there are more than COMPACT_FILES files
+    for i in range(lineage_mod.COMPACT_FILES):
+        r = f"20260102T{i:06d}000000Z-b"
+        log.append("s", r, [rec(r, "p0", "failed" if i % 2 else "completed")])
+    before = {k: v for k, v in LineageLog(store).latest("s").items()}
+    n_records = len(LineageLog(store).load("s"))
+    assert log.compact("s") and len(log._files("s")) == 1
+    assert not log.compact("s")
+    assert len(LineageLog(store).load("s")) == n_records
+    assert LineageLog(store).latest("s") == before and before["p0"].status == "failed"
+
+
+def test_local_workers_fit_the_finest_task_under_the_nanny():
+    gib = 1 << 30
+    # 0.05 m: ~5 GB a task; 24 GiB and 2 cores hold both workers
+    need = runner.task_memory(1536 * 1024 * 260)
+    assert 4.5 * gib < need < 6 * gib
+    assert runner.local_workers(None, need, total=24 * gib, cores=2) == (2, 12 * gib)
+    # 100 cores and 128 GiB: 25 workers, each with room for one task below the kill line
+    n, limit = runner.local_workers(None, need, total=128 * gib, cores=100)
+    assert n == 25 and limit * runner.NANNY_TERMINATE >= need
+    # --workers wins; no task size: distributed's own share ("auto")
+    assert runner.local_workers(7, need, total=128 * gib, cores=100)[0] == 7
+    assert runner.local_workers(None, None, cores=3) == (3, "auto")

@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.records import AssetRecord, AssetStatisticsRecord, QualityRecord
 from carlaocc.stages.report import plots
-from carlaocc.stages.report.statistics import (N_CLASSES, SequenceStatistics, asset_distribution,
-                                       class_voxel_counts, frame_statistics, instance_class_pairs,
-                                       instances_per_class, motion_share, split_pairs)
+from carlaocc.stages.quality.statistics import (N_CLASSES, SequenceStatistics, class_voxel_counts, frame_statistics,
+                                                instance_class_pairs, instances_per_class, split_pairs)
+from carlaocc.stages.report.statistics import asset_distribution, motion_share
 
 CAR, PED, BUILDING, ROAD = (taxonomy.by_name(n).id for n in ("Car", "Pedestrian", "Building", "Road"))
 
