@@ -2,7 +2,8 @@
 
 Two builds, each stage run on its own (``carlaocc run --stages <stage>``) in a subprocess whose
 process tree is sampled every 0.2 s (wall time, CPU seconds of every process, the peak resident
-memory of the largest single process: a worker):
+memory of the largest single process: a worker); a stage's cost per frame is its tasks' summed
+run time from lineage (core-seconds: each worker is one single-threaded process):
 
 * ``wide``: the paper preset (8 towns x 13 sequences) with ``--frames`` frames a sequence at
   ``--res`` (default 50 frames at 0.2 m: 5,200 frames);
@@ -60,7 +61,8 @@ def _sample(proc: psutil.Popen, on_progress=None, interval: float = 0.2, every: 
                     rss = p.memory_info().rss
             except psutil.Error:
                 continue
-            cpu[p.pid] = t.user + t.system + getattr(t, "children_user", 0) + getattr(t, "children_system", 0)
+            # the process's own time: a nanny's children_* would count its worker twice
+            cpu[p.pid] = t.user + t.system
             peak_proc, tree = max(peak_proc, rss), tree + rss
         peak_tree = max(peak_tree, tree)
         time.sleep(interval)
@@ -94,6 +96,16 @@ def _status(root: Path, config: Path, res: str) -> dict:
                          capture_output=True, text=True)
     return {"seconds": time.perf_counter() - t0, "up_to_date": out.returncode == 0 and "stale" not in out.stdout,
             "output": out.stdout[-2000:]}
+
+
+def _task_seconds(root: Path, stage: str) -> float:
+    """The summed run time of the latest task of every partition of ``stage`` (lineage's start
+    and end times): the stage's core-seconds, whatever the attempts, restarts and idle cores."""
+    from carlaocc.catalog.lineage import LineageLog
+    from carlaocc.catalog.store import Store
+
+    recs = [r for r in LineageLog(Store(str(root))).latest(stage).values() if r.status == "completed"]
+    return sum((r.ended_at - r.started_at).total_seconds() for r in recs)
 
 
 def _size(root: Path) -> int:
@@ -131,6 +143,11 @@ def _frames(build: dict) -> int:
     return int(build["frames"])
 
 
+def _per_frame(stage: dict, frames: int) -> float:
+    """Core-seconds a frame: the tasks' summed run time (lineage), else the sampled CPU time."""
+    return (stage.get("task_s") or stage["cpu_s"]) / frames
+
+
 def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 100) -> str:
     """Markdown tables: per build and stage (wall, CPU s per frame, frames per core-hour, peak
     worker memory), status and size; then the extrapolation to ``extrapolate_frames`` frames on
@@ -142,13 +159,13 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
             continue
         n = _frames(b)
         lines += [f"### {kind}: {b['description']} ({n:,} frames at {b['res']} m, {b['workers']} workers)", "",
-                  "| stage | tasks | wall | CPU s / frame | frames / core-hour | peak worker | plan |",
+                  "| stage | tasks | wall | task s / frame | frames / core-hour | peak worker | plan |",
                   "|---|---|---|---|---|---|---|"]
         for stage in STAGES:
             s = b["stages"].get(stage)
             if not s:
                 continue
-            per = s["cpu_s"] / n
+            per = _per_frame(s, n)
             fph = 3600 / per if per else float("inf")
             plan = f"{s['plan_s']:.2f} s" if s.get("plan_s") is not None else "-"
             lines.append(f"| {stage}{' (resumed)' if s.get('attempts', 1) > 1 else ''} | {s['ran']:,} | "
@@ -161,13 +178,13 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
     long, wide = results.get("long"), results.get("wide")
     if long or wide:
         lines += [f"### Extrapolated: {extrapolate_frames:,} frames on {cores} cores", "",
-                  "| stage | CPU s / frame (measured on) | hours on the cores | assumption |", "|---|---|---|---|"]
+                  "| stage | task s / frame (measured on) | hours on the cores | assumption |", "|---|---|---|---|"]
         total = 0.0
         for stage in STAGES:
             src = long if long and stage in long["stages"] else wide
             if not src or stage not in src["stages"]:
                 continue
-            per = src["stages"][stage]["cpu_s"] / _frames(src)
+            per = _per_frame(src["stages"][stage], _frames(src))
             if stage in ("ingest", "splits", "report"):
                 lines.append(f"| {stage} | {per:.3f} ({'long' if src is long else 'wide'}) | - | once per dataset, "
                              f"not per frame |")
@@ -208,6 +225,12 @@ def main(argv: list[str] | None = None) -> None:
     path = args.work / "scale.json"
     results = _load(path)
     if args.report:
+        # the tasks' run times from each root's lineage (figures recorded before they were kept)
+        for kind, b in results.items():
+            for stage, r in b.get("stages", {}).items():
+                if r.get("complete") and (args.work / kind).exists():
+                    r["task_s"] = _task_seconds(args.work / kind, stage)
+        _save(path, results)
         print(report(results, args.extrapolate_frames, args.cores))
         return
     import yaml
@@ -251,9 +274,10 @@ def main(argv: list[str] | None = None) -> None:
                 _save(path, results)  # what an interruption would otherwise lose
 
             r = merged(_run_stage(root, config, res, stage, args.workers, progress), True)
+            r["task_s"] = _task_seconds(root, stage)
             b["stages"][stage] = r
             _save(path, results)
-            print(f"[{kind}] {stage}: {r['ran']} tasks, {r['wall_s']:.0f} s wall, {r['cpu_s'] / frames:.2f} CPU s a "
+            print(f"[{kind}] {stage}: {r['ran']} tasks, {r['wall_s']:.0f} s wall, {_per_frame(r, frames):.2f} task s a "
                   f"frame, peak worker {r['peak_worker_gib']:.2f} GiB", flush=True)
         b["status"] = _status(root, config, res)
         b["store_bytes"] = _size(root)

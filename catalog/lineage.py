@@ -47,17 +47,24 @@ class LineageLog:
         """Every readable record (of one stage); files that cannot be read are skipped and
         noted in :attr:`damaged`."""
         prefix = None if stage is None else self._stage_dir(stage)
-        out: list[RunRecord] = []
-        for path in self.table.paths():
-            if prefix is not None and not path.startswith(prefix):
-                continue
-            key = path[len(self.table.dir) + 1 : -len(".parquet")]
-            try:
-                out.extend(self.table.load([key]))
-            except StoreError:  # truncated, garbage bytes, another schema
-                self.damaged[path] = "unreadable"
-            except ValueError:  # rows that are not valid records
-                self.damaged[path] = "holds no valid lineage records"
+        for _ in range(3):
+            out: list[RunRecord] = []
+            vanished = False
+            for path in self.table.paths():
+                if prefix is not None and not path.startswith(prefix):
+                    continue
+                key = path[len(self.table.dir) + 1 : -len(".parquet")]
+                try:
+                    out.extend(self.table.load([key]))
+                except StoreError:  # truncated, garbage bytes, another schema; or merged away
+                    if not self.table.store.exists(path):
+                        vanished = True  # a compaction merged it since the listing: list again
+                        break
+                    self.damaged[path] = "unreadable"
+                except ValueError:  # rows that are not valid records
+                    self.damaged[path] = "holds no valid lineage records"
+            if not vanished:
+                break
         return out
 
     def damaged_files(self, stage: str) -> list[str]:
@@ -81,7 +88,7 @@ class LineageLog:
         prefix = self._stage_dir(stage)
         return [p for p in self.table.paths() if p.startswith(prefix)]
 
-    def _merge(self, stage: str, paths: list[str], key: str) -> str | None:
+    def _merge(self, stage: str, paths: list[str], key: str | None) -> str | None:
         """Write the records of ``paths`` to ``stage=<stage>/<key>``, then remove the sources
         (an unreadable one is left alone for :meth:`set_aside`)."""
         records, merged = [], []
@@ -94,6 +101,9 @@ class LineageLog:
         if len(merged) < 2:
             return None
         records.sort(key=lambda r: (r.run_id, r.partition))
+        # a stage's merged file is named after the newest run it holds (the file names themselves
+        # may be earlier merges')
+        key = key or f"compacted-{records[-1].run_id}"
         written = self.table.save(f"stage={stage}/{key}", records)
         target = self.table.path(f"stage={stage}/{key}")
         for path in merged:
@@ -114,9 +124,7 @@ class LineageLog:
         files = self._files(stage)
         if len(files) <= max_files:
             return False
-        # the merged file is named after the newest run it holds, so names keep their order
-        last = max(files).rsplit("/", 1)[-1].removesuffix(".parquet")
-        return self._merge(stage, files, f"compacted-{last}") is not None
+        return self._merge(stage, files, None) is not None
 
     def latest(self, stage: str) -> dict[str, RunRecord]:
         """The most recent record of every partition of a stage (completed or failed), ordered by

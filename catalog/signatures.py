@@ -6,7 +6,7 @@ Re-hashing them to decide whether a partition is up to date would read the whole
 a terabyte at the paper's scale), so the driver also records each output's *signature*: for a
 file, its size, modification time and inode on a local disk, or the object store's ETag where it
 has one; for a Zarr frame (``<root>.zarr/<array>[<frame>]``), the same for its array's
-``zarr.json`` and every stored chunk of the frame, from one directory listing. ``status`` and
+``zarr.json`` and every chunk the frame can have (one ``stat`` each; a listing on object stores). ``status`` and
 ``run`` trust a recorded fingerprint while the signature is unchanged and only re-hash outputs
 whose signature moved; ``carlaocc verify`` re-hashes everything.
 
@@ -28,13 +28,16 @@ _VERSION_KEYS = ("ETag", "etag", "e_tag", "md5Hash", "generation", "VersionId")
 _TIME_KEYS = ("mtime", "LastModified", "last_modified", "updated", "created")
 
 
-def info_signature(info: dict) -> str:
+def info_signature(info: dict) -> str | None:
     """The signature of one object from its fsspec ``info`` dict: ``etag:<ETag>`` where the store
-    gives one (S3, GCS, Azure), else ``<size>:<modification time>``."""
+    gives one (S3, GCS, Azure), else ``<size>:<modification time>``; None (never trusted: the
+    object is hashed) when the store gives neither a version nor a time."""
     for key in _VERSION_KEYS:
         if info.get(key):
             return f"etag:{str(info[key]).strip(chr(34))}"
-    when = next((info[k] for k in _TIME_KEYS if info.get(k) is not None), "")
+    when = next((info[k] for k in _TIME_KEYS if info.get(k) is not None), None)
+    if when is None:
+        return None
     if hasattr(when, "isoformat"):
         when = when.isoformat()
     return f"{info.get('size')}:{when}"
@@ -56,45 +59,68 @@ def file_signature(store: Store, rel: str) -> str | None:
         return None
 
 
-def _local_tree(base: str) -> list[tuple[str, str]]:
-    """(path relative to ``base``, signature) of every file under a local directory, skipping
-    dot-prefixed temporaries, in sorted order; one ``scandir`` per directory."""
-    out: list[tuple[str, str]] = []
-    stack = [""]
-    while stack:
-        rel = stack.pop()
+_CHUNK_GRIDS: dict[tuple[str, str], tuple[int, ...] | None] = {}  # (zarr.json, its signature) -> chunks per axis
+
+
+def _chunk_grid(store: Store, meta_rel: str, meta_sig: str) -> tuple[int, ...] | None:
+    """Chunks along each axis after the frame axis of the array whose metadata is ``meta_rel``
+    (read once per version of the file), None when it is not an array's Zarr v3 metadata."""
+    from carlaocc.catalog.zarrio import parse_metadata
+
+    key = (store.path(meta_rel), meta_sig)
+    if key not in _CHUNK_GRIDS:
         try:
-            entries = list(os.scandir(os.path.join(base, rel) if rel else base))
+            meta = parse_metadata(store.fs.cat_file(store.path(meta_rel)), "array")
+        except OSError:
+            meta = None
+        if meta is None or len(meta["shape"]) < 2:
+            _CHUNK_GRIDS[key] = None
+        else:
+            chunks = meta["chunk_grid"]["configuration"]["chunk_shape"]
+            _CHUNK_GRIDS[key] = tuple(-(-n // max(1, c)) for n, c in zip(meta["shape"][1:], chunks[1:]))
+    return _CHUNK_GRIDS[key]
+
+
+def _local_chunks(base: str, frame: int, grid: tuple[int, ...]) -> list[tuple[str, str]]:
+    """(chunk key, signature or "-" when not stored) of every chunk a frame can have: one
+    ``stat`` each, no directory listing (a frame's chunk directories nest one level per axis)."""
+    import itertools
+
+    out = []
+    for idx in itertools.product(*(range(n) for n in grid)):
+        name = "/".join(map(str, idx))
+        try:
+            out.append((name, _local_signature(os.stat(f"{base}/c/{frame}/{name}"))))
         except FileNotFoundError:
-            continue
-        for e in entries:
-            if e.name.startswith("."):
-                continue
-            name = f"{rel}/{e.name}" if rel else e.name
-            if e.is_dir(follow_symlinks=False):
-                stack.append(name)
-            else:
-                out.append((name, _local_signature(e.stat(follow_symlinks=False))))
-    return sorted(out)
+            out.append((name, "-"))
+        except NotADirectoryError:
+            return []  # a file where a chunk directory should be: hashed, never trusted
+    return out
 
 
 def frame_signature(store: Store, zarr_root: str, array_path: str, frame: int) -> str | None:
     """The signature of one frame of a Zarr array: its array's ``zarr.json`` and the names and
     signatures of the chunks stored under ``<array>/c/<frame>``, hashed; None when the array has
-    no metadata. Reads no chunk (a directory listing and one ``stat`` per chunk)."""
+    no metadata. Reads no chunk: on a local disk one ``stat`` per chunk the array's chunk grid
+    allows (stored or not), elsewhere one listing of the frame's chunks."""
     base = store.path(f"{zarr_root}/{array_path}")
     meta = file_signature(store, f"{zarr_root}/{array_path}/zarr.json")
     if meta is None:
-        return None
+        return None  # no array there (or no signature for its metadata): never trusted
     h = hashlib.sha256(meta.encode())
     prefix = f"{base}/c/{frame}"
     if store.is_local:
-        entries = _local_tree(prefix)
+        grid = _chunk_grid(store, f"{zarr_root}/{array_path}/zarr.json", meta)
+        entries = _local_chunks(base, frame, grid) if grid is not None else []
+        if not entries:
+            return None
     else:
         fs = store.fs
         found = fs.find(prefix, detail=True) if fs.exists(prefix) else {}
         entries = sorted((p[len(prefix):].lstrip("/"), info_signature(info)) for p, info in found.items()
                          if not posixpath.basename(p).startswith("."))
+        if any(sig is None for _, sig in entries):
+            return None  # a chunk the store gives no version or time for: never trusted
     for name, sig in entries:
         h.update(f"\0{name}\0{sig}".encode())
     return "stat:" + h.hexdigest()[:24]

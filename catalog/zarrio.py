@@ -56,6 +56,10 @@ def decode_chunk(payload: bytes, dtype, chunk_shape, scratch: bool = False) -> n
     if not scratch:
         return np.frombuffer(Zstd().decode(payload), dtype=little).reshape(chunk_shape)
     nbytes = int(np.prod(chunk_shape)) * little.itemsize
+    # zstd fills what it decodes and leaves the rest of a reused buffer as it was: a chunk that
+    # decodes to another size must fail here as it does on fresh memory
+    if not zstd_frame_ok(payload, nbytes):
+        raise ValueError(f"not a zstd frame of {nbytes} bytes")
     buf = getattr(_SCRATCH, "buf", None)
     if buf is None or buf.size < nbytes:
         buf = _SCRATCH.buf = np.empty(nbytes, np.uint8)

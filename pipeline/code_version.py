@@ -42,6 +42,24 @@ def _tree(path: str) -> ast.Module:
         return ast.parse(fh.read(), filename=path)
 
 
+_BLOCKS = ("body", "orelse", "finalbody", "handlers", "cases")  # the fields statements nest in
+
+
+@lru_cache(maxsize=None)
+def _import_nodes(path: str) -> tuple[ast.Import | ast.ImportFrom, ...]:
+    """Every import statement of a file, at any depth (functions, classes, if/try/with blocks):
+    statements nest only in statement lists, so expressions, most of a tree, are never visited."""
+    out, todo = [], list(_tree(path).body)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            out.append(node)
+            continue
+        for name in _BLOCKS:
+            todo += getattr(node, name, None) or ()
+    return tuple(out)
+
+
 def _absolute(module: str, is_package: bool, node: ast.ImportFrom) -> str:
     """The absolute module name of a (possibly relative) ``from ... import``."""
     if node.level == 0:
@@ -58,7 +76,7 @@ def _binders(package: str, name: str) -> list[str]:
     if src is None:
         return []
     out = []
-    for node in ast.walk(_tree(src[0])):
+    for node in _import_nodes(src[0]):
         if isinstance(node, ast.ImportFrom) and any((a.asname or a.name) == name for a in node.names):
             target = _absolute(package, True, node)
             sub = f"{target}.{name}"
@@ -77,7 +95,7 @@ def _imports(module: str) -> tuple[set[str], set[str]]:
     path, is_package = src
     out: set[str] = set()
     packages: set[str] = set()
-    for node in ast.walk(_tree(path)):
+    for node in _import_nodes(path):
         if isinstance(node, ast.Import):
             out |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):

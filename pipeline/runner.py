@@ -519,6 +519,8 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
             reason = "forced"
         elif rec is None:
             reason = never_run
+        elif rec.status == "retired":
+            reason = "outputs removed (the partition was retired)"
         elif rec.status != "completed":
             reason = f"last run failed: {rec.error}"
         elif rec.cache_key == key:

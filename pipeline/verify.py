@@ -41,7 +41,8 @@ class StageVerification:
 def verify(store: Store, stages: tuple[str, ...] = (), record: bool = True,
            advance: Callable[[str, int], None] = lambda stage, total: None) -> list[StageVerification]:
     """Re-hash the outputs of every partition's latest completed record (of ``stages``; empty:
-    every stage in lineage). ``advance(stage, total)`` is called once per partition checked.
+    every stage in lineage; a retired partition, whose outputs a stage removed when it stopped
+    owning them, is not checked). ``advance(stage, total)`` is called once per partition checked.
     With ``record``, intact partitions whose stat signatures moved get them recorded again."""
     lineage = LineageLog(store)
     names = sorted({r.stage for r in lineage.load()}) if not stages else list(stages)

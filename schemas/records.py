@@ -267,6 +267,9 @@ class QualityRecord(Record):
     isolated: int = 0  # spatial_continuity only
     numerator: int | None = None  # None in rows written before these fields existed
     denominator: int | None = None
+    # sequence rows: the lowest frame (pair) value and its frame index (None on frame rows)
+    worst_value: float | None = None
+    worst_frame: int | None = None
 
 
 class ClassQualityRecord(Record):
@@ -333,7 +336,9 @@ class RunRecord(Record):
     cache_key: str
     input_fingerprints: str  # JSON object: store path -> fingerprint
     output_fingerprints: str  # JSON object: store path -> fingerprint
-    status: Literal["completed", "failed"]
+    # "retired": the partition no longer exists and its outputs were removed (e.g. the quality
+    # stage's runs of frames after frames_per_task changed); never planned, never verified
+    status: Literal["completed", "failed", "retired"]
     started_at: datetime
     ended_at: datetime
     host: str

@@ -150,8 +150,8 @@ def _metrics(store: Store) -> dict[str, list]:
 def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, built, tmp_path):
     """Scoring 3 frames per task (3 tasks a sequence, the pairs across their borders read from the
     next task's first frame) gives every row bit-identical to scoring a whole sequence in one
-    task, and to the scores computed in one pass over the frames here; a smaller run of frames
-    leaves no rows of the earlier tasks behind."""
+    task, and to the scores computed in one pass over the frames here; going back to one task a
+    sequence retires the other tasks and leaves none of their rows behind."""
     import shutil
 
     from carlaocc.stages.quality import (column_ranges, sequence_continuity, sequence_temporal,
@@ -168,6 +168,16 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     assert len(copy.glob("metrics/statistics_frames", ".parquet")) == 9
     a, b = _metrics(built), _metrics(copy)
     assert a == b and len(a["quality"]) == 3 * (8 + 7 + 2) and len(a["statistics_frames"]) > 3 * 8
+    # back to one task a sequence: the runs of frames 3-5 and 6-7 are retired (their files removed,
+    # their lineage says so), the tables hold each row once, and verify finds nothing missing
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--stages",
+                         "quality,aggregate", "--scheduler", "synchronous"])
+    assert r.exit_code == 0 and "quality: ran 3," in r.output, r.output
+    assert len(copy.glob("metrics/statistics_frames", ".parquet")) == 3 and _metrics(copy) == a
+    retired = query(copy, "SELECT count(*) FROM runs WHERE stage = 'quality' AND status = 'retired'")[1][0][0]
+    assert retired == 6
+    r = cli.invoke(app, ["verify", "--root", copy.url, "--stages", "quality,aggregate"])
+    assert r.exit_code == 0 and "quality   3/3 partitions intact" in r.output, r.output
     # the sequence rows against one pass over the frames
     grid = GridSpec(voxel_size=RES)
     occ = OccupancyStore(built)

@@ -9,6 +9,8 @@ scoring all its frames in one pass, because both are sums of the same integers.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from carlaocc.catalog.parquet import ParquetTable
@@ -57,12 +59,19 @@ def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[st
     # 1. the scores: sums of the frames' (pairs') integer counts, one definition of each score
     occupied, isolated = sum(r.occupied for r in cont), sum(r.isolated for r in cont)
     inter, union = sum(r.numerator for r in temp), sum(r.denominator for r in temp)
+
+    def worst(rows: list[QualityRecord]) -> dict:
+        # the lowest frame (pair) score and where, for the report (which reads no frame rows)
+        scored = [r for r in rows if not math.isnan(r.value)]
+        low = min(scored, key=lambda r: (r.value, r.frame_index), default=None)
+        return {} if low is None else {"worst_value": low.value, "worst_frame": low.frame_index}
+
     quality = [
         QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=None, metric="spatial_continuity",
                       value=pooled_continuity(occupied, isolated), occupied=occupied, isolated=isolated,
-                      numerator=occupied - isolated, denominator=occupied),
+                      numerator=occupied - isolated, denominator=occupied, **worst(cont)),
         QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=None, metric="temporal_consistency",
-                      value=pooled_temporal(inter, union), numerator=inter, denominator=union),
+                      value=pooled_temporal(inter, union), numerator=inter, denominator=union, **worst(temp)),
     ]
     # the per-class counts behind the continuity score must add up to the frames' totals
     class_rows = _load(store, ClassQualityRecord, keys)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
@@ -54,6 +55,18 @@ def _quality_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
     files an earlier layout wrote there, so the tables hold each frame's rows once."""
     groups = {f"{p.params['sequence_id']}/{GridSpec.model_validate(p.params['grid']).key}" for p in to_run}
     owned = {p.key for p in partitions}
+    # the lineage of the partitions that no longer exist says so: their outputs go now
+    lineage = LineageLog(ctx.store)
+    retired = [rec.model_copy(update={
+        "run_id": rec.run_id + "~retired", "status": "retired", "output_fingerprints": "{}", "output_signatures": "",
+        "error": "no partition owns its outputs any more (frames_per_task or the frame count changed): removed"})
+        for key, rec in sorted(lineage.latest("quality").items())
+        if rec.status != "retired" and key not in owned
+        and any(key == g or key.startswith(g + "/") for g in groups)]
+    if retired:
+        import uuid
+
+        lineage.append("quality", f"retired-{uuid.uuid4().hex}", retired)
     for model in FRAME_TABLES:
         table = ParquetTable(ctx.store, model)
         for group in sorted(groups):

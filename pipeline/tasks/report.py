@@ -100,8 +100,10 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
     t_ast = ParquetTable(store, AssetStatisticsRecord)
     outputs[t_ast.path(TABLE_KEY)] = t_ast.save(TABLE_KEY, asset_rows)
     # 3. quality scores of these sequences and resolutions
-    wanted = {(s.sequence_id, g.voxel_size) for s in sequences for g in grids}
-    quality = [q for q in ParquetTable(store, QualityRecord).load() if (q.sequence_id, q.resolution) in wanted]
+    # (the sequence rows the aggregate stage wrote, with each sequence's worst frame: never the
+    # frames' own rows, 100 K files at the paper's scale)
+    t_q = ParquetTable(store, QualityRecord)
+    quality = t_q.load([k for k in keys if t_q.exists(k)])
     # 4. plots
     png: dict[str, bytes] = {}
     totals = resolution_totals(class_rows)

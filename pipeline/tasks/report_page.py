@@ -68,7 +68,9 @@ def stage_lineage(records: list[RunRecord]) -> list[StageLineage]:
         latest[rec.stage][rec.partition] = rec
     out = []
     for stage, by_part in latest.items():
-        recs = [by_part[k] for k in sorted(by_part)]
+        recs = [by_part[k] for k in sorted(by_part) if by_part[k].status != "retired"]
+        if not recs:
+            continue
         inputs: dict[str, int] = defaultdict(int)
         outputs: dict[str, int] = defaultdict(int)
         h_in, h_out = hashlib.sha256(), hashlib.sha256()
@@ -208,6 +210,9 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
             if not math.isnan(q.value):
                 key = (q.sequence_id, q.resolution, q.metric)
                 worst[key] = min(worst.get(key, math.inf), q.value)
+        for q in seq_q:  # the aggregate stage's sequence rows carry their worst frame
+            if q.worst_value is not None:
+                worst[(q.sequence_id, q.resolution, q.metric)] = q.worst_value
         value = {(q.sequence_id, q.resolution, q.metric): q.value for q in seq_q}
         rows = []
         for s in sequences:

@@ -21,7 +21,7 @@ GRID = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(6.4, 3.2, 1.6), voxel_si
 def test_info_signature_prefers_the_etag():
     assert info_signature({"size": 3, "ETag": '"abc"', "LastModified": "x"}) == "etag:abc"
     assert info_signature({"size": 3, "mtime": 1.5}) == "3:1.5"
-    assert info_signature({"size": 3}) == "3:"
+    assert info_signature({"size": 3}) is None  # neither version nor time: never trusted
 
 
 @pytest.mark.parametrize("url", ["local", "memory"])

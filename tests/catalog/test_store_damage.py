@@ -243,3 +243,19 @@ def test_an_unreadable_lineage_file_is_skipped_noted_and_set_aside(store, how):
     assert not store.exists(path) and store.fs.cat_file(store.path(path + DAMAGED_SUFFIX)) == bytes_before
     fresh = LineageLog(store)
     assert len(fresh.load()) == 3 and fresh.damaged == {}
+
+
+def test_a_chunk_of_another_size_fails_even_into_a_reused_buffer(store):
+    """Reads decode into a reused buffer: a chunk whose zstd frame holds fewer bytes than a chunk
+    is a StoreError, never the previous chunk's bytes showing through."""
+    from numcodecs import Zstd
+
+    occ, sem, _ = _occupancy(store)
+    full = np.full(GRID.shape, 5, np.uint8)
+    occ.write_frame("seq", GRID, 0, {"semantic": full})
+    victim = sorted(store.glob(f"{_path('semantic')}/c/1", ""))[0]
+    store.fs.pipe_file(store.path(victim), Zstd(level=1).encode(np.zeros(10, np.uint8)))
+    x = occ.read_tile("seq", GRID, 0, "semantic", 0, GRID.shape[0])  # fills the reused buffer with 5s
+    assert (x == 5).all()
+    with pytest.raises(StoreError, match="damaged chunk"):
+        occ.read_tile("seq", GRID, 1, "semantic", 0, GRID.shape[0])

@@ -80,9 +80,6 @@ def small(store: Store, make_asset) -> Store:
         make_asset("a", "procedural", "Car"), make_asset("b", "procedural", "Car"),
         make_asset("c", "procedural", "Building")])
     ParquetTable(store, AssetRecord).save("source=folder/f", [make_asset("d", "folder", "Car")])
-    ParquetTable(store, QualityRecord).save("q", [
-        QualityRecord(sequence_id=s, resolution=0.4, frame_index=f, metric=m, value=v, occupied=10, isolated=0)
-        for s in SEQS for f in (None, 0, 1) for m, v in (("spatial_continuity", 0.99), ("temporal_consistency", 0.95))])
     # the statistics: the quality stage's per-frame counts in two tasks a sequence (frames 0-1, 2),
     # summed by the aggregate stage
     from carlaocc.pipeline.tasks.aggregate import aggregate_task
@@ -154,8 +151,14 @@ def test_report_page_is_self_contained(small):
     images = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
     assert len(images) == 6
     assert all(base64.b64decode(i)[:8] == b"\x89PNG\r\n\x1a\n" for i in images)
+    # the scores are the aggregate stage's sequence rows, with their worst frame
+    rows = ParquetTable(small, QualityRecord).load([f"{s}/{GRID.key}" for s in SEQS])
+    assert {(r.metric, r.frame_index) for r in rows} == {("spatial_continuity", None), ("temporal_consistency", None)}
+    # (the arrays' visibility masks were never written: nothing observed, no temporal score)
+    sc = [r for r in rows if r.metric == "spatial_continuity"]
+    assert len(sc) == 2 and all(r.worst_value == 1.0 and r.worst_frame == 0 for r in sc), sc
     # the content: sizes, sequences, scores, lineage
-    for text in ("occupancy.zarr", "town00_high_seq000", "0.99000", "temporal consistency", "voxelize",
+    for text in ("occupancy.zarr", "town00_high_seq000", f"{sc[0].value:.5f}", "temporal consistency", "voxelize",
                  "c0de", "cf6", "20250102T030405Z-abc", "occupancy.zarr/semantic ×6"):
         assert text in page, text
 

@@ -259,6 +259,13 @@ def test_lineage_is_compacted(store):
     assert not log.compact("s")
     assert len(LineageLog(store).load("s")) == n_records
     assert LineageLog(store).latest("s") == before and before["p0"].status == "failed"
+    # merging again names the file after the newest run it holds, not after the earlier merge
+    for i in range(lineage_mod.COMPACT_FILES):
+        r = f"20260103T{i:06d}000000Z-c"
+        log.append("s", r, [rec(r, "p1")])
+    assert log.compact("s")
+    (name,) = [p.rsplit("/", 1)[1] for p in log._files("s")]
+    assert name == f"compacted-20260103T{lineage_mod.COMPACT_FILES - 1:06d}000000Z-c.parquet"
 
 
 def test_local_workers_fit_the_finest_task_under_the_nanny():

@@ -68,6 +68,8 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
                         value=float("nan"), occupied=0, isolated=0),
         R.QualityRecord(sequence_id="s", resolution=0.2, frame_index=3, metric="temporal_consistency",
                         value=0.75, numerator=3, denominator=4),
+        R.QualityRecord(sequence_id="s", resolution=0.2, frame_index=None, metric="temporal_consistency",
+                        value=0.8, numerator=8, denominator=10, worst_value=0.75, worst_frame=3),
     ],
     R.ClassQualityRecord: [R.ClassQualityRecord(sequence_id="s", resolution=0.05, frame_index=2,
                                                 semantic_id=14, occupied=55, isolated=0)],

@@ -88,13 +88,18 @@ def _run_metrics(store, grid, seq="seq0"):
     from carlaocc.catalog.occupancy import OccupancyStore
     from carlaocc.pipeline.tasks.aggregate import aggregate_task
 
-    # the map (one task over every frame), then the reduce (the sequence rows)
+    # the map with one frame a task (every pair crosses a border: frame t + 1 is the next task's),
+    # then the reduce (the sequence rows)
     n = OccupancyStore(store).open(seq, grid, "semantic").shape[0]
-    part = Partition(f"{seq}/{grid.key}/0000", {"sequence_id": seq, "voxel_size": grid.voxel_size,
-                                                 "grid": grid.model_dump(mode="json"), "first": 0, "stop": n})
-    quality_task(store, QualityConfig(), part)
+    keys = []
+    for first in range(n):
+        part = Partition(f"{seq}/{grid.key}/{first:04d}", {"sequence_id": seq, "voxel_size": grid.voxel_size,
+                                                            "grid": grid.model_dump(mode="json"), "first": first,
+                                                            "stop": first + 1})
+        quality_task(store, QualityConfig(frames_per_task=1), part)
+        keys.append(part.key)
     aggregate_task(store, QualityConfig(), Partition(f"{seq}/{grid.key}", {
-        "sequence_id": seq, "voxel_size": grid.voxel_size, "resolution_key": grid.key, "quality_keys": [part.key]}))
+        "sequence_id": seq, "voxel_size": grid.voxel_size, "resolution_key": grid.key, "quality_keys": keys}))
     rows = ParquetTable(store, QualityRecord).load()
     return {(r.metric, r.frame_index): r for r in rows}
 
