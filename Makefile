@@ -43,7 +43,7 @@ query: venv ## read-only SQL over the catalog: make query Q="SELECT * FROM asset
 	$(BIN)/carlaocc catalog query "$(Q)" --root $(ROOT)
 
 test: venv ## the test suite (slow tests excluded; CI runs this)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" --durations=15
 
 test-all: venv ## every test, the slow 0.05 m end-to-end included
 	$(BIN)/python -m pytest -q

@@ -38,6 +38,8 @@ import psutil
 
 STAGES = ("ingest", "scenes", "splits", "voxelize", "sensors", "quality", "aggregate", "report")
 PAPER_FRAMES = 104_000
+ONCE = ("ingest", "splits", "report")  # once per dataset, not per frame
+SUBMITTED = re.compile(r"first (\d+) of (\d+) tasks submitted in ([\d.]+) s")
 DEFAULT_WORK = Path(__file__).resolve().parent / "results" / "scale"
 
 
@@ -159,17 +161,19 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
             continue
         n = _frames(b)
         lines += [f"### {kind}: {b['description']} ({n:,} frames at {b['res']} m, {b['workers']} workers)", "",
-                  "| stage | tasks | wall | task s / frame | frames / core-hour | peak worker | plan |",
-                  "|---|---|---|---|---|---|---|"]
+                  "| stage | tasks | wall | task s / frame | frames / core-hour | peak worker | plan | first batch |",
+                  "|---|---|---|---|---|---|---|---|"]
         for stage in STAGES:
             s = b["stages"].get(stage)
             if not s:
                 continue
             per = _per_frame(s, n)
-            fph = 3600 / per if per else float("inf")
+            fph = "-" if stage in ONCE else f"{3600 / per:,.0f}"
             plan = f"{s['plan_s']:.2f} s" if s.get("plan_s") is not None else "-"
+            sub = SUBMITTED.search(s.get("log", ""))
+            sub = f"{int(sub.group(1)):,} of {int(sub.group(2)):,} in {float(sub.group(3)):.2f} s" if sub else "-"
             lines.append(f"| {stage}{' (resumed)' if s.get('attempts', 1) > 1 else ''} | {s['ran']:,} | "
-                         f"{s['wall_s']:.0f} s | {per:.2f} | {fph:,.0f} | {s['peak_worker_gib']:.2f} GiB | {plan} |")
+                         f"{s['wall_s']:.0f} s | {per:.2f} | {fph} | {s['peak_worker_gib']:.2f} GiB | {plan} | {sub} |")
         if "status" in b:
             lines.append(f"\n`carlaocc status`: {b['status']['seconds']:.1f} s "
                          f"({'up to date' if b['status']['up_to_date'] else 'NOT up to date'}); "
@@ -185,7 +189,7 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
             if not src or stage not in src["stages"]:
                 continue
             per = _per_frame(src["stages"][stage], _frames(src))
-            if stage in ("ingest", "splits", "report"):
+            if stage in ONCE:
                 lines.append(f"| {stage} | {per:.3f} ({'long' if src is long else 'wide'}) | - | once per dataset, "
                              f"not per frame |")
                 continue

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import re
+
 import time
 from pathlib import Path
 from typing import Annotated, Optional
@@ -189,7 +191,9 @@ def status(
             continue
         reasons: dict[str, int] = {}
         for pp in stale:
-            reasons[pp.reason] = reasons.get(pp.reason, 0) + 1
+            # one line per stage at any scale: waiting partitions are counted per upstream stage
+            why = re.sub(r"^upstream (\w+)/\S+ (is stale|has not completed)$", r"upstream \1 \2", pp.reason)
+            reasons[why] = reasons.get(why, 0) + 1
         summary = "; ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
         typer.echo(f"{name:<9} stale {len(stale)}/{total}: {summary}")
         if verbose:
