@@ -380,14 +380,44 @@ class FrameArrayStore(ABC):
                 combine(view, block[:bx, :by].view(out.dtype), out=view)
         return out
 
+    def read_blocks(self, sequence_id: str, group, frame: int, name: str, out: np.ndarray | None = None) -> np.ndarray:
+        """One whole frame of one array block-major: ``(nbx, nby, cx, cy, *rest)``, block
+        ``[ci, cj]`` being chunk ``(ci, cj)`` as stored (edge chunks padded), each stored chunk
+        decoded straight into its block (no copy: at 0.05 m copying chunks into an ``(X, Y, Z)``
+        frame cost as much as decoding them) and missing ones zero. ``out``: such an array to
+        fill (a buffer reused frame after frame); the layout of
+        :class:`carlaocc.stages.quality.blocks.BlockedGrid`. StoreError naming a damaged chunk."""
+        x_size = self._layout(sequence_id, group, name)[0][1]
+        (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, 0, x_size)
+        cx, cy = chunks[1], chunks[2]
+        layout = (-(-shape[1] // cx), -(-shape[2] // cy), *chunks[1:])
+        if out is None:
+            out = np.empty(layout, dtype)
+        elif out.shape != layout or out.dtype.itemsize != np.dtype(dtype).itemsize or not out.flags.c_contiguous:
+            raise ValueError(f"out has shape {out.shape} and dtype {out.dtype}; the frame's blocks are {layout} "
+                             f"{np.dtype(dtype)}")
+        for ci, cj, key in keys:
+            payload = get_object(self.store, key)
+            if payload is None:  # an all-zero chunk is not stored
+                out[ci, cj] = 0
+                continue
+            try:
+                decode_chunk(payload, dtype, chunks[1:], out=out[ci, cj])
+            except (RuntimeError, ValueError) as exc:  # zstd error, or the wrong decoded size
+                raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
+        return out
+
     def layout(self, sequence_id: str, group, name: str) -> tuple[tuple, tuple, np.dtype]:
         """``(shape, chunks, dtype)`` of one array (ValueError naming it when it does not exist)."""
         return self._layout(sequence_id, group, name)
 
-    def read_chunk(self, sequence_id: str, group, frame: int, name: str, ci: int, cj: int) -> np.ndarray | None:
+    def read_chunk(self, sequence_id: str, group, frame: int, name: str, ci: int, cj: int,
+                   scratch: bool = False) -> np.ndarray | None:
         """Chunk ``(ci, cj)`` (along the two axes after the frame) of one frame of one array, cut to
         the array's bounds (edge chunks are padded on disk); None when it is not stored (all
-        zero). Reads that one object and nothing else. StoreError naming a damaged chunk."""
+        zero). Reads that one object and nothing else. StoreError naming a damaged chunk.
+        ``scratch``: decoded into this thread's reused buffer, valid until its next scratch
+        decode (:func:`~carlaocc.catalog.zarrio.decode_chunk`)."""
         shape, chunks, dtype = self._layout(sequence_id, group, name)
         where = self._where(self.array_path(sequence_id, group, name))
         cx, cy = chunks[1], chunks[2]
@@ -398,7 +428,7 @@ class FrameArrayStore(ABC):
         if payload is None:
             return None
         try:
-            block = decode_chunk(payload, dtype, chunks[1:])
+            block = decode_chunk(payload, dtype, chunks[1:], scratch=scratch)
         except (RuntimeError, ValueError) as exc:
             raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
         return block[: min(cx, shape[1] - ci * cx), : min(cy, shape[2] - cj * cy)]

@@ -229,7 +229,7 @@ class QualityConfig(StageConfig):
     """Dataset-quality scores (spatial continuity, temporal consistency) and the report."""
 
     neighbourhood: Literal[6] = 6
-    frames_per_task: int = Field(10, ge=1, le=1000, description="consecutive frames one quality task scores "
+    frames_per_task: int = Field(20, ge=1, le=1000, description="consecutive frames one quality task scores "
                                  "(its time and memory do not grow with the sequence; each task also reads "
                                  "the next task's first frame for its last pair)")
     taxonomy: LabelTableName | None = Field(None, description=_SET_BY_PIPELINE + " (the report)")

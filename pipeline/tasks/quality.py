@@ -20,6 +20,7 @@ from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, FrameStatisticsRecord, QualityRecord
+from carlaocc.stages.quality.blocks import BlockedGrid
 
 FRAME_TABLES = (QualityRecord, ClassQualityRecord, FrameStatisticsRecord)  # one file of each per task
 
@@ -82,30 +83,47 @@ def _quality_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
     return set()
 
 
-def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, sem: np.ndarray,
-                      occupied: np.ndarray, with_instances: bool) -> tuple[np.ndarray, np.ndarray]:
+def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, sem: BlockedGrid,
+                      ranges: tuple[np.ndarray, np.ndarray], occupied: np.ndarray,
+                      with_instances: bool) -> tuple[np.ndarray, np.ndarray]:
     """Voxels per class and the (instance, class) pair keys of frame ``t``: the voxels from the
     continuity counts (``occupied``, per class id), the pairs from the frame's stored instance
-    chunks only, each with its block of ``sem`` (an instance chunk that is not stored is all
-    zero: most of a frame, and never decoded)."""
-    from carlaocc.stages.quality.statistics import N_CLASSES, SequenceStatistics
+    chunks only (an instance chunk that is not stored is all zero: most of a frame, and never
+    decoded), each read with its block of ``sem`` within the columns' occupied ``ranges``."""
+    from carlaocc.stages.quality.statistics import N_CLASSES, block_pairs
 
     if occupied[N_CLASSES:].any():
         bad = N_CLASSES + int(np.flatnonzero(occupied[N_CLASSES:])[0])
         raise ValueError(f"frame {t} of {seq_id} holds class id {bad}, outside the taxonomy's 0..{N_CLASSES - 1}")
     voxels = occupied[:N_CLASSES].astype(np.int64)
-    voxels[0] = sem.size - int(occupied[1:].sum())
-    stats = SequenceStatistics()
+    X, Y, Z = sem.shape
+    voxels[0] = X * Y * Z - int(occupied[1:].sum())
+    found = [np.zeros(0, np.uint64)]
     if with_instances:
         cx, cy = occ.chunk_edges(seq_id, grid, "instance")
-        X, Y = sem.shape[:2]
-        for ci in range(-(-X // cx)):
-            for cj in range(-(-Y // cy)):
-                inst = occ.read_chunk(seq_id, grid, t, "instance", ci, cj)
+        if (cx, cy) != sem.block:
+            raise StoreError(f"{seq_id} at {grid.voxel_size} m: instance chunks of {cx} x {cy} voxels, "
+                             f"semantic chunks of {sem.block}: re-run voxelize")
+        lo, hi = ranges
+        for ci in range(sem.blocks.shape[0]):
+            for cj in range(sem.blocks.shape[1]):
+                # the stored chunk, decoded into a reused buffer and read at once
+                inst = occ.read_chunk(seq_id, grid, t, "instance", ci, cj, scratch=True)
                 if inst is not None:
-                    block = sem[ci * cx:ci * cx + inst.shape[0], cj * cy:cj * cy + inst.shape[1]]
-                    stats.add(block, inst, last_tile=False)
-    return voxels, stats.pairs
+                    bx, by = inst.shape[:2]
+                    cols = np.s_[ci * cx:ci * cx + bx, cj * cy:cj * cy + by]
+                    found.append(block_pairs(sem.blocks[ci, cj, :bx, :by], inst, lo[cols], hi[cols]))
+    return voxels, np.unique(np.concatenate(found))
+
+
+def _frame_buffer(name: str, shape: tuple[int, int, int], block: tuple[int, int]) -> BlockedGrid:
+    """A uint8 block-major frame buffer of the calling thread (:func:`carlaocc.stages.scratch.scratch`,
+    contents left from its last use: :meth:`OccupancyStore.read_blocks` writes every block)."""
+    from carlaocc.stages.scratch import scratch
+
+    X, Y, Z = shape
+    layout = (-(-X // block[0]), -(-Y // block[1]), block[0], block[1], Z)
+    return BlockedGrid(scratch(name, int(np.prod(layout)), np.uint8).reshape(layout), shape)
 
 
 def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
@@ -119,6 +137,7 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     the sequence has; no mask when it has neither."""
     from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
     from carlaocc.stages.quality.statistics import split_pairs
+    from carlaocc.stages.scratch import scratch
 
     seq_id, voxel_size = part.params["sequence_id"], part.params["voxel_size"]
     first, stop = part.params["first"], part.params["stop"]
@@ -136,29 +155,33 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
                          f"re-run the scenes stage")
     masks = [n for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
     with_instances = occ.exists(seq_id, grid, "instance")
-    X = arr.shape[1]
-    # two buffers each for the frames' semantic grids and masks, reused frame after frame (frames
-    # t - 1 and t are held; t + 1 goes where t - 1 was)
-    sem_buf = [np.empty(arr.shape[1:], np.uint8) for _ in range(2)]
-    mask_buf = [np.empty(arr.shape[1:], np.bool_) for _ in range(2)] if masks else []
+    shape = tuple(arr.shape[1:])
+    # two block-major buffers per array (frames t - 1 and t are held; t + 1 goes where t - 1
+    # was), each chunk decoded straight into its block; the worker thread keeps them for its
+    # next task (first touches of fresh pages cost more than the decoding)
+    buffers = {name: [_frame_buffer(f"quality.{name}.{slot}", shape, occ.chunk_edges(seq_id, grid, name))
+                      for slot in range(2)] for name in ("semantic", *masks)}
 
-    def observed(t: int) -> np.ndarray | None:
-        if not masks:
-            return None
-        # the stored masks are uint8 0/1: read as bool, the second OR-ed in chunk by chunk
-        out = occ.read_tile(seq_id, grid, t, masks[0], 0, X, out=mask_buf[t % 2])
-        for name in masks[1:]:
-            occ.read_tile(seq_id, grid, t, name, 0, X, out=out, combine=np.logical_or)
-        return out
+    range_buffers = [tuple(scratch(f"quality.{end}.{slot}", shape[0] * shape[1], np.int32).reshape(shape[:2])
+                           for end in ("lo", "hi")) for slot in range(2)]
+
+    def read(name: str, t: int) -> BlockedGrid:
+        grid_t = buffers[name][t % 2]
+        occ.read_blocks(seq_id, grid, t, name, out=grid_t.blocks)
+        return grid_t
+
+    def observed(t: int) -> tuple[BlockedGrid, ...] | None:
+        # the stored masks are uint8 0/1; the scores OR them (observed by any sensor)
+        return tuple(read(name, t) for name in masks) or None
 
     quality: list[QualityRecord] = []
     classes: list[ClassQualityRecord] = []
     statistics: list[FrameStatisticsRecord] = []
     prev = None  # (semantic, observed mask, column ranges) of frame t - 1
     for t in range(first, last):
-        sem = occ.read_tile(seq_id, grid, t, "semantic", 0, X, out=sem_buf[t % 2])
+        sem = read("semantic", t)
         # the frame's continuity counts and its columns' occupied z ranges, in one pass
-        counts, ranges = continuity_and_ranges(sem)
+        counts, ranges = continuity_and_ranges(sem, out=range_buffers[t % 2])
         if t < stop:
             # 1. spatial continuity of the frame, per class
             occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
@@ -169,7 +192,7 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
                                            occupied=int(counts.occupied[c]), isolated=int(counts.isolated[c]))
                         for c in np.flatnonzero(counts.occupied)]
             # 2. voxels and instances per class
-            voxels, pairs = _frame_statistics(occ, seq_id, grid, t, sem, counts.occupied, with_instances)
+            voxels, pairs = _frame_statistics(occ, seq_id, grid, t, sem, ranges, counts.occupied, with_instances)
             ids, cls = split_pairs(pairs)
             statistics += [FrameStatisticsRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
                                                  semantic_id=int(c), voxels=int(voxels[c]),

@@ -14,77 +14,62 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from carlaocc.stages.quality.blocks import BlockedGrid, as_blocked, first_nonzero, last_nonzero
+
 N_CLASSES = 256  # counts are kept per uint8 value; the taxonomy uses 0..29
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _count_kernel(sem: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    X, Y, Z = sem.shape
-    occ = np.zeros((X, N_CLASSES), dtype=np.int64)
-    iso = np.zeros((X, N_CLASSES), dtype=np.int64)
-    # one x-slab per parallel iteration; per-slab counters avoid write races
-    for i in numba.prange(X):
-        for j in range(Y):
-            for k in range(Z):
-                c = sem[i, j, k]
-                if c == 0:
-                    continue
-                occ[i, c] += 1
-                # a voxel is connected when any face neighbour carries the same class
-                if i > 0 and sem[i - 1, j, k] == c:
-                    continue
-                if i + 1 < X and sem[i + 1, j, k] == c:
-                    continue
-                if j > 0 and sem[i, j - 1, k] == c:
-                    continue
-                if j + 1 < Y and sem[i, j + 1, k] == c:
-                    continue
-                if k > 0 and sem[i, j, k - 1] == c:
-                    continue
-                if k + 1 < Z and sem[i, j, k + 1] == c:
-                    continue
-                iso[i, c] += 1
+def _count_and_ranges_kernel(flat, words, ox, oy, Z, lo, hi, n_slabs):  # pragma: no cover - numba
+    """Per-class occupied and isolated counts of a grid read through its offset tables (voxel
+    (i, j, k) is ``flat[ox[i] + oy[j] + k]``, :class:`~.blocks.BlockedGrid`), and into ``lo``,
+    ``hi`` (``(X, Y)`` int32) per column the lowest and highest k with a nonzero label (``Z`` and
+    -1 when none)."""
+    X, Y = ox.size, oy.size
+    occ = np.zeros((n_slabs, N_CLASSES), dtype=np.int64)
+    iso = np.zeros((n_slabs, N_CLASSES), dtype=np.int64)
+    # one slab of x rows per parallel iteration; per-slab counters avoid write races
+    for slab in numba.prange(n_slabs):
+        for i in range(slab * X // n_slabs, (slab + 1) * X // n_slabs):
+            for j in range(Y):
+                _column(flat, words, ox, oy, Z, lo, hi, occ, iso, slab, i, j)
     # reduce the per-slab counters
     return occ.sum(axis=0), iso.sum(axis=0)
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _count_and_ranges_kernel(sem: np.ndarray):  # pragma: no cover - numba
-    """:func:`_count_kernel` that also records, per (i, j) column, the lowest and highest k with
-    a nonzero label (``lo = Z``, ``hi = -1`` when none): one pass where two would read the grid."""
-    X, Y, Z = sem.shape
-    occ = np.zeros((X, N_CLASSES), dtype=np.int64)
-    iso = np.zeros((X, N_CLASSES), dtype=np.int64)
-    lo = np.full((X, Y), Z, dtype=np.int32)
-    hi = np.full((X, Y), -1, dtype=np.int32)
-    for i in numba.prange(X):
-        for j in range(Y):
-            first, last = Z, -1
-            for k in range(Z):
-                c = sem[i, j, k]
-                if c == 0:
-                    continue
-                if first == Z:
-                    first = k
-                last = k
-                occ[i, c] += 1
-                # a voxel is connected when any face neighbour carries the same class
-                if i > 0 and sem[i - 1, j, k] == c:
-                    continue
-                if i + 1 < X and sem[i + 1, j, k] == c:
-                    continue
-                if j > 0 and sem[i, j - 1, k] == c:
-                    continue
-                if j + 1 < Y and sem[i, j + 1, k] == c:
-                    continue
-                if k > 0 and sem[i, j, k - 1] == c:
-                    continue
-                if k + 1 < Z and sem[i, j, k + 1] == c:
-                    continue
-                iso[i, c] += 1
-            lo[i, j] = first
-            hi[i, j] = last
-    return occ.sum(axis=0), iso.sum(axis=0), lo, hi
+@numba.njit(cache=True, nogil=True, inline="always")
+def _column(flat, words, ox, oy, Z, lo, hi, occ, iso, slab, i, j):  # pragma: no cover - numba
+    """:func:`_count_and_ranges_kernel` for the column (i, j), counting into row ``slab``."""
+    X, Y = ox.size, oy.size
+    s = ox[i] + oy[j]
+    # the column's occupied extent, free voxels skipped eight at a time
+    first = first_nonzero(flat, words, s, s + Z) - s
+    if first == Z:
+        lo[i, j] = Z
+        hi[i, j] = -1
+        return
+    last = last_nonzero(flat, words, s + first, s + Z) - s
+    lo[i, j] = first
+    hi[i, j] = last
+    # the four face-neighbour columns (-1 where outside the grid)
+    sl = ox[i - 1] + oy[j] if i > 0 else -1
+    sr = ox[i + 1] + oy[j] if i + 1 < X else -1
+    sd = ox[i] + oy[j - 1] if j > 0 else -1
+    su = ox[i] + oy[j + 1] if j + 1 < Y else -1
+    # runs of one label along z: a voxel of a run of two or more has a z neighbour of its class,
+    # so only single-voxel runs can be isolated (checked against the four columns)
+    k = first
+    while k <= last:
+        c = flat[s + k]
+        end = k + 1
+        while end <= last and flat[s + end] == c:
+            end += 1
+        if c != 0:
+            occ[slab, c] += end - k
+            if end - k == 1 and not ((sl >= 0 and flat[sl + k] == c) or (sr >= 0 and flat[sr + k] == c)
+                                     or (sd >= 0 and flat[sd + k] == c) or (su >= 0 and flat[su + k] == c)):
+                iso[slab, c] += 1
+        k = end
 
 
 def pooled_continuity(occupied: int, isolated: int) -> float:
@@ -109,29 +94,42 @@ class ContinuityCounts:
         return ContinuityCounts(self.occupied + other.occupied, self.isolated + other.isolated)
 
 
-def spatial_continuity_counts(semantic: np.ndarray) -> ContinuityCounts:
-    """Per-class occupied and isolated (6-neighbourhood) voxel counts of a 3D uint8 semantic grid."""
-    sem = np.ascontiguousarray(semantic)
-    if sem.ndim != 3:
-        raise ValueError(f"semantic grid must be 3D (x, y, z), got shape {sem.shape}")
-    if sem.dtype != np.uint8:
-        if sem.size and (sem.min() < 0 or sem.max() > 255):
-            raise ValueError("semantic ids must fit uint8 (0..255)")
-        sem = sem.astype(np.uint8)
-    occ, iso = _count_kernel(sem)
-    return ContinuityCounts(occ, iso)
+def _uint8_grid(semantic, name: str) -> BlockedGrid:
+    """A semantic grid (dense array or :class:`~.blocks.BlockedGrid`) as uint8 blocks
+    (ValueError naming ids outside 0..255)."""
+    grid = as_blocked(semantic, name)
+    if grid.dtype != np.uint8:
+        b = grid.blocks
+        if not np.issubdtype(b.dtype, np.integer):
+            raise ValueError(f"{name} must hold integer class ids, got {b.dtype}")
+        if b.size and (b.min() < 0 or b.max() > 255):
+            raise ValueError(f"{name}: semantic ids must fit uint8 (0..255)")
+        grid = BlockedGrid(b.astype(np.uint8), grid.shape)
+    return grid
 
 
-def continuity_and_ranges(semantic: np.ndarray) -> tuple[ContinuityCounts, tuple[np.ndarray, np.ndarray]]:
+def spatial_continuity_counts(semantic: np.ndarray | BlockedGrid) -> ContinuityCounts:
+    """Per-class occupied and isolated (6-neighbourhood) voxel counts of a 3D semantic grid
+    (uint8 class ids, dense ``(X, Y, Z)`` or :class:`~.blocks.BlockedGrid`)."""
+    return continuity_and_ranges(semantic)[0]
+
+
+def continuity_and_ranges(semantic: np.ndarray | BlockedGrid, out: tuple[np.ndarray, np.ndarray] | None = None,
+                          ) -> tuple[ContinuityCounts, tuple[np.ndarray, np.ndarray]]:
     """:func:`spatial_continuity_counts` and the grid's per-column occupied z ranges (what
-    :func:`carlaocc.stages.quality.temporal.column_ranges` gives) from one pass over a 3D uint8
-    semantic grid: at 0.05 m each pass reads 400 MB."""
-    sem = np.ascontiguousarray(semantic)
-    if sem.ndim != 3:
-        raise ValueError(f"semantic grid must be 3D (x, y, z), got shape {sem.shape}")
-    if sem.dtype != np.uint8:
-        raise ValueError(f"semantic grid must be uint8 class ids, got {sem.dtype}")
-    occ, iso, lo, hi = _count_and_ranges_kernel(sem)
+    :func:`carlaocc.stages.quality.temporal.column_ranges` gives) from one pass over a 3D semantic
+    grid (dense or :class:`~.blocks.BlockedGrid`, as the store decodes it: no copy): at 0.05 m
+    each pass reads 400 MB, free voxels 32 at a time. ``out``: two int32 ``(X, Y)`` arrays to
+    fill with the ranges (buffers reused frame after frame)."""
+    grid = _uint8_grid(semantic, "semantic grid")
+    X, Y, Z = grid.shape
+    if out is None:
+        out = (np.empty((X, Y), np.int32), np.empty((X, Y), np.int32))
+    lo, hi = out
+    if any(a.shape != (X, Y) or a.dtype != np.int32 or not a.flags.c_contiguous for a in out):
+        raise ValueError(f"out must be two C-contiguous int32 arrays of shape {(X, Y)}")
+    ox, oy = grid.offsets()
+    occ, iso = _count_and_ranges_kernel(grid.flat, grid.words(), ox, oy, Z, lo, hi, max(1, min(X, 64)))
     return ContinuityCounts(occ, iso), (lo, hi)
 
 

@@ -61,6 +61,49 @@ def _pairs_kernel(sem, inst, start, counts, keys):  # pragma: no cover - numba
     return n, sem.size
 
 
+@numba.njit(cache=True, nogil=True)
+def _column_pairs_kernel(sem, inst, lo, hi, col, keys):  # pragma: no cover - numba
+    """From column ``col`` on of a block (``sem``, ``inst``: ``(bx, by, Z)``; ``lo``, ``hi``:
+    ``(bx, by)`` occupied z ranges): append the key ``id << 8 | class`` of each voxel in the
+    column's range with a nonzero instance id when it differs from the previous such voxel's.
+    Stops before a column that might not fit in ``keys``; returns (keys written, next column)."""
+    bx, by, Z = sem.shape
+    n, prev, cap = 0, np.int64(-1), keys.size
+    for q in range(col, bx * by):
+        a, b = q // by, q % by
+        if n + Z > cap:
+            return n, q
+        for k in range(lo[a, b], hi[a, b] + 1):
+            i = inst[a, b, k]
+            if i != 0:
+                key = (np.int64(i) << 8) | np.int64(sem[a, b, k])
+                if key != prev:
+                    keys[n] = key
+                    n += 1
+                    prev = key
+    return n, bx * by
+
+
+def block_pairs(semantic: np.ndarray, instance: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The distinct ``(instance id, class)`` pair keys (sorted uint64, see :func:`split_pairs`) of
+    a block of a frame, ``semantic`` uint8 and ``instance`` uint32 ``(bx, by, Z)``, visiting in
+    each ``(a, b)`` column only ``[lo[a, b], hi[a, b]]``: the semantic grid's occupied range
+    (an instance id marks an occupied voxel, so the free rest of a column, most of a frame, is
+    never read). What :func:`frame_statistics` finds, for grids that keep the contract."""
+    if semantic.shape != instance.shape or lo.shape != semantic.shape[:2] or hi.shape != lo.shape:
+        raise ValueError(f"block shapes differ: semantic {semantic.shape}, instance {instance.shape}, "
+                         f"ranges {lo.shape} and {hi.shape}")
+    keys = np.empty(max(1 << 16, 2 * semantic.shape[2]), np.int64)
+    found, col = [], 0
+    # the kernel fills a fixed buffer of run keys; each full buffer is reduced to its distinct keys
+    while True:
+        n, col = _column_pairs_kernel(semantic, instance, lo, hi, col, keys)
+        found.append(np.unique(keys[:n]))
+        if col >= semantic.shape[0] * semantic.shape[1]:
+            break
+    return (np.unique(np.concatenate(found)) if len(found) > 1 else found[0]).astype(np.uint64)
+
+
 def _flat_u8(semantic: np.ndarray) -> np.ndarray:
     """A semantic grid as a flat uint8 array (ValueError naming a bad dtype or id)."""
     sem = np.asarray(semantic)

@@ -51,6 +51,7 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.taxonomy import dynamic_ids
+from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero
 
 N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
 
@@ -142,60 +143,72 @@ def _pose(pose, name: str) -> np.ndarray:
     return p
 
 
-def _semantic(a, name: str) -> np.ndarray:
-    sem = np.asarray(a)
-    if sem.ndim != 3:
-        raise ValueError(f"{name} must be 3D (x, y, z), got shape {sem.shape}")
-    if sem.dtype != np.uint8:
-        if not np.issubdtype(sem.dtype, np.integer):
-            raise ValueError(f"{name} must hold integer class ids, got {sem.dtype}")
-        if sem.size and (sem.min() < 0 or sem.max() > 255):
-            raise ValueError(f"{name}: class ids must fit uint8 (0..255)")
-        sem = sem.astype(np.uint8)
-    return np.ascontiguousarray(sem)
+def _semantic(a, name: str) -> BlockedGrid:
+    """A semantic grid (dense or :class:`~.blocks.BlockedGrid`) as uint8 blocks."""
+    from carlaocc.stages.quality.continuity import _uint8_grid
+
+    return _uint8_grid(a, name)
 
 
-def _mask(m, shape: tuple[int, ...], name: str) -> np.ndarray:
-    arr = np.asarray(m)
-    if arr.shape != shape:
-        raise ValueError(f"{name} has shape {arr.shape}, its semantic grid has {shape}")
-    return np.ascontiguousarray(arr.astype(np.bool_, copy=False)).view(np.uint8)
+def _masks(m, sem: BlockedGrid, name: str) -> list[np.ndarray]:
+    """A frame's visibility: one mask or a tuple of masks (observed by any), each dense or
+    :class:`~.blocks.BlockedGrid`, as flat uint8 arrays in ``sem``'s layout (nonzero = observed)."""
+    masks = list(m) if isinstance(m, (tuple, list)) else [m]
+    if not 1 <= len(masks) <= 2:
+        raise ValueError(f"{name}: give one or two visibility masks, got {len(masks)}")
+    out = []
+    for mask in masks:
+        grid = sem.like(mask, name)
+        b = grid.blocks
+        if b.dtype != np.uint8:
+            b = b.view(np.uint8) if b.dtype == np.bool_ else (b != 0).view(np.uint8)
+        out.append(b.reshape(-1))
+    return out
+
+
+def _words(flat: np.ndarray) -> np.ndarray:
+    """The whole 8-byte words of a flat uint8 array, as uint64 (a view)."""
+    return flat[: flat.size // 8 * 8].view(np.uint64)
 
 
 def column_ranges(semantic: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per ``(i, j)`` column of a semantic grid: the lowest and highest ``k`` with a nonzero label
-    (``lo > hi`` when none), int32 ``(X, Y)`` each. One pass over the grid (about 0.3 s at
-    0.05 m): compute it once per frame and pass it to :func:`temporal_consistency_counts` for both
-    pairs the frame belongs to."""
-    return _column_ranges(_semantic(semantic, "semantic"))
+    """Per ``(i, j)`` column of a semantic grid (dense or :class:`~.blocks.BlockedGrid`): the
+    lowest and highest ``k`` with a nonzero label (``lo > hi`` when none), int32 ``(X, Y)`` each.
+    Compute it once per frame and pass it to :func:`temporal_consistency_counts` for both pairs
+    the frame belongs to (:func:`~carlaocc.stages.quality.continuity.continuity_and_ranges` gives
+    it with the continuity counts in the same pass)."""
+    grid = _semantic(semantic, "semantic")
+    ox, oy = grid.offsets()
+    return _column_ranges(grid.flat, grid.words(), ox, oy, grid.shape[2])
 
 
 @numba.njit(cache=True, nogil=True)
-def _column_ranges(sem):  # pragma: no cover - numba
+def _column_ranges(flat, words, ox, oy, Z):  # pragma: no cover - numba
     """Per (i, j) column: the lowest and highest k with a nonzero label (lo > hi when none)."""
-    X, Y, Z = sem.shape
+    X, Y = ox.size, oy.size
     lo = np.full((X, Y), Z, dtype=np.int32)
     hi = np.full((X, Y), -1, dtype=np.int32)
     for i in range(X):
         for j in range(Y):
-            for k in range(Z):
-                if sem[i, j, k] != 0:
-                    lo[i, j] = k
-                    break
-            if lo[i, j] < Z:
-                for k in range(Z - 1, -1, -1):
-                    if sem[i, j, k] != 0:
-                        hi[i, j] = k
-                        break
+            s = ox[i] + oy[j]
+            first = first_nonzero(flat, words, s, s + Z) - s
+            if first < Z:
+                lo[i, j] = first
+                hi[i, j] = last_nonzero(flat, words, s + first, s + Z) - s
     return lo, hi
 
 
 @numba.njit(cache=True, nogil=True)
-def _tc_kernel(sem0, sem1, m0, m1, use_mask, static, A, c, lo0, hi0, lo1, hi1):  # pragma: no cover - numba
+def _tc_kernel(sem0, ox0, oy0, Z0, sem1, ox1, oy1, Z1, m0a, m0aw, m0b, m0bw, m1a, m1b, n_masks, static, A, c,
+               lo0, hi0, lo1, hi1):  # pragma: no cover - numba
     """Count per-class intersections and unions. ``q = A @ (i, j, k) + c`` is voxel (i, j, k)'s
-    centre warped into frame t+1's continuous voxel coordinates (voxel u spans [u, u + 1))."""
-    X0, Y0, Z0 = sem0.shape
-    X1, Y1, Z1 = sem1.shape
+    centre warped into frame t+1's continuous voxel coordinates (voxel u spans [u, u + 1)). Each
+    grid is read flat through its offset tables (voxel (i, j, k) of frame t is
+    ``sem0[ox0[i] + oy0[j] + k]``, :class:`~.blocks.BlockedGrid`); each frame's masks (``n_masks``
+    of them, 0 to 2, in its semantic grid's layout; ``m0aw``, ``m0bw``: frame t's as whole uint64
+    words) are OR-ed: observed by any."""
+    X0, Y0 = ox0.size, oy0.size
+    X1, Y1 = ox1.size, oy1.size
     inter = np.zeros(256, dtype=np.int64)
     union = np.zeros(256, dtype=np.int64)
     a02, a12, a22 = A[0, 2], A[1, 2], A[2, 2]
@@ -239,11 +252,20 @@ def _tc_kernel(sem0, sem1, m0, m1, use_mask, static, A, c, lo0, hi0, lo1, hi1): 
                         k_hi = khi
             k_lo = max(k_lo, 0)
             k_hi = min(k_hi, Z0 - 1)
+            s0 = ox0[i] + oy0[j]
+            if n_masks > 0 and k_lo <= k_hi:
+                # every voxel that counts is observed in frame t: narrow the range to the
+                # column's first and last observed voxels in it (unobserved runs, the insides of
+                # the ground and of buildings, skipped eight voxels at a time)
+                a0 = first_nonzero(m0a, m0aw, s0 + k_lo, s0 + k_hi + 1)
+                a1 = last_nonzero(m0a, m0aw, s0 + k_lo, s0 + k_hi + 1)
+                if n_masks == 2:
+                    a0 = min(a0, first_nonzero(m0b, m0bw, s0 + k_lo, s0 + k_hi + 1))
+                    a1 = max(a1, last_nonzero(m0b, m0bw, s0 + k_lo, s0 + k_hi + 1))
+                k_lo, k_hi = a0 - s0, a1 - s0
             for k in range(k_lo, k_hi + 1):
-                a = sem0[i, j, k]
+                a = sem0[s0 + k]
                 if not static[a]:
-                    continue
-                if use_mask and m0[i, j, k] == 0:
                     continue
                 # nearest voxel of frame t+1: floor of the continuous coordinates, inside the grid
                 qx = bx + a02 * k
@@ -256,10 +278,15 @@ def _tc_kernel(sem0, sem1, m0, m1, use_mask, static, A, c, lo0, hi0, lo1, hi1): 
                 s = int(qz)
                 if u >= X1 or w >= Y1 or s >= Z1:
                     continue
-                b = sem1[u, w, s]
-                if not static[b]:
+                s1 = ox1[u] + oy1[w] + s
+                b = sem1[s1]
+                # free against free adds nothing (most of the range): the masks are read only
+                # where a count may change
+                if (a == 0 and b == 0) or not static[b]:
                     continue
-                if use_mask and m1[u, w, s] == 0:
+                if n_masks > 0 and m0a[s0 + k] == 0 and (n_masks == 1 or m0b[s0 + k] == 0):
+                    continue
+                if n_masks > 0 and m1a[s1] == 0 and (n_masks == 1 or m1b[s1] == 0):
                     continue
                 # per-class intersection and union over classes >= 1
                 if a == b:
@@ -287,15 +314,15 @@ def warp_to_voxels(relative: np.ndarray, origin_t: Sequence[float], voxel_t: flo
 
 
 def temporal_consistency_counts(
-    semantic_t: np.ndarray,
-    semantic_t1: np.ndarray,
+    semantic_t: np.ndarray | BlockedGrid,
+    semantic_t1: np.ndarray | BlockedGrid,
     pose_t: np.ndarray,
     pose_t1: np.ndarray,
     voxel_size: float,
     origin: Sequence[float],
     *,
-    mask_t: np.ndarray | None = None,
-    mask_t1: np.ndarray | None = None,
+    mask_t: np.ndarray | BlockedGrid | tuple | None = None,
+    mask_t1: np.ndarray | BlockedGrid | tuple | None = None,
     static: np.ndarray | None = None,
     voxel_size_t1: float | None = None,
     origin_t1: Sequence[float] | None = None,
@@ -304,21 +331,26 @@ def temporal_consistency_counts(
 ) -> TemporalCounts:
     """Per-class ``|I_c|`` and ``|U_c|`` within ``M_t`` of the pair (t, t+1) (module docstring).
 
-    ``semantic_*``: uint8 (or integer 0..255) ``(X, Y, Z)`` grids, 0 = free. ``pose_*``: 4x4
+    ``semantic_*``: uint8 (or integer 0..255) ``(X, Y, Z)`` grids, 0 = free, dense or
+    :class:`~carlaocc.stages.quality.blocks.BlockedGrid` (as the store decodes them). ``pose_*``: 4x4
     sensor-to-world poses of the grids' frame. ``voxel_size`` (m) and ``origin`` (m, minimum corner
     of voxel (0, 0, 0)) describe grid t and, unless ``voxel_size_t1`` / ``origin_t1`` are given,
-    grid t+1 too. ``mask_*``: visibility (nonzero = observed), both or neither. ``static``: (256,)
+    grid t+1 too. ``mask_*``: visibility (nonzero = observed), both or neither; a tuple of
+    two masks per frame means observed by either (camera or LiDAR). ``static``: (256,)
     bool table (:func:`static_table`; default: the CarlaOcc taxonomy). ``ranges_*``: each grid's
     :func:`column_ranges`, when the caller already has them (computed here otherwise).
     """
     sem0, sem1 = _semantic(semantic_t, "semantic_t"), _semantic(semantic_t1, "semantic_t1")
     if (mask_t is None) != (mask_t1 is None):
         raise ValueError("give both visibility masks (mask_t and mask_t1) or neither")
-    use_mask = mask_t is not None
-    if use_mask:
-        m0, m1 = _mask(mask_t, sem0.shape, "mask_t"), _mask(mask_t1, sem1.shape, "mask_t1")
+    if mask_t is None:
+        m0 = m1 = [np.zeros(1, np.uint8)]
+        n_masks = 0
     else:
-        m0 = m1 = np.zeros((1, 1, 1), np.uint8)
+        m0, m1 = _masks(mask_t, sem0, "mask_t"), _masks(mask_t1, sem1, "mask_t1")
+        if len(m0) != len(m1):
+            raise ValueError(f"mask_t has {len(m0)} masks and mask_t1 {len(m1)}: give each frame the same ones")
+        n_masks = len(m0)
     table = static_table() if static is None else np.asarray(static, dtype=np.bool_)
     if table.shape != (N_CLASSES,):
         raise ValueError(f"static must be a (256,) bool table, got shape {table.shape}")
@@ -332,9 +364,12 @@ def temporal_consistency_counts(
             raise ValueError(f"{name} must be 3 finite numbers, got {o!r}")
     A, c = warp_to_voxels(relative_pose(pose_t, pose_t1), origin, float(voxel_size), o1, float(vs1))
     # per-column occupied z ranges bound the work to voxels where O_t or W is occupied
-    lo0, hi0 = _column_ranges(sem0) if ranges_t is None else ranges_t
-    lo1, hi1 = _column_ranges(sem1) if ranges_t1 is None else ranges_t1
+    lo0, hi0 = column_ranges(sem0) if ranges_t is None else ranges_t
+    lo1, hi1 = column_ranges(sem1) if ranges_t1 is None else ranges_t1
     if lo0.shape != sem0.shape[:2] or lo1.shape != sem1.shape[:2]:
         raise ValueError("ranges_t / ranges_t1 must be the column_ranges of semantic_t / semantic_t1")
-    inter, union = _tc_kernel(sem0, sem1, m0, m1, use_mask, table, A, c, lo0, hi0, lo1, hi1)
+    (ox0, oy0), (ox1, oy1) = sem0.offsets(), sem1.offsets()
+    inter, union = _tc_kernel(sem0.flat, ox0, oy0, sem0.shape[2], sem1.flat, ox1, oy1, sem1.shape[2],
+                              m0[0], _words(m0[0]), m0[-1], _words(m0[-1]), m1[0], m1[-1], n_masks, table, A, c,
+                              lo0, hi0, lo1, hi1)
     return TemporalCounts(inter, union)

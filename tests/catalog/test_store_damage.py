@@ -259,3 +259,41 @@ def test_a_chunk_of_another_size_fails_even_into_a_reused_buffer(store):
     assert (x == 5).all()
     with pytest.raises(StoreError, match="damaged chunk"):
         occ.read_tile("seq", GRID, 1, "semantic", 0, GRID.shape[0])
+
+
+def test_frames_read_block_major_equal_the_frames_and_never_show_stale_blocks(store):
+    """``read_blocks`` decodes each chunk into its block of a reused buffer: the blocks are the
+    frame (``BlockedGrid.to_dense``), a chunk not stored reads as zeros over whatever the buffer
+    held, and a chunk of another size is a StoreError."""
+    from numcodecs import Zstd
+
+    from carlaocc.stages.quality.blocks import BlockedGrid
+
+    occ, sem, _ = _occupancy(store)
+    occ.write_frame("seq", GRID, 0, {"semantic": np.full(GRID.shape, 5, np.uint8)})
+    buf = occ.read_blocks("seq", GRID, 0, "semantic")
+    assert buf.shape == (2, 2, 8, 8, GRID.shape[2])  # 16 x 10 in chunks of 8: the y edge is padded
+    np.testing.assert_array_equal(BlockedGrid(buf, GRID.shape).to_dense(), 5)
+    # frame 1 into the same buffer: the 5s of frame 0 must not survive where frame 1 has no chunk
+    occ.read_blocks("seq", GRID, 1, "semantic", out=buf)
+    np.testing.assert_array_equal(BlockedGrid(buf, GRID.shape).to_dense(), sem)
+    np.testing.assert_array_equal(BlockedGrid(buf, GRID.shape).to_dense(),
+                                  occ.read_tile("seq", GRID, 1, "semantic", 0, GRID.shape[0]))
+    with pytest.raises(ValueError, match="blocks are"):
+        occ.read_blocks("seq", GRID, 1, "semantic", out=np.empty((2, 2, 8, 8, 3), np.uint8))
+    victim = sorted(store.glob(f"{_path('semantic')}/c/1", ""))[0]
+    store.fs.pipe_file(store.path(victim), Zstd(level=1).encode(np.zeros(10, np.uint8)))
+    with pytest.raises(StoreError, match="damaged chunk"):
+        occ.read_blocks("seq", GRID, 1, "semantic", out=buf)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["uint8", "uint32"]))
+def test_zstd_content_size_reads_the_frame_header(seed, dtype):
+    from carlaocc.catalog.zarrio import zstd_content_size
+
+    rng = np.random.default_rng(seed)
+    block = rng.integers(0, 3, tuple(rng.integers(1, 40, 3))).astype(dtype)
+    payload = encode_chunk(block, dtype)
+    assert zstd_content_size(payload) == block.nbytes
+    assert zstd_content_size(GARBAGE) is None and zstd_content_size(b"") is None

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from carlaocc.stages.quality import (relative_pose, sequence_temporal, static_table, temporal_consistency_counts)
 from carlaocc.schemas.taxonomy import by_name
+from carlaocc.stages.quality.blocks import BlockedGrid
 
 CAR = by_name("Car").id
 ROAD, BUILDING, VEG = by_name("Road").id, by_name("Building").id, by_name("Vegetation").id
@@ -265,3 +266,34 @@ def test_tall_sparse_columns_skip_nothing_that_counts():
     c = temporal_consistency_counts(s0, s1, np.eye(4), p1, 0.2, (-0.8, -0.8, -1.0))
     inter, union = reference_counts(s0, s1, np.eye(4), p1, 0.2, (-0.8, -0.8, -1.0))
     assert (c.union == union).all() and (c.intersection == inter).all() and union[VEG] > 0
+
+
+# -- block-major grids (as the store decodes them) ------------------------------------------------
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 4), st.booleans())
+def test_temporal_counts_on_blocks_with_two_masks_agree_with_brute_force(seed, bx, by, two_masks):
+    rng = np.random.default_rng(seed)
+    shape0, shape1 = tuple(rng.integers(2, 7, 3)), tuple(rng.integers(2, 7, 3))
+    s0 = rng.choice(np.array([0, 0, 0, ROAD, VEG, CAR], np.uint8), size=shape0)
+    s1 = rng.choice(np.array([0, 0, ROAD, VEG], np.uint8), size=shape1)
+    p0, p1 = pose(_rotation(rng, 0.6), rng.uniform(-1, 1, 3)), pose(_rotation(rng, 0.6), rng.uniform(-1, 1, 3))
+    o0, o1 = rng.uniform(-2, 0, 3), rng.uniform(-2, 0, 3)
+    masks0 = [rng.random(shape0) < 0.5 for _ in range(1 + two_masks)]
+    masks1 = [rng.random(shape1) < 0.5 for _ in range(1 + two_masks)]
+    # frame t block-major with its masks in its blocks, frame t+1 in other blocks and its masks dense
+    c = temporal_consistency_counts(BlockedGrid.from_dense(s0, (bx, by)), BlockedGrid.from_dense(s1, (by, bx)), p0, p1, 0.4, o0,
+                                    voxel_size_t1=0.5, origin_t1=o1,
+                                    mask_t=tuple(BlockedGrid.from_dense(m.astype(np.uint8), (bx, by)) for m in masks0),
+                                    mask_t1=tuple(masks1))
+    inter, union = reference_counts(s0, s1, p0, p1, 0.4, o0, np.logical_or.reduce(masks0),
+                                    np.logical_or.reduce(masks1), vs1=0.5, origin1=o1)
+    assert (c.intersection == inter).all() and (c.union == union).all()
+
+
+def test_temporal_counts_need_the_same_masks_in_both_frames():
+    s = np.zeros((2, 2, 2), np.uint8)
+    m = np.ones((2, 2, 2), bool)
+    with pytest.raises(ValueError, match="same ones"):
+        temporal_consistency_counts(s, s, np.eye(4), np.eye(4), 1.0, (0, 0, 0), mask_t=(m, m), mask_t1=m)
+    with pytest.raises(ValueError, match="one or two"):
+        temporal_consistency_counts(s, s, np.eye(4), np.eye(4), 1.0, (0, 0, 0), mask_t=(m, m, m), mask_t1=(m, m, m))

@@ -1,0 +1,104 @@
+"""The quality kernels on block-major grids (what the store decodes) agree with the dense grids
+and the brute-force references, for any block edges, edge padding and column height."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from carlaocc.stages.quality import (column_ranges, continuity_and_ranges, isolated_mask_reference,
+                                     spatial_continuity_counts)
+from carlaocc.stages.quality.blocks import BlockedGrid
+from carlaocc.stages.quality.statistics import block_pairs, instance_class_pairs
+
+
+def blocked(dense: np.ndarray, bx: int, by: int, pad: int = 0) -> BlockedGrid:
+    """``dense`` cut into (bx, by) column blocks, the padding beyond the grid filled with ``pad``
+    (the kernels must never read it)."""
+    grid = BlockedGrid.from_dense(dense, (bx, by))
+    X, Y, _ = dense.shape
+    nbx, nby = grid.blocks.shape[:2]
+    grid.blocks[nbx - 1, :, X - (nbx - 1) * bx:] = pad
+    grid.blocks[:, nby - 1, :, Y - (nby - 1) * by:] = pad
+    return grid
+
+
+def reference_ranges(sem: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    Z = sem.shape[2]
+    nz = sem != 0
+    lo = np.where(nz.any(axis=2), nz.argmax(axis=2), Z)
+    hi = np.where(nz.any(axis=2), Z - 1 - nz[:, :, ::-1].argmax(axis=2), -1)
+    return lo, hi
+
+
+@st.composite
+def grids(draw, labels=(0, 0, 0, 1, 2, 3)):
+    shape = (draw(st.integers(1, 9)), draw(st.integers(1, 9)), draw(st.integers(1, 41)))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    density = draw(st.sampled_from([0.0, 0.05, 0.5, 1.0]))
+    sem = (rng.choice(np.asarray(labels[3:], np.uint8), size=shape) * (rng.random(shape) < density)).astype(np.uint8)
+    return sem, draw(st.integers(1, 5)), draw(st.integers(1, 5)), draw(st.sampled_from([0, 1, 255]))
+
+
+@settings(max_examples=120, deadline=None)
+@given(grids())
+def test_continuity_and_ranges_agree_with_the_references_for_any_blocks(case):
+    sem, bx, by, pad = case
+    counts, (lo, hi) = continuity_and_ranges(blocked(sem, bx, by, pad))
+    ref = isolated_mask_reference(sem)
+    for c in range(1, 4):
+        assert counts.occupied[c] == int((sem == c).sum())
+        assert counts.isolated[c] == int((ref & (sem == c)).sum())
+    rlo, rhi = reference_ranges(sem)
+    np.testing.assert_array_equal(lo, rlo)
+    np.testing.assert_array_equal(hi, rhi)
+    # the dense form (one block) and the ranges-only pass agree too
+    dense = spatial_continuity_counts(sem)
+    assert (dense.occupied == counts.occupied).all() and (dense.isolated == counts.isolated).all()
+    for a, b in zip(column_ranges(blocked(sem, bx, by, pad)), (rlo, rhi)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_ranges_out_buffers_are_filled_and_checked():
+    sem = np.zeros((3, 4, 20), np.uint8)
+    sem[1, 2, 5:9] = 3
+    lo, hi = np.full((3, 4), 7, np.int32), np.full((3, 4), 7, np.int32)  # stale values
+    _, (a, b) = continuity_and_ranges(blocked(sem, 2, 3), out=(lo, hi))
+    assert a is lo and b is hi
+    np.testing.assert_array_equal(lo, reference_ranges(sem)[0])
+    np.testing.assert_array_equal(hi, reference_ranges(sem)[1])
+    with pytest.raises(ValueError, match="int32 arrays of shape"):
+        continuity_and_ranges(sem, out=(np.zeros((3, 4), np.int64), hi))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 300))
+def test_block_pairs_agree_with_the_whole_frame(seed, n_ids):
+    rng = np.random.default_rng(seed)
+    shape = tuple(rng.integers(1, 8, 2)) + (int(rng.integers(1, 700)),)
+    sem = (rng.integers(1, 30, shape) * (rng.random(shape) < 0.4)).astype(np.uint8)
+    inst = np.where(sem > 20, rng.integers(1, n_ids + 1, shape), 0).astype(np.uint32)
+    lo, hi = reference_ranges(sem)
+    np.testing.assert_array_equal(block_pairs(sem, inst, lo.astype(np.int32), hi.astype(np.int32)),
+                                  instance_class_pairs(sem, inst))
+
+
+def test_blocked_grid_layout():
+    dense = np.arange(5 * 3 * 2, dtype=np.uint8).reshape(5, 3, 2)
+    g = blocked(dense, 2, 2, pad=77)
+    assert g.blocks.shape == (3, 2, 2, 2, 2) and g.block == (2, 2)
+    np.testing.assert_array_equal(g.to_dense(), dense)
+    ox, oy = g.offsets()
+    for i in range(5):
+        for j in range(3):
+            np.testing.assert_array_equal(g.flat[ox[i] + oy[j]:ox[i] + oy[j] + 2], dense[i, j])
+    one = BlockedGrid.dense(dense)
+    assert one.blocks.base is dense or np.shares_memory(one.blocks, dense)
+    np.testing.assert_array_equal(g.like(dense, "x").to_dense(), dense)
+    np.testing.assert_array_equal(one.like(g, "x").to_dense(), dense)
+    with pytest.raises(ValueError, match="do not tile"):
+        BlockedGrid(np.zeros((3, 2, 2, 2, 2), np.uint8), (7, 3, 2))
+    with pytest.raises(ValueError, match="has shape"):
+        g.like(np.zeros((5, 3, 3), np.uint8), "mask_t")
