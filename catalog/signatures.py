@@ -116,7 +116,7 @@ def frame_signature(store: Store, zarr_root: str, array_path: str, frame: int) -
             return None
     else:
         fs = store.fs
-        found = fs.find(prefix, detail=True) if fs.exists(prefix) else {}
+        found = store.find(prefix, detail=True)
         entries = sorted((p[len(prefix):].lstrip("/"), info_signature(info)) for p, info in found.items()
                          if not posixpath.basename(p).startswith("."))
         if any(sig is None for _, sig in entries):

@@ -70,8 +70,20 @@ class Store:
     # resolved once per Store object (a chunk read asks for both: url_to_fs costs ~0.1 ms)
     @functools.cached_property
     def fs(self) -> fsspec.AbstractFileSystem:
-        fs, _ = fsspec.core.url_to_fs(self.url)
+        fs, _ = fsspec.core.url_to_fs(self.url, **self.storage_options)
         return fs
+
+    @property
+    def storage_options(self) -> dict:
+        """What the filesystem is opened with: an object store's listings are never cached (other
+        processes write the same root: a cached listing would hide their chunks); credentials and
+        endpoint come from the environment (``AWS_ENDPOINT_URL``, ``AWS_ACCESS_KEY_ID``...)."""
+        return {} if self.is_local else {"use_listings_cache": False}
+
+    @property
+    def in_memory(self) -> bool:
+        """A ``memory://`` root: it lives in this process only (worker processes cannot see it)."""
+        return self.url.startswith("memory://")
 
     @functools.cached_property
     def root(self) -> str:
@@ -100,18 +112,19 @@ class Store:
             raise StoreError(f"missing in the store {self.url}: {rel}") from None
 
     def write_bytes(self, rel: str, data: bytes) -> str:
-        """Write a whole file atomically (temporary name, then rename); returns its fingerprint."""
+        """Write a whole file atomically (on a disk: temporary name, then rename; on an object
+        store: one PUT, which readers see whole or not at all); returns its fingerprint."""
         fs, final = self.fs, self.path(rel)
+        if not self.is_local:
+            fs.pipe_file(final, bytes(data))
+            return fingerprint_bytes(data)
         parent = posixpath.dirname(final)
         fs.makedirs(parent, exist_ok=True)
         tmp = posixpath.join(parent, f".tmp-{uuid.uuid4().hex}-{posixpath.basename(final)}.partial")
         try:
             with fs.open(tmp, "wb") as fh:
                 fh.write(data)
-            if self.is_local:
-                os.replace(tmp, final)  # atomic on POSIX
-            else:
-                fs.mv(tmp, final)
+            os.replace(tmp, final)  # atomic on POSIX
         finally:
             if fs.exists(tmp):
                 fs.rm(tmp)
@@ -124,14 +137,20 @@ class Store:
         except FileNotFoundError:
             return None
 
+    def find(self, path: str, detail: bool = False):
+        """``fs.find`` of an absolute filesystem path, empty when nothing is there: one listing
+        (an object store answers ``exists`` of a prefix with a listing of its own)."""
+        try:
+            return self.fs.find(path, detail=detail)
+        except (FileNotFoundError, NotADirectoryError):
+            return {} if detail else []
+
     def glob(self, rel_dir: str, suffix: str) -> list[str]:
         """Store-relative paths of the files under ``rel_dir`` (recursively) ending in ``suffix``,
         sorted; temporary files are never listed."""
         base = self.path(rel_dir)
-        if not self.fs.exists(base):
-            return []
         out = []
-        for p in self.fs.find(base):
+        for p in self.find(base):
             name = posixpath.basename(p)
             if name.endswith(suffix) and not name.startswith(".tmp-"):
                 out.append(posixpath.relpath(p, self.root))

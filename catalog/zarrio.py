@@ -37,7 +37,7 @@ def zarr_store(store: Store, name: str):
     """A zarr store object over ``<root>/<name>`` (local directory or fsspec URL)."""
     if store.is_local:
         return LocalStore(store.path(name))
-    return FsspecStore.from_url(store.uri(name))
+    return FsspecStore.from_url(store.uri(name), storage_options=store.storage_options or None)
 
 
 def encode_chunk(block: np.ndarray, dtype) -> bytes:
@@ -307,7 +307,7 @@ def frame_fingerprint(store: Store, zarr_root: str, array_path: str, frame: int,
     nbytes = _chunk_nbytes(parsed) if check else None
     h = hashlib.sha256(meta)
     prefix = f"{base}/c/{frame}"
-    files = sorted(fs.find(prefix)) if fs.exists(prefix) else []
+    files = sorted(store.find(prefix))
     for f in files:
         if f.rsplit("/", 1)[-1].startswith("."):
             continue  # a temporary chunk left by a crashed write is not part of the frame

@@ -361,7 +361,8 @@ def make_executor(scheduler: str | None, store: Store, workers: int | None = Non
     scheduler = resolve_scheduler(scheduler)
     if scheduler == SYNCHRONOUS:
         return SynchronousExecutor()
-    return DaskExecutor(scheduler, processes=store.is_local, workers=workers, memory_limit=task_bytes)
+    # worker processes, unless the root lives in this process (memory://)
+    return DaskExecutor(scheduler, processes=not store.in_memory, workers=workers, memory_limit=task_bytes)
 
 
 # -- planning -------------------------------------------------------------------------------------

@@ -30,7 +30,11 @@ def test_write_is_atomic_on_failure(store, monkeypatch):
             fh.write = boom
         return fh
 
+    def failing_put(self, path, value, **kw):  # an object store's one PUT fails as a whole
+        raise OSError("disk full")
+
     monkeypatch.setattr(type(store.fs), "open", crashing_open)
+    monkeypatch.setattr(type(store.fs), "pipe_file", failing_put)
     with pytest.raises(OSError, match="disk full"):
         table.save("k", [_q("second")])
     monkeypatch.undo()

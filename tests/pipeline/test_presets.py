@@ -4,6 +4,8 @@ of one of its towns builds end to end, the traffic-free sequence included."""
 
 from __future__ import annotations
 
+import pytest
+
 import yaml
 from typer.testing import CliRunner
 
@@ -55,6 +57,7 @@ def test_sequences_per_level_is_checked():
             raise AssertionError(f"{bad} accepted")
 
 
+@pytest.mark.slow  # `make test-all`; the default run builds every stage end to end elsewhere
 def test_a_slice_of_the_plan_builds(tmp_path):
     plan = yaml.safe_load(preset_path("paper").read_text())
     plan["scenes"]["towns"] = plan["scenes"]["towns"][:1]  # the plan's first town, its 13 sequences

@@ -32,6 +32,7 @@ def _no_overlaps(res, lib) -> None:
                 assert not _overlap(boxes[i][1], boxes[j][1]), f"frame {f}: {boxes[i][0]} overlaps {boxes[j][0]}"
 
 
+@pytest.mark.slow  # `make test-all`; the default run builds every stage end to end elsewhere
 def test_crowded_suburb_walkers(lib, monkeypatch):
     monkeypatch.setitem(TRAFFIC_LEVELS, "high", TrafficLevel(16.0, 40.0, 2.0, 0.4))
     cfg = ScenesConfig(frame_count=300, actor_range=1000.0)
