@@ -43,6 +43,10 @@ class Context:
     sequence_patterns: tuple[str, ...] = ()
 
 
+class PlanError(Exception):
+    """The requested run cannot be planned (unknown stage, upstream never run...): exit code 2."""
+
+
 class SelectionError(ValueError):
     """A sequence selection (``--sequences``) that matches no sequence of the dataset."""
 
