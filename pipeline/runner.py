@@ -29,7 +29,7 @@ from carlaocc.pipeline.executors import (NANNY_TERMINATE, SYNCHRONOUS, TASK_BASE
                                          TaskResult, execute_task, local_workers, make_executor, resolve_scheduler,
                                          task_memory)
 from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
-from carlaocc.pipeline.spec import (Context, Partition, PlanError, SelectionError, StageSpec,  # noqa: F401
+from carlaocc.pipeline.spec import (Context, Partition, PlanError, Prepared, SelectionError, StageSpec,  # noqa: F401
                                     UpstreamMissing, cache_key)
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import RunRecord
@@ -209,6 +209,27 @@ def plan_stage(spec: StageSpec, ctx: Context, lineage: LineageLog, force: bool,
     return plan
 
 
+def retire_orphans(lineage: LineageLog, stage: str, planned: set[str], removed: frozenset[str]) -> list[RunRecord]:
+    """Append a ``retired`` record for every partition of ``stage`` that is no longer planned and
+    whose latest record names an output in ``removed`` (what the stage's ``prepare`` deleted: no
+    partition owns it any more); returns them. Retired partitions are never planned again nor
+    verified; their outputs are gone."""
+    if not removed:
+        return []
+    retired = []
+    for key, rec in sorted(lineage.latest(stage).items()):
+        if rec.status == "retired" or key in planned:
+            continue
+        outputs = json.loads(rec.output_fingerprints) if rec.output_fingerprints else {}
+        if removed.intersection(outputs):
+            retired.append(rec.model_copy(update={
+                "run_id": rec.run_id + "~retired", "status": "retired", "output_fingerprints": "{}",
+                "output_signatures": "", "error": "no partition owns its outputs any more: removed"}))
+    if retired:
+        lineage.append(stage, f"retired-{uuid.uuid4().hex}", retired)
+    return retired
+
+
 def stage_order(names: list[str] | None, registry: dict[str, StageSpec] | None = None) -> list[StageSpec]:
     """Registered stages in dependency order, optionally restricted to ``names`` (validated;
     earlier stage names are read as the stage's name, e.g. ``metrics`` as ``quality``)."""
@@ -303,7 +324,12 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
             t0 = time.perf_counter()
             if spec.prepare is not None:
                 # creating outputs may invalidate partitions planned as done (a replaced array)
-                invalid = spec.prepare(ctx, [pp.partition for pp in todo], [pp.partition for pp in plan.partitions])
+                prepared = spec.prepare(ctx, [pp.partition for pp in todo], [pp.partition for pp in plan.partitions])
+                if not isinstance(prepared, Prepared):
+                    prepared = Prepared(invalid=frozenset(prepared))
+                invalid = prepared.invalid
+                # outputs removed because no partition owns them: their partitions' lineage says so
+                retire_orphans(lineage, spec.name, {pp.partition.key for pp in plan.partitions}, prepared.removed)
                 for pp in plan.partitions:
                     if pp.reason is None and pp.partition.key in invalid:
                         pp.reason = "array re-created"

@@ -43,6 +43,17 @@ class Context:
     sequence_patterns: tuple[str, ...] = ()
 
 
+@dataclass(frozen=True)
+class Prepared:
+    """What a stage's ``prepare`` did: ``invalid``, the keys of partitions planned as done that
+    its creations invalidated (they run as well); ``removed``, the store-relative outputs it
+    deleted because no partition owns them any more (the runner retires the lineage records of
+    partitions no longer planned that recorded any of them: never planned, never verified)."""
+
+    invalid: frozenset[str] = frozenset()
+    removed: frozenset[str] = frozenset()
+
+
 class PlanError(Exception):
     """The requested run cannot be planned (unknown stage, upstream never run...): exit code 2."""
 
@@ -64,9 +75,10 @@ class StageSpec:
     writes: tuple[str, ...]
     partitions: Callable[[Context], list[Partition]]
     task: Callable[[Store, StageConfig, Partition], dict[str, str]]
-    # creates outputs before tasks run (e.g. Zarr arrays); given the partitions to run and all
-    # partitions, returns the keys of partitions its creation invalidated (to run as well)
-    prepare: Callable[[Context, list[Partition], list[Partition]], set[str]] | None = None
+    # creates outputs before tasks run (e.g. Zarr arrays) or removes those no partition owns any
+    # more; given the partitions to run and all partitions, returns the keys of partitions its
+    # creation invalidated (to run as well), or a Prepared that also names what it removed
+    prepare: Callable[[Context, list[Partition], list[Partition]], set[str] | Prepared] | None = None
     # the stage's config: by default the DatasetConfig section of the stage's name
     config_of: Callable[[DatasetConfig], StageConfig] | None = None
 

@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.spec import Context, Partition, Prepared, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
@@ -50,37 +49,29 @@ def quality_partitions(ctx: Context) -> list[Partition]:
     return out
 
 
-def _quality_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
+def _quality_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> Prepared:
     """Remove the per-task files of the (sequence, voxel size) groups about to be scored that no
     partition owns any more (another ``frames_per_task``, fewer frames) and the whole-sequence
-    files an earlier layout wrote there, so the tables hold each frame's rows once."""
+    files an earlier layout wrote there, so the tables hold each frame's rows once; the runner
+    retires the lineage of the partitions that recorded them."""
     groups = {f"{p.params['sequence_id']}/{GridSpec.model_validate(p.params['grid']).key}" for p in to_run}
     owned = {p.key for p in partitions}
-    # the lineage of the partitions that no longer exist says so: their outputs go now
-    lineage = LineageLog(ctx.store)
-    retired = [rec.model_copy(update={
-        "run_id": rec.run_id + "~retired", "status": "retired", "output_fingerprints": "{}", "output_signatures": "",
-        "error": "no partition owns its outputs any more (frames_per_task or the frame count changed): removed"})
-        for key, rec in sorted(lineage.latest("quality").items())
-        if rec.status != "retired" and key not in owned
-        and any(key == g or key.startswith(g + "/") for g in groups)]
-    if retired:
-        import uuid
-
-        lineage.append("quality", f"retired-{uuid.uuid4().hex}", retired)
+    removed = set()
     for model in FRAME_TABLES:
         table = ParquetTable(ctx.store, model)
         for group in sorted(groups):
             for rel in ctx.store.glob(f"{table.dir}/{group}", ".parquet"):
                 if rel[len(table.dir) + 1:-len(".parquet")] not in owned:
                     ctx.store.remove(rel)
+                    removed.add(rel)
     # an earlier layout's whole-sequence class rows (the sequence rows of quality/ are the
     # aggregate stage's)
     legacy = ParquetTable(ctx.store, ClassQualityRecord)
     for group in sorted(groups):
         if legacy.exists(group):
             ctx.store.remove(legacy.path(group))
-    return set()
+            removed.add(legacy.path(group))
+    return Prepared(removed=frozenset(removed))
 
 
 def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, sem: BlockedGrid,

@@ -280,3 +280,33 @@ def test_local_workers_fit_the_finest_task_under_the_nanny():
     # --workers wins; no task size: distributed's own share ("auto")
     assert runner.local_workers(7, need, total=128 * gib, cores=100)[0] == 7
     assert runner.local_workers(None, None, cores=3) == (3, "auto")
+
+
+def test_partitions_whose_outputs_prepare_removed_are_retired(store):
+    """``retire_orphans``: a partition no longer planned whose recorded outputs a stage's prepare
+    removed gets a retired record; planned ones, already retired ones and ones whose outputs
+    were kept stay as they are."""
+    import json
+    from datetime import datetime, timezone
+
+    from carlaocc.catalog.lineage import LineageLog
+    from carlaocc.schemas.records import RunRecord
+
+    t = datetime(2026, 1, 1, tzinfo=timezone.utc)
+
+    def rec(part, outputs, status="completed"):
+        return RunRecord(run_id="r1", stage="s", partition=part, code_version="c", config_hash="h", cache_key="k",
+                         input_fingerprints="{}", output_fingerprints=json.dumps({o: "f" for o in outputs}),
+                         status=status, started_at=t, ended_at=t, host="w")
+
+    log = LineageLog(store)
+    log.append("s", "r1-0000", [rec("gone", ["t/gone.parquet"]), rec("kept", ["t/kept.parquet"]),
+                                rec("planned", ["t/planned.parquet"]), rec("old", ["t/old.parquet"], "retired")])
+    removed = frozenset({"t/gone.parquet", "t/planned.parquet", "t/old.parquet"})
+    retired = runner.retire_orphans(log, "s", {"planned"}, removed)
+    assert [r.partition for r in retired] == ["gone"]
+    latest = LineageLog(store).latest("s")
+    assert latest["gone"].status == "retired" and latest["gone"].output_fingerprints == "{}"
+    assert latest["kept"].status == latest["planned"].status == "completed"
+    assert runner.retire_orphans(log, "s", {"planned"}, frozenset()) == []
+    assert runner.retire_orphans(log, "s", {"planned"}, removed) == []  # once
