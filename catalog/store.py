@@ -81,6 +81,12 @@ class Store:
         return {} if self.is_local else {"use_listings_cache": False}
 
     @property
+    def is_object_store(self) -> bool:
+        """Keys, not directories (S3, GCS, Azure, memory://): nothing to create before a write,
+        and one PUT of a whole file is atomic."""
+        return "://" in self.url and self.url.split("://", 1)[0] in ("s3", "s3a", "gs", "gcs", "az", "abfs", "memory")
+
+    @property
     def in_memory(self) -> bool:
         """A ``memory://`` root: it lives in this process only (worker processes cannot see it)."""
         return self.url.startswith("memory://")
@@ -116,6 +122,8 @@ class Store:
         store: one PUT, which readers see whole or not at all); returns its fingerprint."""
         fs, final = self.fs, self.path(rel)
         if not self.is_local:
+            if not self.is_object_store:  # e.g. sftp: a file's directory must exist
+                fs.makedirs(posixpath.dirname(final), exist_ok=True)
             fs.pipe_file(final, bytes(data))
             return fingerprint_bytes(data)
         parent = posixpath.dirname(final)

@@ -313,8 +313,10 @@ def resolve_scheduler(scheduler: str | None, probe: bool = False) -> str | None:
 
 
 # a task's peak resident memory per voxel of the finest grid, and its fixed part (Python, numba,
-# the scene mesh): measured 4.0 GB for a 0.05 m voxelize task (409 M voxels), 1.2 GB at 0.2 m
-TASK_BYTES_PER_VOXEL = 10
+# the scene mesh): measured 4.0 GB for a 0.05 m voxelize task (409 M voxels), 1.2 GB at 0.2 m,
+# plus 6 bytes a voxel the quality stage's frame buffers keep in the worker thread between its
+# tasks (three arrays, two frames each: 2.4 GB at 0.05 m) whatever task the thread runs next
+TASK_BYTES_PER_VOXEL = 16
 TASK_BASE_BYTES = 1 << 30
 NANNY_TERMINATE = 0.95  # distributed's default: a worker past 95 % of its limit is restarted
 

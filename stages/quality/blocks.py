@@ -36,7 +36,7 @@ class BlockedGrid:
             raise ValueError(f"blocks must be a C-contiguous (nbx, nby, bx, by, Z) array, got shape {b.shape}")
         nbx, nby, bx, by, bz = b.shape
         # the blocks cover the grid, and no block lies wholly outside it
-        if bz != Z or not (nbx * bx >= X > (nbx - 1) * bx) or not (nby * by >= Y > (nby - 1) * by):
+        if bz != Z or not (X == 0 or nbx * bx >= X > (nbx - 1) * bx) or not (Y == 0 or nby * by >= Y > (nby - 1) * by):
             raise ValueError(f"blocks of shape {b.shape} do not tile a grid of shape {self.shape}")
 
     @classmethod

@@ -98,6 +98,8 @@ def _uint8_grid(semantic, name: str) -> BlockedGrid:
     """A semantic grid (dense array or :class:`~.blocks.BlockedGrid`) as uint8 blocks
     (ValueError naming ids outside 0..255)."""
     grid = as_blocked(semantic, name)
+    if grid.dtype == np.bool_:  # occupied / free: class 1 / 0
+        grid = grid.view(np.uint8)
     if grid.dtype != np.uint8:
         b = grid.blocks
         if not np.issubdtype(b.dtype, np.integer):

@@ -38,8 +38,8 @@ def _count_kernel(sem, counts):  # pragma: no cover - numba
 @numba.njit(cache=True, nogil=True)
 def _pairs_kernel(sem, inst, start, counts, keys):  # pragma: no cover - numba
     """From voxel ``start`` on: count occupied voxels per class into ``counts`` (free ones are
-    skipped, as in :func:`_count_kernel`) and append the key ``id << 8 | class`` of each voxel
-    with a nonzero instance to ``keys`` when it differs from the previous such voxel's (objects
+    skipped, as in :func:`_count_kernel`) and append the key ``id << 8 | class`` of each occupied
+    voxel with a nonzero instance to ``keys`` when it differs from the previous such voxel's (objects
     are runs of voxels along z, so this drops most repeats). Stops when ``keys`` is full; returns
     (keys written, next voxel)."""
     n, prev, cap = 0, np.int64(-1), keys.size
@@ -48,7 +48,7 @@ def _pairs_kernel(sem, inst, start, counts, keys):  # pragma: no cover - numba
         if c != 0:
             counts[c] += 1
         i = inst[v]
-        if i != 0:
+        if i != 0 and c != 0:  # instances of occupied voxels only
             k = (np.int64(i) << 8) | np.int64(c)
             if k != prev:
                 if n == cap:
@@ -64,8 +64,8 @@ def _pairs_kernel(sem, inst, start, counts, keys):  # pragma: no cover - numba
 @numba.njit(cache=True, nogil=True)
 def _column_pairs_kernel(sem, inst, lo, hi, col, keys):  # pragma: no cover - numba
     """From column ``col`` on of a block (``sem``, ``inst``: ``(bx, by, Z)``; ``lo``, ``hi``:
-    ``(bx, by)`` occupied z ranges): append the key ``id << 8 | class`` of each voxel in the
-    column's range with a nonzero instance id when it differs from the previous such voxel's.
+    ``(bx, by)`` occupied z ranges): append the key ``id << 8 | class`` of each occupied voxel in
+    the column's range with a nonzero instance id when it differs from the previous such voxel's.
     Stops before a column that might not fit in ``keys``; returns (keys written, next column)."""
     bx, by, Z = sem.shape
     n, prev, cap = 0, np.int64(-1), keys.size
@@ -75,8 +75,9 @@ def _column_pairs_kernel(sem, inst, lo, hi, col, keys):  # pragma: no cover - nu
             return n, q
         for k in range(lo[a, b], hi[a, b] + 1):
             i = inst[a, b, k]
-            if i != 0:
-                key = (np.int64(i) << 8) | np.int64(sem[a, b, k])
+            c = sem[a, b, k]
+            if i != 0 and c != 0:  # instances of occupied voxels only (as frame_statistics)
+                key = (np.int64(i) << 8) | np.int64(c)
                 if key != prev:
                     keys[n] = key
                     n += 1
@@ -89,7 +90,7 @@ def block_pairs(semantic: np.ndarray, instance: np.ndarray, lo: np.ndarray, hi: 
     a block of a frame, ``semantic`` uint8 and ``instance`` uint32 ``(bx, by, Z)``, visiting in
     each ``(a, b)`` column only ``[lo[a, b], hi[a, b]]``: the semantic grid's occupied range
     (an instance id marks an occupied voxel, so the free rest of a column, most of a frame, is
-    never read). What :func:`frame_statistics` finds, for grids that keep the contract."""
+    never read). What :func:`frame_statistics` finds."""
     if semantic.shape != instance.shape or lo.shape != semantic.shape[:2] or hi.shape != lo.shape:
         raise ValueError(f"block shapes differ: semantic {semantic.shape}, instance {instance.shape}, "
                          f"ranges {lo.shape} and {hi.shape}")

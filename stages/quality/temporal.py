@@ -153,7 +153,7 @@ def _semantic(a, name: str) -> BlockedGrid:
 def _masks(m, sem: BlockedGrid, name: str) -> list[np.ndarray]:
     """A frame's visibility: one mask or a tuple of masks (observed by any), each dense or
     :class:`~.blocks.BlockedGrid`, as flat uint8 arrays in ``sem``'s layout (nonzero = observed)."""
-    masks = list(m) if isinstance(m, (tuple, list)) else [m]
+    masks = list(m) if isinstance(m, tuple) else [m]
     if not 1 <= len(masks) <= 2:
         raise ValueError(f"{name}: give one or two visibility masks, got {len(masks)}")
     out = []

@@ -128,6 +128,12 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
     for part in (f"occupancy.zarr/{SEQ}/", f"sensors.zarr/{SEQ}/", f"lidar/{SEQ}/", f"metrics/quality/{SEQ}/",
                  "admesh/", "scenes/", "splits/"):
         assert any(k.startswith(part) for k in on_s3), part
+    # listings are never cached; a frame's stat signature comes from the objects' ETags (so status
+    # trusts the recorded fingerprints and reads no chunk)
+    from carlaocc.catalog.signatures import frame_signature
+
+    assert not store.fs.dircache.use_listings_cache
+    assert frame_signature(store, "occupancy.zarr", f"{SEQ}/{RES}/semantic", 0) is not None
     # status from the object store (signatures from the ETags): everything up to date
     r = cli.invoke(app, ["status", *_args(config_file, root)])
     assert r.exit_code == 0, r.output
