@@ -193,7 +193,7 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     temp = sequence_temporal([temporal_consistency_counts(sems[t], sems[t + 1], poses[t], poses[t + 1], RES, grid.origin,
                                                           mask_t=masks[t], mask_t1=masks[t + 1],
                                                           ranges_t=column_ranges(sems[t]))
-                              for t in range(7)])
+                              for t in range(F - 1)])
     rows = dict(query(built, f"SELECT metric, value FROM quality WHERE sequence_id = '{seq}' AND frame_index IS NULL")[1])
     assert rows == {"spatial_continuity": cont.score, "temporal_consistency": temp.score}
 
@@ -356,7 +356,7 @@ def test_status_reads_no_chunk_data_and_verify_rehashes(config_file, built, tmp_
     r = cli.invoke(app, ["verify", "--root", copy.url, "-v"])
     assert r.exit_code == 1 and f"{seq}/{grid.key}/0002: outputs damaged: occupancy.zarr/{seq}/{grid.key}/semantic" in r.output
     after = status().output
-    assert "voxelize  stale 1/24" in after and f"    {seq}/{grid.key}/0002: outputs damaged" in after
+    assert f"voxelize  stale 1/{3 * F}" in after and f"    {seq}/{grid.key}/0002: outputs damaged" in after
     r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--stages", "voxelize",
                          "--scheduler", "synchronous"])
     assert r.exit_code == 0 and "voxelize: ran 1," in r.output, r.output

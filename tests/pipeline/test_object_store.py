@@ -147,6 +147,17 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
                          f"SELECT count(*) AS n FROM frames WHERE sequence_id = '{SEQ}'"])
     assert r.exit_code == 0, r.output
     assert r.output.split()[:3] == ["n", "-", str(CONFIG.scenes.frame_count)], r.output
+    # an export read from the object store: the same files as from the directory
+    outs = {}
+    for name, src in (("s3", root), ("dir", directory.root)):
+        outs[name] = tmp_path / f"occ3d-{name}"
+        r = cli.invoke(app, ["export", "occ3d", "--res", str(RES), "--root", src, "--out", str(outs[name]),
+                             "--sequence", SEQ])
+        assert r.exit_code == 0, r.output
+    files = {name: {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+             for name, out in outs.items()}
+    assert files["s3"].keys() == files["dir"].keys() and any(k.name == "labels.npz" for k in files["s3"])
+    assert [k for k in files["s3"] if files["s3"][k] != files["dir"][k] and k.name != "grid.json"] == []
     # a sample through the loader, equal to the directory's
     from carlaocc.data import CarlaOccDataset
 
