@@ -445,6 +445,9 @@ class FrameArrayStore(ABC):
         return frame_fingerprint(self.store, self.zarr_root, array_path, frame)
 
     def fingerprints(self, sequence_id: str, group, frame: int, names: tuple[str, ...]) -> dict[str, str]:
-        """Lineage key -> fingerprint of one frame of each named array."""
+        """Lineage key -> fingerprint of one frame of each named array (the arrays' groups'
+        metadata checked once for all of them: on an object store each check is a request)."""
+        checked: dict[str, str | None] = {}
         return {self.output_key(sequence_id, group, n, frame):
-                self.frame_fingerprint(self.array_path(sequence_id, group, n), frame) for n in names}
+                frame_fingerprint(self.store, self.zarr_root, self.array_path(sequence_id, group, n), frame, checked)
+                for n in names}
