@@ -13,6 +13,7 @@ import socket
 import time
 import traceback
 import uuid
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
@@ -68,12 +69,13 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
 
 
 # -- executors ------------------------------------------------------------------------------------
-class Executor:
+class Executor(ABC):
     """Runs a batch of tasks, calling ``on_done`` as each finishes."""
 
+    @abstractmethod
     def map(self, spec: StageSpec, store_url: str, cfg: StageConfig, partitions: list[Partition],
             on_done: Callable[[TaskResult], None]) -> None:
-        raise NotImplementedError
+        """Run ``partitions`` of ``spec`` against the root at ``store_url``."""
 
     def close(self) -> None:
         pass

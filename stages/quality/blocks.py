@@ -82,8 +82,7 @@ class BlockedGrid:
     def words(self) -> np.ndarray:
         """The whole 8-byte words of :attr:`flat` as uint64 (a view; kernels skip free voxels
         eight at a time through it)."""
-        flat = self.flat.view(np.uint8)
-        return flat[: flat.size // 8 * 8].view(np.uint64)
+        return words_of(self.flat.view(np.uint8))
 
     def like(self, other: BlockedGrid | np.ndarray, name: str) -> BlockedGrid:
         """``other`` (a grid of this shape) in this grid's blocks: itself when it already is,
@@ -117,6 +116,11 @@ class BlockedGrid:
                 part = a[p * bx:(p + 1) * bx, q * by:(q + 1) * by]
                 out.blocks[p, q, :part.shape[0], :part.shape[1]] = part
         return out
+
+
+def words_of(flat: np.ndarray) -> np.ndarray:
+    """The whole 8-byte words of a flat uint8 array, as uint64 (a view)."""
+    return flat[: flat.size // 8 * 8].view(np.uint64)
 
 
 def as_blocked(grid, name: str) -> BlockedGrid:

@@ -51,7 +51,7 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.taxonomy import dynamic_ids
-from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero
+from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero, words_of
 
 N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
 
@@ -164,11 +164,6 @@ def _masks(m, sem: BlockedGrid, name: str) -> list[np.ndarray]:
             b = b.view(np.uint8) if b.dtype == np.bool_ else (b != 0).view(np.uint8)
         out.append(b.reshape(-1))
     return out
-
-
-def _words(flat: np.ndarray) -> np.ndarray:
-    """The whole 8-byte words of a flat uint8 array, as uint64 (a view)."""
-    return flat[: flat.size // 8 * 8].view(np.uint64)
 
 
 def column_ranges(semantic: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -370,6 +365,6 @@ def temporal_consistency_counts(
         raise ValueError("ranges_t / ranges_t1 must be the column_ranges of semantic_t / semantic_t1")
     (ox0, oy0), (ox1, oy1) = sem0.offsets(), sem1.offsets()
     inter, union = _tc_kernel(sem0.flat, ox0, oy0, sem0.shape[2], sem1.flat, ox1, oy1, sem1.shape[2],
-                              m0[0], _words(m0[0]), m0[-1], _words(m0[-1]), m1[0], m1[-1], n_masks, table, A, c,
+                              m0[0], words_of(m0[0]), m0[-1], words_of(m0[-1]), m1[0], m1[-1], n_masks, table, A, c,
                               lo0, hi0, lo1, hi1)
     return TemporalCounts(inter, union)
