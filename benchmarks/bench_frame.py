@@ -24,7 +24,7 @@ import numba
 numba.set_num_threads(1)
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.spec import Partition
+from carlaocc.pipeline.engine.spec import Partition
 from carlaocc.pipeline.tasks.voxelize import occupancy_arrays, voxelize_config, voxelize_task
 from carlaocc.schemas.configs import DatasetConfig
 root, res, masks, frames, fill = sys.argv[1], float(sys.argv[2]), sys.argv[3] == "1", int(sys.argv[4]), sys.argv[5]

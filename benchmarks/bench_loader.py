@@ -73,11 +73,11 @@ def _zarr_rows(root: str, seq: str, res_key: str, frame: int) -> dict:
 
 
 def occupancy_only(root: str, res: float, frames: int) -> None:
-    from carlaocc.schemas.grid import resolution_key
+    from carlaocc.schemas.grid import voxel_size_key
 
     ds = CarlaOccDataset(root, voxel_size=res, cameras=False, lidar=False, boxes=False)
     idx = list(range(min(frames, len(ds))))
-    key = resolution_key(res)
+    key = voxel_size_key(res)
     ds[idx[0]]  # warm the per-process tables, imports and page cache for both sides
     _zarr_rows(root, ds.samples[idx[0]][0], key, ds.samples[idx[0]][1])
     t_ours = t_zarr = 0.0

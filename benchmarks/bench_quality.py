@@ -29,7 +29,7 @@ import numpy as np
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.spec import Partition
+from carlaocc.pipeline.engine.spec import Partition
 from carlaocc.pipeline.tasks.quality import quality_task
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec

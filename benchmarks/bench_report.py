@@ -59,8 +59,8 @@ def bench_kernel() -> None:
 
 def bench_task(root: str, res: float) -> None:
     from carlaocc.catalog.store import Store
-    from carlaocc.pipeline.registry import STAGES
-    from carlaocc.pipeline.spec import Context
+    from carlaocc.pipeline.engine.registry import STAGES
+    from carlaocc.pipeline.engine.spec import Context
     from carlaocc.pipeline.tasks.report import REPORT_HTML, report_task
     from carlaocc.schemas.configs import DatasetConfig
 

@@ -30,7 +30,7 @@ import numpy as np
 import open3d as o3d
 from carlaocc.catalog.store import Store
 from carlaocc.catalog.sensors import SensorStore
-from carlaocc.pipeline.spec import Partition
+from carlaocc.pipeline.engine.spec import Partition
 from carlaocc.pipeline.tasks.frame import frame_inputs
 from carlaocc.pipeline.tasks.sensors import sensor_arrays, sensor_region, sensors_config, sensors_task
 from carlaocc.schemas.configs import DatasetConfig

@@ -39,8 +39,8 @@ _API: dict[str, tuple[str, str]] = {
     "StoreError": ("carlaocc.catalog.store", "StoreError"),
     "OccupancyStore": ("carlaocc.catalog.occupancy", "OccupancyStore"),
     "SensorStore": ("carlaocc.catalog.sensors", "SensorStore"),
-    "STAGES": ("carlaocc.pipeline.registry", "STAGES"),
-    "status": ("carlaocc.pipeline.runner", "status"),
+    "STAGES": ("carlaocc.pipeline.engine.registry", "STAGES"),
+    "status": ("carlaocc.pipeline.engine.runner", "status"),
 }
 
 __all__ = ["__version__", "run", *_API]
@@ -52,7 +52,7 @@ def run(store, config=None, voxel_sizes=(0.2,), stages=None, scheduler=None, for
     skipped. Returns one outcome per stage run. ``scheduler``: None for a LocalCluster,
     ``"synchronous"``, or a Dask scheduler address."""
     from carlaocc.catalog.store import Store
-    from carlaocc.pipeline.runner import run as _run
+    from carlaocc.pipeline.engine.runner import run as _run
     from carlaocc.schemas.configs import DatasetConfig
 
     store = store if isinstance(store, Store) else Store(str(store))

@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from carlaocc.catalog.sources._obj import ObjError, read_obj
+from carlaocc.catalog.sources.obj import ObjError, read_obj
 from carlaocc.schemas.taxonomy import by_id, by_name
 
 __all__ = [

@@ -24,7 +24,7 @@ import zarr
 from carlaocc.catalog.store import OCCUPANCY_ZARR
 from carlaocc.catalog.zarrio import parse_frame_key
 from carlaocc.catalog.zarrstore import FrameArrayStore
-from carlaocc.schemas.grid import GridSpec, resolution_key
+from carlaocc.schemas.grid import GridSpec, voxel_size_key
 from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
 # array name -> dtype, description, trailing axes (beyond frame, x, y, z)
@@ -95,7 +95,7 @@ class OccupancyStore(FrameArrayStore):
     def stored_grid(self, sequence_id: str, voxel_size: float) -> GridSpec | None:
         """The grid a sequence was voxelized on at ``voxel_size`` (from the arrays' attributes,
         whatever the current config says), or None when it was not."""
-        arr = self._node(f"{sequence_id}/{resolution_key(voxel_size)}/semantic")
+        arr = self._node(f"{sequence_id}/{voxel_size_key(voxel_size)}/semantic")
         if not isinstance(arr, zarr.Array):
             return None
         return GridSpec.model_validate(dict(arr.attrs)["grid_spec"])

@@ -1,13 +1,11 @@
-"""Orchestration: the stage engine, one wiring module per stage, and the CLI.
+"""Orchestration, in three parts; the engine and the wiring import no command (tested):
 
-* ``spec``          — what a stage is to the engine: ``StageSpec``, ``Partition``, ``Context``
-* ``registry``      — the registered stages, in dependency order
-* ``runner``        — planning (what is stale and why), Dask execution, lineage records
-* ``code_version``  — a stage's code version, derived from what its wiring imports
-* ``tasks``         — one module per stage: partitions, prepare, config and the task body
-* ``cli``           — the ``carlaocc`` command line, one module per command group
-* ``scene_editing`` — ``carlaocc scenes``: town and frame meshes, sequence swaps
-* ``standalone``    — ``carlaocc voxelize`` of any mesh files
-* ``export``        — ``carlaocc export`` to the layouts models train on
-* ``audit``         — ``carlaocc audit``: quality scores of any dataset on disk
+* ``engine``   — the stage engine: spec, registry, runner (planning, status, lineage),
+  executors (where tasks run), code versions
+* ``tasks``    — the stages' wiring, one module per stage: partitions, prepare, config and the
+  task body (catalog readers -> ``carlaocc.stages`` compute -> catalog writers)
+* ``cli``      — the ``carlaocc`` command line, one module per command group
+* ``commands`` — what the commands call beyond running stages: ``export`` (a package, one
+  module per format family), ``audit``, ``standalone`` (``carlaocc voxelize``),
+  ``scene_editing`` (``carlaocc scenes``), ``verify``
 """

@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, resolution_key
+from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, voxel_size_key
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.schemas.taxonomy import DEFAULT_LABEL_TABLE, LabelTableName
 
@@ -301,9 +301,9 @@ def parse_voxel_size_list(text: str) -> tuple[float, ...]:
             raise ValueError(f"resolution {item!r} is not a number of metres") from None
         if not math.isfinite(v) or v <= 0:
             raise ValueError(f"resolution {item!r} must be a positive finite number of metres")
-        if resolution_key(v) == "0":
+        if voxel_size_key(v) == "0":
             raise ValueError(f"resolution {item!r} is below the store's micrometre precision")
-        out.setdefault(resolution_key(v), v)
+        out.setdefault(voxel_size_key(v), v)
     if not out:
         raise ValueError("no resolution given (e.g. --res 0.2 or --res 0.2,0.05)")
     return tuple(out.values())

@@ -24,8 +24,8 @@ _WHOLE_TOLERANCE = 1e-6
 _AXES = "xyz"
 
 
-def resolution_key(voxel_size: float) -> str:
-    """Store key of a resolution: ``0.05`` -> ``"0.05"``, ``0.2`` -> ``"0.2"`` (no float noise)."""
+def voxel_size_key(voxel_size: float) -> str:
+    """Store key of a voxel size: ``0.05`` -> ``"0.05"``, ``0.2`` -> ``"0.2"`` (no float noise)."""
     return f"{voxel_size:.6f}".rstrip("0").rstrip(".")
 
 
@@ -93,7 +93,7 @@ class GridSpec(BaseModel):
     @property
     def key(self) -> str:
         """Store key of this resolution, e.g. ``"0.05"``."""
-        return resolution_key(self.voxel_size)
+        return voxel_size_key(self.voxel_size)
 
     def attrs(self) -> dict:
         """JSON-able description recorded on every array written on this grid."""

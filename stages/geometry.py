@@ -9,6 +9,7 @@ a source frame into a target frame (``p_target = T @ p_source``).
 from __future__ import annotations
 
 import hashlib
+import math
 
 import numpy as np
 
@@ -217,3 +218,27 @@ def geometry_hash(parts: list[tuple[np.ndarray, np.ndarray]], decimals: int = 5)
         h.update(np.ascontiguousarray(np.asarray(f, np.int64)).tobytes())
         h.update(b"|")
     return h.hexdigest()[:24]
+
+
+def boxes_in_frame(rows: list, world_to_frame: np.ndarray) -> dict[str, np.ndarray]:
+    """Actor boxes (world-frame rows of the actors table: instance id, semantic id, centre (3,) m,
+    size (l, w, h) m, yaw, pitch, roll rad, velocity (3,) m/s) in another frame, sorted by
+    instance id: ``boxes`` (M, 7) float32 ``x, y, z, l, w, h, yaw`` (yaw about the frame's z from
+    its x axis), ``box_pose`` (M, 4, 4) box-to-frame, ``box_velocity`` (M, 3) float32 in the
+    frame's axes, ``box_instance`` (M,) uint32, ``box_semantic`` (M,) uint8."""
+    R_wl, t_wl = world_to_frame[:3, :3], world_to_frame[:3, 3]
+    m = len(rows)
+    boxes = np.zeros((m, 7), np.float32)
+    pose = np.tile(np.eye(4), (m, 1, 1))
+    vel = np.zeros((m, 3), np.float32)
+    inst, sem = np.zeros(m, np.uint32), np.zeros(m, np.uint8)
+    for k, (iid, sid, c, size, yaw, pitch, roll, v) in enumerate(sorted(rows, key=lambda r: r[0])):
+        # the box's orientation and centre in the frame
+        R = R_wl @ rotation_matrix(yaw, pitch, roll)
+        centre = R_wl @ np.asarray(c, float) + t_wl
+        pose[k, :3, :3], pose[k, :3, 3] = R, centre
+        # its heading: the box x axis seen from above in the frame
+        boxes[k] = (*centre, *size, math.atan2(R[1, 0], R[0, 0]))
+        vel[k] = R_wl @ np.asarray(v, float)
+        inst[k], sem[k] = iid, sid
+    return {"boxes": boxes, "box_pose": pose, "box_velocity": vel, "box_instance": inst, "box_semantic": sem}

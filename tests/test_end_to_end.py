@@ -671,7 +671,7 @@ def test_recorded_path_rectifies_stored_raw_maps_like_the_raycast_path(built, tm
 
     from carlaocc.catalog.sensors import SensorStore
     from carlaocc.catalog.store import StoreError
-    from carlaocc.pipeline.spec import Partition
+    from carlaocc.pipeline.engine.spec import Partition
     from carlaocc.pipeline.tasks.sensors import sensors_config, sensors_task
 
     copy = Store(str(tmp_path / "copy"))

@@ -32,10 +32,8 @@ attenuation rate).
 from __future__ import annotations
 
 import io
-import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -44,7 +42,7 @@ from carlaocc.catalog.formats.carlaocc_npz import LABEL_LIMITS, check_encoding
 __all__ = [
     "ATTENUATION", "DEPTH_RANGE", "RELEASE_GRIDS", "RELEASE_PRIORITY", "ReleaseGrid", "encode_depth",
     "instance_lookup", "remap_instances", "encode_normals", "encode_semantics", "release_instance_ids",
-    "sequence_folder", "town_numbers", "calib_yaml", "pose_lines", "ply_text", "split_lines", "layout_note",
+    "sequence_folder", "town_numbers", "calib_yaml", "pose_lines", "ply_text", "split_lines",
 ]  # fmt: skip
 
 DEPTH_RANGE = 80.0  # m: full scale of the uint16 depth PNGs

@@ -15,7 +15,7 @@ Materials
     uses ``KHR_materials_transmission`` with a factor > 0 (glass authored physically).
     ``MASK`` (cut-outs) is not transparent. Trimesh materials are matched to the glTF materials by
     name, ties broken by colour factor and alpha mode.
-    OBJ: the MTL is parsed here (:func:`carlaocc.catalog.sources._obj.parse_mtl`): ``d < 1`` or ``Tr > 0``.
+    OBJ: the MTL is parsed here (:func:`carlaocc.catalog.sources.obj.parse_mtl`): ``d < 1`` or ``Tr > 0``.
 
 Texture references (``SourcePart.texture``)
     Kept by reference, never decoded: the image path relative to the mesh file's directory
@@ -50,7 +50,7 @@ from carlaocc.catalog.sources._appearance import (MAX_TEXTURE_SIDE, gltf_materia
                                                   obj_appearance, read_texture, texture_image,
                                                   trimesh_appearance, trimesh_material_info)
 from carlaocc.catalog.sources._collada import ColladaError, read_dae
-from carlaocc.catalog.sources._obj import missing_mtl_libraries, mtl_files, obj_materials
+from carlaocc.catalog.sources.obj import missing_mtl_libraries, mtl_files, obj_materials
 from carlaocc.catalog.sources.base import SourceError
 from carlaocc.schemas.meshes import Axis, SourcePart
 from carlaocc.schemas.taxonomy import SemanticClass, by_id, by_name

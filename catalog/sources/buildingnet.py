@@ -60,7 +60,7 @@ import re
 from carlaocc.catalog.sources._common import (check_subclass, compact, is_excluded, make_part, obj_appearance,
                                               missing_file_notes, read_json_object, semantic_class,
                                               sidecar_files)
-from carlaocc.catalog.sources._obj import ObjError, obj_materials, read_obj
+from carlaocc.catalog.sources.obj import ObjError, obj_materials, read_obj
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
 from carlaocc.schemas.taxonomy import by_name

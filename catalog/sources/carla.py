@@ -97,7 +97,7 @@ from carlaocc.catalog.sources._common import (
     semantic_class,
     texture_files,
 )
-from carlaocc.catalog.sources._obj import ObjError, mtl_files, obj_materials, read_obj
+from carlaocc.catalog.sources.obj import ObjError, mtl_files, obj_materials, read_obj
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
 

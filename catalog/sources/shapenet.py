@@ -47,7 +47,7 @@ import re
 
 from carlaocc.catalog.sources._common import (drop_excluded, load_parts, missing_file_notes, semantic_class,
                                               texture_files)
-from carlaocc.catalog.sources._obj import mtl_files
+from carlaocc.catalog.sources.obj import mtl_files
 from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.schemas.meshes import SourceAsset
 

@@ -8,7 +8,8 @@
 * ``scene_tools`` — ``scenes town-mesh|frame-mesh|swap``
 * ``files``       — ``voxelize`` (mesh files), ``export``, ``compare-resolutions``
 * ``evaluate``    — ``eval ssc|panoptic|depth|det``
-* ``audit`` (in ``carlaocc.pipeline.audit``) — quality scores of any dataset on disk
+* ``evaluate_rays`` — ``eval rayiou|raypq``
+* ``audit``       — ``audit``: quality scores of any dataset on disk
 
 Exit codes: 0 ok, 1 a task failed (named with its partition) or work failed, 2 a usage or input
 error (one line naming the culprit; nothing in the dataset root is touched). Every error is one
@@ -20,14 +21,13 @@ from __future__ import annotations
 import os
 import sys
 
-from carlaocc.pipeline.audit import audit_cli
-from carlaocc.pipeline.cli import build, files, query, scene_tools, show  # noqa: F401  (register commands)
+# the command modules register their commands, in the order --help lists them
+from carlaocc.pipeline.cli import build, files, audit, query, scene_tools, show  # noqa: F401, I001
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli import evaluate_rays  # noqa: F401  (registers eval rayiou / raypq)
 from carlaocc.pipeline.cli.evaluate import eval_app
 
 app.add_typer(eval_app, name="eval")
-app.command("audit")(audit_cli)
 
 __all__ = ["app", "main"]
 

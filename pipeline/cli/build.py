@@ -14,8 +14,8 @@ from pydantic import ValidationError
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
-from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, _RichProgress, parse_voxel_sizes, _store,
-                                         _validation_message, check_towns, fail, load_config,
+from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, RichProgress, parse_voxel_sizes, open_store,
+                                         validation_message, check_towns, fail, load_config,
                                          plan_config, PresetOpt, MapsOpt, LimitFramesOpt, SequencesOpt,
                                          TaxonomyOpt, sequence_patterns)
 
@@ -37,7 +37,7 @@ def run(
 ) -> None:
     """Build the dataset (or the selected stages) on the embedded default, a --config file or a
     --preset plan (--maps, --limit-frames and --sequences pick the towns and a slice of it)."""
-    from carlaocc.pipeline.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
+    from carlaocc.pipeline.engine.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
     cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     check_towns(cfg)
@@ -48,8 +48,8 @@ def run(
         resolve_scheduler(scheduler, probe=True)
     except PlanError as exc:
         fail(str(exc))
-    store = _store(root, writable=True)
-    progress = _RichProgress()
+    store = open_store(root, writable=True)
+    progress = RichProgress()
     t0 = time.perf_counter()
     try:
         outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
@@ -93,7 +93,7 @@ def ingest(
     """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
     are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
     from carlaocc.pipeline.tasks.ingest import IngestError, ingest_source
-    from carlaocc.pipeline.runner import PlanError, resolve_scheduler
+    from carlaocc.pipeline.engine.runner import PlanError, resolve_scheduler
     from carlaocc.schemas.configs import SourceIngestConfig
 
     if category_map is not None and not category_map.is_file():
@@ -103,13 +103,13 @@ def ingest(
         cfg = SourceIngestConfig(kind=kind, root=str(path.resolve()),
                                  category_map=str(category_map.resolve()) if category_map else None)
     except ValidationError as exc:
-        fail(_validation_message("ingest", exc).replace("ingest: kind: ", f"unknown source kind {kind!r}: "))
+        fail(validation_message("ingest", exc).replace("ingest: kind: ", f"unknown source kind {kind!r}: "))
     try:
         resolve_scheduler(scheduler, probe=True)
     except PlanError as exc:
         fail(str(exc))
-    store = _store(root, writable=True)
-    progress = _RichProgress()
+    store = open_store(root, writable=True)
+    progress = RichProgress()
     try:
         s = ingest_source(store, cfg, scheduler, force, progress, workers, log=lambda m: typer.echo(m, err=True))
     except (IngestError, PlanError) as exc:
@@ -169,12 +169,12 @@ def status(
 ) -> None:
     """List what is stale and why (runs nothing, writes nothing), for the same plan and slice
     options as `carlaocc run`."""
-    from carlaocc.pipeline.runner import PlanError, status as plan_status
+    from carlaocc.pipeline.engine.runner import PlanError, status as plan_status
 
     cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     check_towns(cfg)
     voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     try:
         plans = plan_status(store, cfg, voxel_sizes, sequence_patterns(sequences))
     except PlanError as exc:
@@ -217,9 +217,9 @@ def verify(
     output is damaged, modified or missing: `carlaocc run` rebuilds those partitions."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from carlaocc.pipeline.verify import verify as verify_outputs
+    from carlaocc.pipeline.commands.verify import verify as verify_outputs
 
-    store = _store(root, writable=record)
+    store = open_store(root, writable=record)
     names = tuple(s.strip() for s in stages.split(",") if s.strip()) if stages else ()
     bars: dict[str, int] = {}
     with Progress(TextColumn("verify {task.description:<9}"), BarColumn(), MofNCompleteColumn(),
@@ -257,7 +257,7 @@ def verify(
 @app.command("stages")
 def list_stages() -> None:
     """List the registered stages, what they read and write."""
-    from carlaocc.pipeline.registry import STAGES
+    from carlaocc.pipeline.engine.registry import STAGES
 
     for s in STAGES.values():
         typer.echo(f"{s.name}: {s.description}")

@@ -78,7 +78,7 @@ def pydantic_message(exc: ValidationError, names: dict[str, str] | None = None) 
 
 
 def _known_errors() -> tuple[type[BaseException], ...]:
-    from carlaocc.pipeline.runner import PlanError
+    from carlaocc.pipeline.engine.runner import PlanError
 
     return (PlanError, StoreError, ValidationError, ValueError, OSError, LookupError)
 
@@ -87,7 +87,7 @@ def error_line(exc: BaseException) -> tuple[str, int]:
     """The one line and exit code of an exception no command handled: bad input the plan refuses
     (a PlanError, an invalid value) exit 2; anything else is a failure during work, exit 1;
     an exception of no known kind also says how to see its traceback."""
-    from carlaocc.pipeline.runner import PlanError
+    from carlaocc.pipeline.engine.runner import PlanError
 
     if isinstance(exc, ValidationError):
         return pydantic_message(exc), 2
@@ -125,7 +125,7 @@ class ErrorGroup(TyperGroup):
             report_exception(exc)
 
 
-def _validation_message(source: str, exc: ValidationError) -> str:
+def validation_message(source: str, exc: ValidationError) -> str:
     err = exc.errors()[0]
     loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
     if err["type"] == "extra_forbidden":
@@ -179,7 +179,7 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
     try:
         return DatasetConfig.model_validate(cfg.model_copy(update=update).model_dump())
     except ValidationError as exc:
-        fail(_validation_message("config", exc))
+        fail(validation_message("config", exc))
 
 
 def sequence_patterns(text: str | None) -> tuple[str, ...]:
@@ -217,7 +217,7 @@ def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:
     try:
         return DatasetConfig.model_validate(data)
     except ValidationError as exc:
-        fail(_validation_message(f"config file {path}", exc))
+        fail(validation_message(f"config file {path}", exc))
 
 
 MAX_FRAME_VOXELS = 1_000_000_000
@@ -272,7 +272,7 @@ def parse_voxel_sizes(text: str, config: DatasetConfig) -> tuple[float, ...]:
     return values
 
 
-def _store(root: str, writable: bool) -> Store:
+def open_store(root: str, writable: bool) -> Store:
     """The dataset root of ``--root``: one that can be written (``writable``; it may not exist
     yet), or -- for commands that read -- one that exists and is a directory, else a one-line
     error naming it (exit 2) rather than the answer of an empty dataset."""
@@ -299,7 +299,7 @@ def _store(root: str, writable: bool) -> Store:
     return store
 
 
-class _RichProgress:
+class RichProgress:
     """A progress bar per stage: tasks done / total and elapsed time."""
 
     def __init__(self) -> None:
@@ -333,7 +333,7 @@ class _RichProgress:
             self._tasks.clear()
 
 
-def _floats(text: Optional[str], name: str, kind=float) -> Optional[tuple]:
+def parse_floats(text: Optional[str], name: str, kind=float) -> Optional[tuple]:
     if text is None:
         return None
     what = "integers" if kind is int else "numbers"
@@ -346,7 +346,7 @@ def _floats(text: Optional[str], name: str, kind=float) -> Optional[tuple]:
     return vals
 
 
-def _write_png(out: Path, image) -> None:
+def write_png(out: Path, image) -> None:
     from carlaocc.catalog.images import save_png
 
     if out.is_dir():
@@ -357,7 +357,7 @@ def _write_png(out: Path, image) -> None:
         fail(f"--out {out}: cannot write: {exc}")
 
 
-def _write_bytes(out: Path, data: bytes) -> None:
+def write_bytes(out: Path, data: bytes) -> None:
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_name(out.name + ".tmp")

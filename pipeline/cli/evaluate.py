@@ -102,7 +102,7 @@ def pair_files(pred: Path, gt: Path, suffixes: tuple[str, ...]) -> list[tuple[st
     return [(k, p_files[k], g_files[k]) for k in sorted(g_files)]
 
 
-def _load_arrays(path: Path, occupancy_ok: bool = False) -> dict[str, np.ndarray]:
+def load_arrays(path: Path, occupancy_ok: bool = False) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` (or ``{"": array}`` of an ``.npy``), no pickles; errors name the
     file. With ``occupancy_ok``, a CarlaOcc npz returns ``{"occupancy": None}`` unread."""
     try:
@@ -119,7 +119,7 @@ def _load_arrays(path: Path, occupancy_ok: bool = False) -> dict[str, np.ndarray
 
 def load_occupancy(path: Path, lm, instances: bool) -> tuple[np.ndarray, np.ndarray | None, dict[str, np.ndarray]]:
     """``(semantics, instances or None, masks)`` of one occupancy file in ``lm``'s label space."""
-    arrays = _load_arrays(path, occupancy_ok=True)
+    arrays = load_arrays(path, occupancy_ok=True)
     if "occupancy" in arrays:  # a published CarlaOcc npz: CarlaOcc ids, mapped into lm
         from carlaocc.catalog.formats import FormatError, load_carlaocc_npz
 
@@ -184,11 +184,11 @@ def _label_map(name: str, table: str):
 # --------------------------------------------------------------------------- output
 
 
-def _pct(v: float | None) -> str:
+def percent(v: float | None) -> str:
     return "     -" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{100 * v:6.2f}"
 
 
-def _write_json(out: Path | None, data: dict[str, Any]) -> None:
+def write_json(out: Path | None, data: dict[str, Any]) -> None:
     if out is None:
         return
     from carlaocc.catalog.formats import atomic_write
@@ -199,7 +199,7 @@ def _write_json(out: Path | None, data: dict[str, Any]) -> None:
         raise InputError(f"--json {out}: cannot write: {exc.strerror or exc}") from exc
 
 
-def _run(fn) -> None:
+def run_checked(fn) -> None:
     """Run ``fn``; bad input becomes a one-line error with exit code 2."""
     try:
         fn()
@@ -253,16 +253,16 @@ def ssc_cmd(pred: PredOpt, gt: GtOpt, map_name: MapOpt = "carlaocc", ignore: Ign
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt), "ignore": list(acc.ignore), "mask": mask}
-        _write_json(json_out, data)
+        write_json(json_out, data)
         typer.echo(f"{'class':<22} {'IoU %':>6} {'gt voxels':>12}")
         for row in data["classes"]:
-            typer.echo(f"{row['name']:<22} {_pct(row['iou'])} {row['tp'] + row['fn']:>12,}")
-        typer.echo(f"{'mIoU':<22} {_pct(data['miou'])}")
+            typer.echo(f"{row['name']:<22} {percent(row['iou'])} {row['tp'] + row['fn']:>12,}")
+        typer.echo(f"{'mIoU':<22} {percent(data['miou'])}")
         g = data["geometry"]
-        typer.echo(f"{'geometry IoU':<22} {_pct(g['iou'])}   precision {_pct(g['precision'])}   recall {_pct(g['recall'])}")
+        typer.echo(f"{'geometry IoU':<22} {percent(g['iou'])}   precision {percent(g['precision'])}   recall {percent(g['recall'])}")
         typer.echo(f"{res.frames} frame(s), {res.voxels:,} voxels scored, map {lm.name}")
 
-    _run(go)
+    run_checked(go)
 
 
 @eval_app.command("panoptic")
@@ -298,20 +298,20 @@ def panoptic_cmd(
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt), "ignore": list(acc.ignore), "mask": mask}
-        _write_json(json_out, data)
+        write_json(json_out, data)
         typer.echo(f"{'class':<22} {'kind':<6} {'PQ %':>6} {'SQ %':>6} {'RQ %':>6} {'TP':>7} {'FP':>7} {'FN':>7}")
         for r in data["classes"]:
-            typer.echo(f"{r['name']:<22} {'thing' if r['thing'] else 'stuff':<6} {_pct(r['pq'])} {_pct(r['sq'])} "
-                       f"{_pct(r['rq'])} {r['tp']:>7} {r['fp']:>7} {r['fn']:>7}")
+            typer.echo(f"{r['name']:<22} {'thing' if r['thing'] else 'stuff':<6} {percent(r['pq'])} {percent(r['sq'])} "
+                       f"{percent(r['rq'])} {r['tp']:>7} {r['fp']:>7} {r['fn']:>7}")
         for suffix, name in (("", "all"), ("_things", "things"), ("_stuff", "stuff")):
-            typer.echo(f"{'mean ' + name:<29} {_pct(data['pq' + suffix])} {_pct(data['sq' + suffix])} {_pct(data['rq' + suffix])}")
+            typer.echo(f"{'mean ' + name:<29} {percent(data['pq' + suffix])} {percent(data['sq' + suffix])} {percent(data['rq' + suffix])}")
         typer.echo(f"{res.frames} frame(s), map {lm.name}, min segment size {min_size} voxels")
 
-    _run(go)
+    run_checked(go)
 
 
 def _load_depth(path: Path) -> np.ndarray:
-    arrays = _load_arrays(path)
+    arrays = load_arrays(path)
     if "depth" in arrays:
         d = arrays["depth"]
     elif len(arrays) == 1:
@@ -355,7 +355,7 @@ def depth_cmd(
                 raise _frame_error(str(pf), exc) from exc
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
-        _write_json(json_out, _finite(data))
+        write_json(json_out, finite_json(data))
         names = ("AbsRel", "SqRel", "RMSE", "RMSElog", "d<1.25", "d<1.25^2", "d<1.25^3")
         typer.echo(f"{'average':<8} " + " ".join(f"{n:>9}" for n in names))
         for avg in ("pixel", "image"):
@@ -364,7 +364,7 @@ def depth_cmd(
         typer.echo(f"{res.images} image(s) ({res.valid_images} with valid pixels), {res.pixels:,} valid pixels, "
                    f"cap ({min_depth:g}, {max_depth:g}) m, scale {scale}")
 
-    _run(go)
+    run_checked(go)
 
 
 def _box(obj: Any, where: str, need_score: bool):
@@ -506,7 +506,7 @@ def det_cmd(
             acc.update(s, p_all[s], g_all[s])
         res = acc.result()
         data = res.to_dict() | {"pred": str(pred), "gt": str(gt)}
-        _write_json(json_out, _finite(data))
+        write_json(json_out, finite_json(data))
         f3 = lambda v: "     -" if v is None or not math.isfinite(v) else f"{v:6.3f}"  # noqa: E731
         typer.echo(f"{'class':<18} {'AP':>6} {'ATE m':>7} {'ASE':>6} {'AOE rad':>8} {'AVE m/s':>8} {'AAE':>6} {'gt':>7} {'pred':>7}")
         for r in data["classes"]:
@@ -516,15 +516,15 @@ def det_cmd(
         typer.echo(f"{res.samples} sample(s); mAP {res.mean_ap:.4f}, mATE {res.mate:.4f}, mASE {res.mase:.4f}, mAOE {res.maoe:.4f}, "
                    f"mAVE {res.mave:.4f}, mAAE {res.maae:.4f}, NDS {res.nds:.4f}")
 
-    _run(go)
+    run_checked(go)
 
 
-def _finite(obj):
+def finite_json(obj):
     """NaN -> None throughout (strict JSON)."""
     if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
+        return {k: finite_json(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
+        return [finite_json(v) for v in obj]
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj

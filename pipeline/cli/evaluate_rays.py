@@ -4,13 +4,23 @@ poses, and the table; the compute is :mod:`carlaocc.stages.evaluation.rays`."""
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 from typing import Annotated, Optional
 
 import numpy as np
 import typer
 
-from carlaocc.pipeline.cli.evaluate import InputError, JsonOpt, _finite, _load_arrays, _pct, _run, _write_json, eval_app
+from carlaocc.catalog.occupancy import OccupancyStore
+from carlaocc.catalog.samples import DatasetError, FrameSamples
+from carlaocc.catalog.store import Store
+from carlaocc.pipeline.cli.evaluate import (InputError, JsonOpt, eval_app, finite_json, load_arrays, percent,
+                                           run_checked, write_json)
+from carlaocc.pipeline.commands.export.spec import built_label_table, scenes_label_tables
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.evaluation.rays import RayAccumulator, select_origins
+from carlaocc.stages.geometry import rotation_from_quaternion
+from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, OPENOCC_V2, resample, resample_panoptic
 
 __all__ = ["origins_from_poses", "ray_origins", "ray_pairs"]
 
@@ -28,10 +38,8 @@ def _is_root(path: Path) -> bool:
 
 def _root_index(path: Path, opt: str):
     """``(dataset, {token: sample index})`` of a built root, tokens ``<sequence>_<frame:06d>``."""
-    from carlaocc.data import CarlaOccDataset, DatasetError
-
     try:
-        ds = CarlaOccDataset(str(path), occupancy="none", cameras=False, lidar=False, boxes=False)
+        ds = FrameSamples(str(path), occupancy="none", cameras=False, lidar=False, boxes=False)
     except DatasetError as exc:
         raise InputError(f"{opt} {path}: {exc}") from None
     return ds, {f"{s}_{f:06d}": k for k, (s, f) in enumerate(ds.samples)}
@@ -72,11 +80,6 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
     info ``token``, ``scene_name``, ``timestamp``, ``lidar2ego_*`` and ``ego2global_*``
     translation + quaternion w x y z): the LiDAR positions of the scene's frames in the sample's
     ego frame (SparseOcc's ego_pose_dataset), then :func:`select_origins`."""
-    import pickle
-
-    from carlaocc.stages.evaluation.rays import select_origins
-    from carlaocc.stages.geometry import rotation_from_quaternion
-
     def pose(t, q) -> np.ndarray:
         try:
             t, q = np.asarray(t, float).reshape(3), np.asarray(q, float).reshape(4)
@@ -119,8 +122,6 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
 
 def origins_from_poses(by_scene: dict[str, list]) -> dict[str, np.ndarray]:
     """``token -> origins`` from ``scene -> [(timestamp, token, lidar_to_world, ego_to_world)]``."""
-    from carlaocc.stages.evaluation.rays import select_origins
-
     out = {}
     for frames in by_scene.values():
         frames.sort(key=lambda r: r[0])
@@ -135,10 +136,8 @@ def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
     """A carlaocc root as ground truth: ``(pairs, origins, loader)`` where each pair's ground truth
     is resampled from the root's occupancy onto the Occ3D grid when scored (the prediction tree is
     keyed by the tokens ``<sequence>_<frame:06d>``), origins from the root's poses."""
-    from carlaocc.data import CarlaOccDataset, DatasetError
-
     try:
-        ds = CarlaOccDataset(str(gt), occupancy="none", cameras=False, lidar=False, boxes=False)
+        ds = FrameSamples(str(gt), occupancy="none", cameras=False, lidar=False, boxes=False)
     except DatasetError as exc:
         raise InputError(f"--gt {gt}: {exc}") from None
     pairs, by_scene = [], {}
@@ -155,16 +154,10 @@ def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
 def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarray]:
     """One root frame on the Occ3D grid (ego frame, 0.4 m) in ``classes``' ids: semantics, and
     instances and flow (vx, vy m/s) for RayPQ / mAVE."""
-    from carlaocc.catalog.occupancy import OccupancyStore
-    from carlaocc.catalog.store import Store
-    from carlaocc.pipeline.export import built_label_table, scenes_label_tables
-    from carlaocc.pipeline.export_flow import OPENOCC_V2
-    from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample, resample_panoptic
-
     seq, frame = ds.samples[k]
     store = Store(ds.root)
     occ = OccupancyStore(store)
-    grid = ds._grids[seq]
+    grid = ds.grid(seq)
     table = built_label_table(occ, seq, grid, scenes_label_tables(store)[seq])
     target = OCC3D_NUSCENES if classes == "occ3d" else OPENOCC_V2
     names = tuple(n for n in ("semantic", "instance", "flow") if occ.exists(seq, grid, n))
@@ -183,9 +176,6 @@ def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarra
 
 def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, relative: bool, origin: str,
               panoptic: bool, json_out: Path | None) -> None:
-    from carlaocc.schemas import taxonomy
-    from carlaocc.stages.evaluation.rays import RayAccumulator
-
     if classes not in RAY_CLASSES:
         raise InputError(f"--classes {classes!r}: one of {', '.join(RAY_CLASSES)}")
     names = list(taxonomy.TARGETS[RAY_CLASSES[classes]])
@@ -208,8 +198,8 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     acc = RayAccumulator(names, thing_classes=things, relative=relative, flow_classes=things)
     grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
     for scene, token, p, g in pairs:
-        g_arr = _root_frame(*g, classes, panoptic) if root_gt else _load_arrays(g)
-        p_arr = _root_frame(*p, classes, panoptic) if isinstance(p, tuple) else _load_arrays(p)
+        g_arr = _root_frame(*g, classes, panoptic) if root_gt else load_arrays(g)
+        p_arr = _root_frame(*p, classes, panoptic) if isinstance(p, tuple) else load_arrays(p)
         gsem = g_arr.get("semantics")
         psem = p_arr.get("semantics", p_arr.get("pred", next(iter(p_arr.values())) if len(p_arr) == 1 else None))
         if gsem is None or psem is None:
@@ -257,12 +247,12 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
     typer.echo(f"{'class':22s} {'@1':>7s} {'@2':>7s} {'@4':>7s}  gt rays")
     for i, c in enumerate(iou.classes):
         if iou.gt_rays[i] or np.isfinite(iou.iou[:, i]).any():
-            typer.echo(f"{c:22s} " + " ".join(_pct(float(iou.iou[k, i])) + " " for k in range(3)) + f" {int(iou.gt_rays[i]):,}")
+            typer.echo(f"{c:22s} " + " ".join(percent(float(iou.iou[k, i])) + " " for k in range(3)) + f" {int(iou.gt_rays[i]):,}")
     for name, by, mean in rows:
-        typer.echo(f"{name:22s} " + " ".join(_pct(by[t]) + " " for t in (1.0, 2.0, 4.0)) + f" mean {_pct(mean)}")
+        typer.echo(f"{name:22s} " + " ".join(percent(by[t]) + " " for t in (1.0, 2.0, 4.0)) + f" mean {percent(mean)}")
     if flow_line:
         typer.echo(flow_line)
-    _write_json(json_out, _finite(doc))
+    write_json(json_out, finite_json(doc))
 
 
 InfosOpt = Annotated[Optional[list[Path]], typer.Option("--infos", help="info pickle(s) with the samples' poses (carlaocc export mmdet3d-infos, or BEVDet/SparseOcc infos): ray origins at up to 8 LiDAR positions of each scene, SparseOcc's protocol")]
@@ -280,7 +270,7 @@ def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="predictions: a
     origins per sample, a hit counting when the class agrees and the depth is within 1, 2 or 4 m;
     RayIoU@1/@2/@4 and their mean. With a 'flow' array on both sides (OpenOcc v2), also mAVE and
     the occupancy score 0.9 RayIoU + 0.1 max(1 - mAVE, 0)."""
-    _run(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, False, json_out))
+    run_checked(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, False, json_out))
 
 
 @eval_app.command("raypq")
@@ -291,4 +281,4 @@ def raypq_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree
     """RayPQ (SparseOcc) beside RayIoU: ray segments (one per thing instance, one per stuff class
     and sample) matched at IoU > 0.5 within each depth threshold; segments under 10 rays are never
     counted as errors."""
-    _run(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, True, json_out))
+    run_checked(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, True, json_out))

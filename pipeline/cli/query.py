@@ -12,7 +12,7 @@ import typer
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import catalog_app
-from carlaocc.pipeline.cli.common import RootOpt, _store, fail
+from carlaocc.pipeline.cli.common import RootOpt, open_store, fail
 
 
 def _format_value(v) -> str:
@@ -33,7 +33,7 @@ def catalog_query(
 
     if fmt not in ("table", "csv", "json"):
         fail(f"--format {fmt!r}: choose table, csv or json")
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     try:
         cols, rows = query(store, sql)
     except QueryRefused as exc:

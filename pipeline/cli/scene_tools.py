@@ -10,7 +10,7 @@ import typer
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import scenes_app
-from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, _store, _write_bytes, fail, load_config
+from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, open_store, write_bytes, fail, load_config
 
 
 @scenes_app.command("town-mesh")
@@ -22,14 +22,14 @@ def scenes_town_mesh(
     """Write the town's unified static mesh (world frame, Z up converted to glTF's Y up) as GLB:
     one primitive per (class, instance), per-vertex attributes _SEMANTIC and _INSTANCE, and
     extras naming the class and instance (the city-level reconstruction of the paper)."""
-    from carlaocc.pipeline.scene_editing import town_mesh_glb
+    from carlaocc.pipeline.commands.scene_editing import town_mesh_glb
 
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     try:
         data, triangles, placements = town_mesh_glb(store, town)
     except StoreError as exc:
         fail(str(exc))
-    _write_bytes(out, data)
+    write_bytes(out, data)
     typer.echo(f"wrote {out}: {triangles:,} triangles from {placements:,} placements of {town}")
 
 
@@ -46,7 +46,7 @@ def scenes_frame_mesh(
     instance ids, for inspection."""
     import numpy as np
 
-    from carlaocc.pipeline.scene_editing import frame_mesh_glb
+    from carlaocc.pipeline.commands.scene_editing import frame_mesh_glb
     from carlaocc.stages.scenes.assembly import region_of_grid
 
     cfg = load_config(config, root)
@@ -54,12 +54,12 @@ def scenes_frame_mesh(
         region = region_of_grid(cfg.voxelize.grid(0.2))
     else:
         region = (np.array([-range_m, -range_m, -5.0]), np.array([range_m, range_m, 20.0]))
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     try:
         data, triangles = frame_mesh_glb(store, sequence, frame, region)
     except StoreError as exc:
         fail(str(exc))
-    _write_bytes(out, data)
+    write_bytes(out, data)
     typer.echo(f"wrote {out}: {triangles:,} triangles of {sequence} frame {frame}")
 
 
@@ -76,10 +76,10 @@ def scenes_swap(
     trajectories, rig, timing and lots are unchanged; nothing is written (exit 2) when nothing can
     be swapped; parent_sequence_id and the runs table record where they came from. Then
     `carlaocc run --stages voxelize,quality` voxelizes them."""
-    from carlaocc.pipeline.scene_editing import swap_class
+    from carlaocc.pipeline.commands.scene_editing import swap_class
 
     cfg = load_config(config, root)
-    store = _store(root, writable=True)
+    store = open_store(root, writable=True)
     try:
         results = swap_class(store, class_name, seed, sequence or None, cfg.scenes.asset_sources)
     except StoreError as exc:

@@ -10,7 +10,7 @@ import typer
 
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli.app import admesh_app, show_app
-from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, parse_voxel_sizes, _store, _write_png, fail,
+from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, parse_voxel_sizes, open_store, write_png, fail,
                                          load_config)
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
@@ -65,8 +65,8 @@ def admesh_show(
     root: RootOpt = "data",
 ) -> None:
     """Render one asset to a PNG (semantic colours, glass translucent), headless."""
-    labels, images = _render_assets(_store(root, writable=False), None, asset_id, 1)
-    _write_png(out, images[0])
+    labels, images = _render_assets(open_store(root, writable=False), None, asset_id, 1)
+    write_png(out, images[0])
     typer.echo(f"{labels[0]} -> {out}")
 
 
@@ -82,20 +82,20 @@ def admesh_sheet(
     """A contact sheet of the assets a query selects (semantic colours), headless."""
     from carlaocc.stages.render.sheets import contact_sheet
 
-    labels, images = _render_assets(_store(root, writable=False), where, None, limit, size)
-    _write_png(out, contact_sheet(images, labels, columns=columns))
+    labels, images = _render_assets(open_store(root, writable=False), where, None, limit, size)
+    write_png(out, contact_sheet(images, labels, columns=columns))
     typer.echo(f"{len(images)} assets -> {out}")
 
 
 def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, res: float):
     from carlaocc.catalog.occupancy import OccupancyStore
 
-    from carlaocc.schemas.grid import resolution_key
+    from carlaocc.schemas.grid import voxel_size_key
 
     occ = OccupancyStore(store)
     grid = occ.stored_grid(sequence, res)  # the grid it was built on, whatever the config says now
     if grid is None:
-        key = resolution_key(res)
+        key = voxel_size_key(res)
         fail(f"{sequence} has no occupancy at {key} m in {store.url}: run `carlaocc run --res {key}`")
     n = occ.open(sequence, grid, "semantic").shape[0]
     if not 0 <= frame < n:
@@ -122,7 +122,7 @@ def show_occupancy(
         fail(f"--mode must be instance, semantic or height, got {mode!r}")
     cfg = load_config(config, root)
     voxel_sizes = parse_voxel_sizes(res, cfg)
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     if len(voxel_sizes) == 1:
         sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, voxel_sizes[0])
         image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", mode=mode)
@@ -132,7 +132,7 @@ def show_occupancy(
             sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, r)
             frames.append((f"{grid.key} m", sem, inst, grid))
         image = multi_resolution_figure(frames, mode=mode, title=f"{seq} frame {frame}")
-    _write_png(out, image)
+    write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 
 
@@ -188,7 +188,7 @@ def show_sensors(
     from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
     cfg = load_config(config, root)
-    store = _store(root, writable=False)
+    store = open_store(root, writable=False)
     sensors = SensorStore(store)
     stored = sensors.cameras(seq)
     if not stored:
@@ -220,5 +220,5 @@ def show_sensors(
             view = _with_skeletons(view, joints, poses, cfg.scenes.rig, cam)
         views.append(view)
     image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
-    _write_png(out, image)
+    write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")

@@ -15,7 +15,7 @@ import numpy as np
 
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.pipeline.tasks.quality import quality_partitions
 from carlaocc.schemas.configs import QualityConfig
@@ -31,7 +31,7 @@ def aggregate_partitions(ctx: Context) -> list[Partition]:
     out = []
     for group, keys in groups.items():
         seq_id, res_key = group.split("/")
-        params = {"sequence_id": seq_id, "resolution_key": res_key, "quality_keys": keys,
+        params = {"sequence_id": seq_id, "voxel_size_key": res_key, "quality_keys": keys,
                   "voxel_size": next(v for v in ctx.voxel_sizes if ctx.config.voxelize.grid(v).key == res_key)}
         # the quality tasks' tables, and the scenes partition of the sequence's actors
         out.append(Partition(group, params, needs=tuple(("quality", k) for k in keys) + (("scenes", town[seq_id]),)))
@@ -76,7 +76,7 @@ def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[st
     # the per-class counts behind the continuity score must add up to the frames' totals
     class_rows = _load(store, ClassQualityRecord, keys)
     if sum(r.occupied for r in class_rows if r.semantic_id) != occupied:
-        raise StoreError(f"{seq_id} at {part.params['resolution_key']} m: the quality_classes rows do not add up to "
+        raise StoreError(f"{seq_id} at {part.params['voxel_size_key']} m: the quality_classes rows do not add up to "
                          f"the quality rows; re-run the quality stage")
     # 2. class statistics: voxels summed, instances as the union of each frame's (id, class) pairs
     stats = SequenceStatistics()

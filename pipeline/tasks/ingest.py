@@ -22,11 +22,11 @@ from carlaocc.catalog.sources.base import SourceError
 from carlaocc.catalog.sources.registry import adapter
 from carlaocc.catalog.store import ADMESH_MESHES, ADMESH_TEXTURES, Store
 from carlaocc.catalog.textures import TextureStore, has_texture
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, PROCEDURAL_SOURCE
 
 if TYPE_CHECKING:
-    from carlaocc.pipeline.runner import Progress
+    from carlaocc.pipeline.engine.runner import Progress
 from carlaocc.schemas.configs import DatasetConfig, IngestConfig, SourceIngestConfig
 from carlaocc.schemas.records import AssetRecord, PartRecord, QuarantineRecord
 
@@ -228,7 +228,7 @@ def prune_orphan_meshes(store: Store) -> int:
 def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None = None, force: bool = False,
                   progress: Progress | None = None, workers: int | None = None, log=lambda s: None) -> IngestSummary:
     """Ingest one source into the store's ADMesh library."""
-    from carlaocc.pipeline.runner import StageOutcome, run  # the engine runs this stage alone
+    from carlaocc.pipeline.engine.runner import StageOutcome, run  # the engine runs this stage alone
 
     excluded = dataset_roots_inside(store, cfg)
     spec = source_spec(cfg, excluded)

@@ -5,7 +5,7 @@ stage's code version does not take in the wiring of the stages it only names).""
 from __future__ import annotations
 
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.pipeline.spec import Context, SelectionError, UpstreamMissing
+from carlaocc.pipeline.engine.spec import Context, SelectionError, UpstreamMissing
 from carlaocc.schemas.records import SequenceRecord
 
 PROCEDURAL_SOURCE = "procedural"

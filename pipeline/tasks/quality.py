@@ -14,7 +14,7 @@ import numpy as np
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.spec import Context, Partition, Prepared, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, Prepared, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec

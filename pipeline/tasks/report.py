@@ -21,7 +21,7 @@ from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.usage import store_usage
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.pipeline.tasks.aggregate import aggregate_partitions
 from carlaocc.pipeline.tasks.report_page import PLOTS_DIR, REPORT_HTML, SENSOR_STEP, render_html, stage_lineage

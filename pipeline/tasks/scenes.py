@@ -10,7 +10,7 @@ from carlaocc.catalog.admesh import dedupe_assets
 from carlaocc.catalog.meshes import MeshStore
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, town_key
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec

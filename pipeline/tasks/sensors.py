@@ -13,7 +13,7 @@ import numpy as np
 
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.frame import frame_inputs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
 from carlaocc.schemas.configs import DatasetConfig, SensorsConfig

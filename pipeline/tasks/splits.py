@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from carlaocc.catalog.splits import SplitStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences, town_key
 from carlaocc.schemas.configs import SplitsConfig
 

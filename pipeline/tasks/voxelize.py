@@ -11,7 +11,7 @@ import numpy as np
 
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.frame import FrameInputs, frame_inputs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
 from carlaocc.schemas.configs import DatasetConfig, VoxelizeConfig

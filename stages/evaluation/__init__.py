@@ -10,7 +10,7 @@
 
 Every metric has an accumulator with ``update(...)`` per frame and ``result()`` at the end, so a
 dataset is scored one frame at a time in bounded memory. Nothing here opens a path: the CLI
-(``carlaocc eval``, :mod:`carlaocc.pipeline.evaluate`) reads the files and feeds the arrays in.
+(``carlaocc eval``, :mod:`carlaocc.pipeline.cli.evaluate`) reads the files and feeds the arrays in.
 """
 
 from carlaocc.stages.evaluation.depth import DepthAccumulator, DepthResult

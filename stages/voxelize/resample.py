@@ -685,3 +685,14 @@ def downsample_ssc(labels: np.ndarray, factor: int, empty: int = 0, invalid: int
     mostly_empty = (n_empty + n_invalid) > empty_fraction * factor ** 3
     out = np.where(mostly_empty, np.where(n_empty > n_invalid, empty, invalid), majority)
     return out.astype(labels.dtype).reshape(X // factor, Y // factor, Z // factor)
+
+
+SEMANTICKITTI_GRID = TargetGrid("semantickitti", SSCBENCH_KITTI360.shape, SSCBENCH_KITTI360.voxel_size,
+                                SSCBENCH_KITTI360.range_min, "lidar", "semantickitti", 0)
+"""SemanticKITTI SSC: the forward KITTI grid of SSCBench, raw SemanticKITTI ids (free 0)."""
+SURROUNDOCC_GRID = TargetGrid("surroundocc", (200, 200, 16), 0.5, (-50.0, -50.0, -5.0), "lidar", "occ3d_nuscenes", 17)
+"""SurroundOcc: 200 x 200 x 16 at 0.5 m over [-50, -50, -5, 50, 50, 3] m, LiDAR frame."""
+OPENOCC_V2 = TargetGrid("openocc-v2", (200, 200, 16), 0.4, (-40.0, -40.0, -1.0), "ego", "openocc_v2", 16)
+"""OpenOcc v2: the Occ3D grid and frame (OccNet ray_metrics / nuscenes_occ), its own class order."""
+UNIOCC = TargetGrid("uniocc", (200, 200, 16), 0.4, (-40.0, -40.0, -1.0), "ego", "uniocc", 10)
+"""UniOcc: 0.4 m over [-40, -40, -1, 40, 40, 5.4] m (uniocc_viz.py); we place it in the ego frame."""

@@ -18,7 +18,7 @@ from conftest import assert_clear_error, invoke, snapshot
 
 import carlaocc.pipeline.cli as cli_pkg
 from carlaocc.catalog.store import StoreError
-from carlaocc.pipeline import runner
+from carlaocc.pipeline.engine import runner
 from carlaocc.pipeline.cli.common import DEBUG_ENV
 
 TETRA = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n"
@@ -328,8 +328,8 @@ def test_local_cluster_teardown_prints_nothing(tmp_path):
 
         def main():
             from carlaocc.catalog.store import Store
-            from carlaocc.pipeline import runner
-            from carlaocc.pipeline.spec import Partition, StageSpec
+            from carlaocc.pipeline.engine import runner
+            from carlaocc.pipeline.engine.spec import Partition, StageSpec
             from carlaocc.schemas.configs import DatasetConfig
             import tiny_task
 

@@ -41,7 +41,7 @@ def built(tmp_path_factory) -> tuple[Path, Path]:
     config.write_text(yaml.safe_dump(CONFIG))
     root = base / "good"
     # one lineage file per stage (a slow machine would otherwise flush a stage's records in parts)
-    from carlaocc.pipeline import runner
+    from carlaocc.pipeline.engine import runner
 
     flush, runner._LINEAGE_FLUSH_SECONDS = runner._LINEAGE_FLUSH_SECONDS, float("inf")
     try:

@@ -12,7 +12,7 @@ from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.signatures import (external_signature, file_signature, frame_signature, info_signature,
                                          output_signature, output_signatures)
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.runner import outputs_problem
+from carlaocc.pipeline.engine.runner import outputs_problem
 from carlaocc.schemas.grid import GridSpec
 
 GRID = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(6.4, 3.2, 1.6), voxel_size=0.4)  # 16 x 8 x 4

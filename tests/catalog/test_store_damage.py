@@ -18,7 +18,7 @@ from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import StoreError
 from carlaocc.catalog.zarrio import (encode_chunk, frame_fingerprint, is_damaged, metadata_problem, parse_metadata,
                                      zstd_frame_ok)
-from carlaocc.pipeline.runner import outputs_problem
+from carlaocc.pipeline.engine.runner import outputs_problem
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import QuarantineRecord, RunRecord
 

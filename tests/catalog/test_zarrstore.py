@@ -19,7 +19,7 @@ from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import StoreError
 from carlaocc.catalog.zarrio import ZSTD_LEVEL, frame_fingerprint, parse_frame_key, zarr_store
 from carlaocc.catalog.zarrstore import FrameArrayStore, chunk_flags
-from carlaocc.pipeline.runner import outputs_intact
+from carlaocc.pipeline.engine.runner import outputs_intact
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 

@@ -14,7 +14,7 @@ from carlaocc.catalog.formats import (FORMATS, DatasetInputError, Occ3DFrame, Se
                                       to_raw)  # fmt: skip
 from carlaocc.catalog.formats.layout import collect_inputs
 from carlaocc.catalog.formats.poses import KeyedPoses, load_poses, plan_sequences
-from carlaocc.pipeline.audit import audit_command
+from carlaocc.pipeline.commands.audit import audit_command
 from carlaocc.pipeline.cli import app
 from carlaocc.stages.quality import isolated_mask_reference, spatial_continuity_counts
 from shared_data import needs, shared_path

@@ -132,8 +132,8 @@ def test_query_json_has_no_nan(tmp_path):
 
 
 def test_stage_names_and_the_earlier_metrics_name():
-    from carlaocc.pipeline.registry import STAGES
-    from carlaocc.pipeline.runner import PlanError, stage_order
+    from carlaocc.pipeline.engine.registry import STAGES
+    from carlaocc.pipeline.engine.runner import PlanError, stage_order
 
     assert list(STAGES) == ["ingest", "scenes", "splits", "voxelize", "sensors", "quality", "aggregate", "report"]
     assert [s.name for s in stage_order(["metrics", "voxelize"])] == ["voxelize", "quality"]

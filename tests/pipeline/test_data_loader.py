@@ -65,7 +65,7 @@ def test_sparse_occupancy_is_the_stored_frame_read_from_its_own_chunks(default_0
 
 
 def test_crop_faces_on_voxel_centres_take_those_voxels_on_every_axis(default_01):
-    from carlaocc.data import _crop_box
+    from carlaocc.catalog.samples import _crop_box
 
     g = GridSpec(voxel_size=0.2)
     o = np.asarray(g.region_min)

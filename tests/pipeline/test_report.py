@@ -18,10 +18,10 @@ from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.sql import query
 from carlaocc.catalog.store import Store
 from carlaocc.catalog.usage import store_usage
-from carlaocc.pipeline.spec import Context, Partition
+from carlaocc.pipeline.engine.spec import Context, Partition
 from carlaocc.pipeline.tasks.report import PLOTS_DIR, REPORT_HTML, report_task
 from carlaocc.pipeline.tasks.report_page import SECTIONS, stage_lineage
-from carlaocc.pipeline.registry import STAGES
+from carlaocc.pipeline.engine.registry import STAGES
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig, QualityConfig
 from carlaocc.schemas.grid import GridSpec
@@ -93,7 +93,7 @@ def small(store: Store, make_asset) -> Store:
                 "sequence_id": seq, "voxel_size": 0.4, "grid": GRID.model_dump(mode="json"), "first": first,
                 "stop": stop}))
         aggregate_task(store, QualityConfig(), Partition(f"{seq}/{GRID.key}", {
-            "sequence_id": seq, "voxel_size": 0.4, "resolution_key": GRID.key, "quality_keys": keys}))
+            "sequence_id": seq, "voxel_size": 0.4, "voxel_size_key": GRID.key, "quality_keys": keys}))
     LineageLog(store).append("voxelize", "r1", [
         _run("voxelize", f"{s}/0.4/{t:04d}", {f"occupancy.zarr/{s}/0.4/semantic[{t}]": "sha256:aa",
                                                f"occupancy.zarr/{s}/0.4/instance[{t}]": "sha256:bb"},

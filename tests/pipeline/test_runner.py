@@ -7,8 +7,8 @@ import pytest
 
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.pipeline import runner
-from carlaocc.pipeline.spec import Partition, StageSpec
+from carlaocc.pipeline.engine import runner
+from carlaocc.pipeline.engine.spec import Partition, StageSpec
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import QuarantineRecord
 
@@ -201,7 +201,7 @@ def test_partitions_are_submitted_in_a_bounded_window():
     window of 3 never have more than 3 submitted and unfinished, and every one is done once."""
     from distributed import LocalCluster
 
-    from carlaocc.pipeline.spec import Partition, StageSpec
+    from carlaocc.pipeline.engine.spec import Partition, StageSpec
 
     spec = StageSpec("x", "", (), (), (), partitions=lambda ctx: [], task=_counted_task)
     parts = [Partition(f"p{i:02d}") for i in range(40)]

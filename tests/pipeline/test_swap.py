@@ -12,7 +12,7 @@ from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli import app
-from carlaocc.pipeline.scene_editing import SWAP_STAGE, compatible, swap_class
+from carlaocc.pipeline.commands.scene_editing import SWAP_STAGE, compatible, swap_class
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
 from carlaocc.stages.geometry import pose_matrix, pose_to_list
 

@@ -19,7 +19,7 @@ import pytest
 
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline import runner
+from carlaocc.pipeline.engine import runner
 from carlaocc.schemas.configs import DatasetConfig
 
 RES = 0.4

@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from carlaocc.schemas.grid import GridSpec, resolution_key
+from carlaocc.schemas.grid import GridSpec, voxel_size_key
 
 
 @pytest.mark.parametrize(
@@ -59,7 +59,7 @@ def test_effective_region_covers_region_within_one_voxel(vs, ext):
 
 
 def test_resolution_key():
-    assert resolution_key(0.05) == "0.05"
-    assert resolution_key(0.2) == "0.2"
-    assert resolution_key(1.0) == "1"
-    assert resolution_key(0.1 + 0.2 - 0.2) == "0.1"
+    assert voxel_size_key(0.05) == "0.05"
+    assert voxel_size_key(0.2) == "0.2"
+    assert voxel_size_key(1.0) == "1"
+    assert voxel_size_key(0.1 + 0.2 - 0.2) == "0.1"

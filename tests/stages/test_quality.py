@@ -80,7 +80,7 @@ def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
 
 def _run_metrics(store, grid, seq="seq0"):
     from carlaocc.catalog.parquet import ParquetTable
-    from carlaocc.pipeline.spec import Partition
+    from carlaocc.pipeline.engine.spec import Partition
     from carlaocc.pipeline.tasks.quality import quality_task
     from carlaocc.schemas.configs import QualityConfig
     from carlaocc.schemas.records import QualityRecord
@@ -99,7 +99,7 @@ def _run_metrics(store, grid, seq="seq0"):
         quality_task(store, QualityConfig(frames_per_task=1), part)
         keys.append(part.key)
     aggregate_task(store, QualityConfig(), Partition(f"{seq}/{grid.key}", {
-        "sequence_id": seq, "voxel_size": grid.voxel_size, "resolution_key": grid.key, "quality_keys": keys}))
+        "sequence_id": seq, "voxel_size": grid.voxel_size, "voxel_size_key": grid.key, "quality_keys": keys}))
     rows = ParquetTable(store, QualityRecord).load()
     return {(r.metric, r.frame_index): r for r in rows}
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from carlaocc.catalog.sources._obj import ObjError, parse_mtl, parse_obj
+from carlaocc.catalog.sources.obj import ObjError, parse_mtl, parse_obj
 
 QUAD = """v 0 0 0
 v 1 0 0

@@ -32,20 +32,17 @@ those classes only) and ``occ_path`` (``gts/<scene>/<token>``, the directory of 
 
 from __future__ import annotations
 
-import io
-import json
-import pickle
-from collections.abc import Callable
-from pathlib import Path
-
 import numpy as np
 
 from carlaocc.catalog.formats import Occ3DFrame, atomic_write, save_occ3d
+from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
+from carlaocc.catalog.formats.mmdet3d import jpeg_bytes, save_infos
 from carlaocc.catalog.occupancy import OccupancyStore
-from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, frame_samples, one_label_table,
+                                                    save_sequence_splits, split_assignment)
 from carlaocc.schemas import taxonomy
-from carlaocc.schemas.configs import DatasetConfig
-from carlaocc.stages.geometry import quaternion_wxyz
+from carlaocc.stages.export.boxes import points_in_boxes
+from carlaocc.stages.geometry import boxes_in_frame, quaternion_wxyz
 from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample
 
 DETECTION_CLASSES = ("car", "truck", "construction_vehicle", "bus", "trailer", "barrier", "motorcycle", "bicycle",
@@ -55,36 +52,6 @@ NUSCENES_NAMES = {"Car": "car", "Truck": "truck", "Bus": "bus", "Motorcycle": "m
                   "Pedestrian": "pedestrian"}
 """Our classes that have a nuScenes detection name (the others keep their own, and are not in ``ann_infos``)."""
 INFO_VERSION = "carlaocc-infos-1"
-
-
-def _json_ready(obj):
-    """The info tree with numpy arrays and scalars as lists and numbers (for the JSON copy)."""
-    if isinstance(obj, dict):
-        return {k: _json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_ready(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
-def _points_in_boxes(points: np.ndarray, box_pose: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """(M,) int: LiDAR points inside each box (its own frame, half extents)."""
-    out = np.zeros(len(boxes), np.int64)
-    for k in range(len(boxes)):
-        local = (points - box_pose[k, :3, 3]) @ box_pose[k, :3, :3]
-        out[k] = int(np.count_nonzero(np.all(np.abs(local) <= boxes[k, 3:6] / 2, axis=1)))
-    return out
-
-
-def _jpeg(image: np.ndarray) -> bytes:
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(image).save(buf, format="JPEG", quality=95)
-    return buf.getvalue()
 
 
 SEQUENCE_SPACING_US = 10**10
@@ -112,7 +79,7 @@ def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str,
     cams = {}
     for k, cam in enumerate(sample["camera_names"]):
         path = f"samples/{cam}/{token}.jpg"
-        files[path] = _jpeg(sample["images"][k])
+        files[path] = jpeg_bytes(sample["images"][k])
         c2l, c2e = sample["cam_to_lidar"][k], sample["cam_to_ego"][k]
         cams[cam] = {
             "data_path": path, "type": cam, "sample_data_token": f"{token}_{cam}",
@@ -123,7 +90,7 @@ def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str,
         }  # fmt: skip
     boxes, pose, vel = sample["boxes"], sample["box_pose"], sample["box_velocity"]
     names = [taxonomy.by_id(int(s)).name for s in sample["box_semantic"]]
-    num_pts = _points_in_boxes(pts.astype(np.float64), pose, boxes)
+    num_pts = points_in_boxes(pts.astype(np.float64), pose, boxes)
     # BEVDet's ann_infos: valid boxes of the detection classes, in the ego frame, with velocity
     ann_boxes, ann_labels = [], []
     R_le, t_le = lidar_to_ego[:3, :3], lidar_to_ego[:3, 3]
@@ -151,31 +118,23 @@ def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str,
     return info, files
 
 
-def grid_manifest(label_table: str) -> dict:
+def occ3d_manifest(label_table: str) -> dict:
     """``grid.json`` of the Occ3D ground truth the infos point to."""
     g = OCC3D_NUSCENES
-    return {
-        "format": "occ3d-nuscenes (gts/<scene>/<token>/labels.npz)", "frame": "ego (x forward, y left, z up)",
-        "origin": list(g.range_min), "voxel_size": g.voxel_size, "shape": list(g.shape), "axis_order": ["x", "y", "z"],
-        "index_to_metre": "centre = origin + (index + 0.5) * voxel_size",
-        "labels": list(taxonomy.OCC3D_NUSCENES_NAMES), "free_label": g.free_label,
-        "built_from_label_table": label_table,
-    }  # fmt: skip
+    grid = {"origin": g.range_min, "voxel_size": g.voxel_size, "shape": g.shape}
+    return grid_manifest("occ3d-nuscenes (gts/<scene>/<token>/labels.npz)", "ego", [grid],
+                         taxonomy.OCC3D_NUSCENES_NAMES, g.free_label, label_table)
 
 
-def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: float,
-                 sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> tuple[int, int, int]:
+def write_infos(job: ExportJob) -> tuple[int, int, int]:
     """Write the infos, images, sweeps and Occ3D ground truth of every frame built at
-    ``voxel_size`` (or of ``sequences``); returns (sequences, frames, files)."""
-    from carlaocc.catalog.splits import SPLIT_NAMES, SplitStore
-    from carlaocc.pipeline.export import loader_and_label_table
-
-    ds, seqs, label_table = loader_and_label_table(store, voxel_size, sequences)
+    ``job.voxel_size`` (or of ``job.sequences``); returns (sequences, frames, files)."""
+    store, out = job.store, job.out
+    ds = frame_samples(store, job.voxel_size, job.sequences)
+    seqs = sorted({s for s, _ in ds.samples})
+    label_table = one_label_table(store, {s: ds.grid(s) for s in seqs})
     occ = OccupancyStore(store)
-    try:
-        assignment = SplitStore(store).load()
-    except StoreError:
-        assignment = {}
+    assignment = split_assignment(store)
     by_split: dict[str, list] = {}
     n_files = 0
     camera_names: list[str] = []
@@ -185,12 +144,13 @@ def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: flo
         prev = f"{seq}_{order[idx - 1][1]:06d}" if idx and order[idx - 1][0] == seq else ""
         nxt = f"{seq}_{order[idx + 1][1]:06d}" if idx + 1 < len(order) and order[idx + 1][0] == seq else ""
         sample = ds[idx]
+        sample |= boxes_in_frame(ds.actor_rows(idx), np.linalg.inv(sample["lidar_pose"]))
         info, files = frame_info(sample, token, prev, nxt, label_table, seqs.index(seq))
         camera_names = sample["camera_names"]
         for rel, data in files.items():
             atomic_write(out / rel, lambda fh, b=data: fh.write(b))
         # the Occ3D ground truth: our frame resampled into the ego grid, with its masks
-        grid = ds._grids[seq]
+        grid = ds.grid(seq)
         names = tuple(n for n in ("semantic", "mask_lidar", "mask_camera") if occ.exists(seq, grid, n))
         data = occ.read_frame(seq, grid, frame, names)
         labels, m = resample(data["semantic"], grid, OCC3D_NUSCENES, sample["lidar_to_ego"],
@@ -200,19 +160,18 @@ def export_infos(store: Store, config: DatasetConfig, out: Path, voxel_size: flo
                    Occ3DFrame(labels, m.get("mask_lidar", ones).astype(np.uint8), m.get("mask_camera", ones).astype(np.uint8)))
         n_files += len(files) + 1
         by_split.setdefault(assignment.get(seq, "all") if assignment else "all", []).append(info)
-        if progress:
-            progress(1)
+        job.advance()
     metadata = {"version": INFO_VERSION, "voxel_size_built": ds.voxel_size, "label_table": label_table,
                 "detection_classes": list(DETECTION_CLASSES), "camera_names": camera_names}
     for split, infos in by_split.items():
-        doc = {"infos": infos, "metadata": metadata}
-        atomic_write(out / f"carlaocc_infos_{split}.pkl", lambda fh, d=doc: pickle.dump(d, fh, protocol=4))
-        atomic_write(out / f"carlaocc_infos_{split}.json",
-                     lambda fh, d=doc: fh.write(json.dumps(_json_ready(d), indent=1).encode()))
-        n_files += 2
-    atomic_write(out / "grid.json", lambda fh: fh.write(json.dumps(grid_manifest(label_table), indent=1).encode()))
-    for split in SPLIT_NAMES if assignment else ():
-        ids = sorted(s for s in seqs if assignment.get(s) == split)
-        atomic_write(out / "splits" / f"{split}.txt", lambda fh, b="".join(f"{s}\n" for s in ids).encode(): fh.write(b))
-        n_files += 1
-    return len(seqs), len(order), n_files + 1
+        n_files += save_infos(out, f"carlaocc_infos_{split}", {"infos": infos, "metadata": metadata})
+    n_files += save_grid_manifest(out, occ3d_manifest(label_table))
+    n_files += save_sequence_splits(out, seqs, assignment)
+    return len(seqs), len(order), n_files
+
+
+FORMATS = (
+    ExportFormat("mmdet3d-infos", "carlaocc_infos_{train,val,test}.pkl/.json with the keys BEVDet / FlashOcc / "
+                 "SparseOcc pipelines read, samples/<camera>/<token>.jpg, samples/LIDAR_TOP/<token>.bin, "
+                 "gts/<scene>/<token>/labels.npz as Occ3D, grid.json; every path relative to --out", write_infos),
+)

@@ -2,7 +2,7 @@
 process (:class:`SynchronousExecutor`) or on Dask (:class:`DaskExecutor`: an existing scheduler's
 address or a LocalCluster sized for the run's finest grid, partitions submitted in a bounded
 window), and the ``--scheduler`` value checked (:func:`resolve_scheduler`). The runner
-(:mod:`carlaocc.pipeline.runner`) plans the tasks and records what they return.
+(:mod:`carlaocc.pipeline.engine.runner`) plans the tasks and records what they return.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from typing import Callable
 
 from carlaocc.catalog.signatures import output_signatures
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.spec import Partition, PlanError, StageSpec
+from carlaocc.pipeline.engine.spec import Partition, PlanError, StageSpec
 from carlaocc.schemas.configs import StageConfig
 
 SYNCHRONOUS = "synchronous"

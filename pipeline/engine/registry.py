@@ -4,7 +4,7 @@ quality -> aggregate -> report. Each stage's spec (partitions, prepare, task) li
 
 from __future__ import annotations
 
-from carlaocc.pipeline.spec import StageSpec
+from carlaocc.pipeline.engine.spec import StageSpec
 from carlaocc.pipeline.tasks import aggregate, ingest, quality, report, scenes, sensors, splits, voxelize
 
 STAGES: dict[str, StageSpec] = {m.SPEC.name: m.SPEC for m in (ingest, scenes, splits, voxelize, sensors, quality,

@@ -22,16 +22,14 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
 from carlaocc.catalog.formats import atomic_write
-from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, frame_samples, split_assignment
 from carlaocc.schemas import taxonomy
-from carlaocc.schemas.configs import DatasetConfig
-from carlaocc.stages.geometry import quaternion_wxyz
+from carlaocc.stages.export.boxes import points_in_boxes
+from carlaocc.stages.geometry import boxes_in_frame, quaternion_wxyz
 
 DET_NAMES = {"Car": "car", "Truck": "truck", "Bus": "bus", "Pedestrian": "pedestrian", "Motorcycle": "motorcycle",
              "Bicycle": "bicycle"}
@@ -51,11 +49,9 @@ def attribute(det_name: str, speed: float) -> str:
 
 def sample_boxes(sample: dict, token: str) -> list[dict]:
     """The nuScenes boxes of one loader sample (:class:`carlaocc.data.CarlaOccDataset`)."""
-    from carlaocc.pipeline.export_infos import _points_in_boxes
-
     lidar, ego = sample["lidar_pose"], sample["ego_pose"]
     pts = sample["points"].astype(np.float64) if "points" in sample else np.zeros((0, 3))
-    n_pts = _points_in_boxes(pts, sample["box_pose"], sample["boxes"])
+    n_pts = points_in_boxes(pts, sample["box_pose"], sample["boxes"])
     out = []
     for b, pose, v, iid, sid, n in zip(sample["boxes"], sample["box_pose"], sample["box_velocity"],
                                        sample["box_instance"], sample["box_semantic"], n_pts):
@@ -75,34 +71,30 @@ def sample_boxes(sample: dict, token: str) -> list[dict]:
     return out
 
 
-def export_det_gt(store: Store, config: DatasetConfig, out: Path, voxel_size: float | None,
-                  sequences: list[str] | None = None, progress: Callable[[int], None] | None = None) -> tuple[int, int, int]:
+def write_det_gt(job: ExportJob) -> tuple[int, int, int]:
     """Write ``OUT/det_gt.json``; returns (sequences, frames, files)."""
-    from carlaocc.catalog.splits import SplitStore
-    from carlaocc.data import CarlaOccDataset, DatasetError
-
-    try:
-        ds = CarlaOccDataset(store.url, voxel_size=voxel_size, occupancy="none", cameras=False, sequences=sequences)
-    except DatasetError as exc:
-        raise StoreError(str(exc)) from None
+    ds = frame_samples(job.store, job.voxel_size, job.sequences, cameras=False)
     results: dict[str, list] = {}
     egos: dict[str, list] = {}
     for k, (seq, frame) in enumerate(ds.samples):
         token = f"{seq}_{frame:06d}"
         sample = ds[k]
+        sample |= boxes_in_frame(ds.actor_rows(k), np.linalg.inv(sample["lidar_pose"]))
         results[token] = sample_boxes(sample, token)
         egos[token] = sample["ego_pose"][:3, 3].tolist()
-        if progress:
-            progress(1)
-    try:
-        splits = SplitStore(store).load()
-    except StoreError:
-        splits = {}
+        job.advance()
+    splits = split_assignment(job.store)
     seqs = sorted({s for s, _ in ds.samples})
     doc = {"results": results, "meta": {
         "use_camera": True, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False,
         "classes": sorted(set(DET_NAMES.values())), "frame": "global (the dataset's world frame)",
         "splits": {s: splits.get(s, "") for s in seqs}, "source": "carlaocc export det-gt", "ego_positions": egos,
     }}  # fmt: skip
-    atomic_write(out / "det_gt.json", lambda fh: fh.write(json.dumps(doc).encode()))
+    atomic_write(job.out / "det_gt.json", lambda fh: fh.write(json.dumps(doc).encode()))
     return len(seqs), len(ds.samples), 1
+
+
+FORMATS = (
+    ExportFormat("det-gt", "det_gt.json: the boxes in the nuScenes detection result layout with velocities, "
+                 "attributes and LiDAR point counts, for carlaocc eval det", write_det_gt, finest_by_default=True),
+)

@@ -30,20 +30,31 @@ How our dataset maps onto it:
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+import re
 from pathlib import Path
 
 import numpy as np
 
+from carlaocc.catalog.carla_recording import OPTICAL_FROM_BODY
 from carlaocc.catalog.formats import atomic_write
 from carlaocc.catalog.formats import carlaocc_release as rel
+from carlaocc.catalog.formats.carlaocc_npz import LABEL_ENCODINGS, save_carlaocc_npz
+from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest, save_split_lists
+from carlaocc.catalog.images import png_bytes
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sensors import LidarStore, SensorStore
+from carlaocc.catalog.splits import SPLIT_NAMES
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, actor_ids, one_label_table,
+                                                    sequence_release_ids, sequence_splits, voxelized_or_refuse)
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
-from carlaocc.schemas.grid import GridSpec, resolution_key
+from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import FrameRecord, SequenceRecord
+from carlaocc.schemas.taxonomy import palette
+from carlaocc.stages.sensors import camera_poses
+from carlaocc.stages.voxelize.resample import pool_window
 
 LEVEL_ORDER = {"none": 0, "low": 1, "medium": 2, "high": 3}
 
@@ -61,8 +72,6 @@ def folder_names(seqs: list[SequenceRecord]) -> tuple[dict[str, int], dict[str, 
     """``(town -> release town number, sequence id -> (town number, sequence number))`` over every
     sequence of the dataset (see the module docstring). A recorded sequence whose id ends in the
     release's folder name (``town00_Town03_Opt_Seq04``) keeps that town and sequence number."""
-    import re
-
     towns = sorted({s.town for s in seqs})
     # recorded towns: the number their sequences' ids carry
     recorded: dict[str, str] = {}
@@ -95,10 +104,6 @@ def folder_names(seqs: list[SequenceRecord]) -> tuple[dict[str, int], dict[str, 
 
 def _write_images(store: Store, seq: str, frame: int, folder: Path) -> int:
     """The frame's camera maps in the release's encodings; returns the files written."""
-    from carlaocc.catalog.images import png_bytes
-    from carlaocc.catalog.sensors import SensorStore
-    from carlaocc.schemas.taxonomy import palette
-
     sensors = SensorStore(store)
     n = 0
     encoders = {"rgb": ("rgb", lambda a: a), "depth": ("depth", rel.encode_depth),
@@ -117,8 +122,6 @@ def _write_images(store: Store, seq: str, frame: int, folder: Path) -> int:
 
 
 def _write_lidar(store: Store, seq: str, frame: int, folder: Path) -> int:
-    from carlaocc.catalog.sensors import LidarStore
-
     lidar = LidarStore(store)
     if not lidar.exists(seq, frame):
         return 0
@@ -130,11 +133,6 @@ def _write_lidar(store: Store, seq: str, frame: int, folder: Path) -> int:
 
 def _calib(config: DatasetConfig) -> str:
     """``calib.yaml`` of the rig: the release's camera names (``cam_XX``) and body frames."""
-    import re
-
-    from carlaocc.catalog.carla_recording import OPTICAL_FROM_BODY
-    from carlaocc.stages.sensors import camera_poses
-
     rig = config.scenes.rig
     cams = list(rig.cameras)
     odd = [c.name for c in cams if not re.fullmatch(r"camera_\d{2}", c.name)]
@@ -164,35 +162,20 @@ def _previous_note(out: Path) -> dict:
     return note if isinstance(note, dict) else {}
 
 
-def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: float = 0.1,
-                   sequences: list[str] | None = None, progress: Callable[[int], None] | None = None,
-                   encoding: str = "bits") -> tuple[int, int, int]:
-    """Write the release layout under ``out`` from the occupancy built at ``voxel_size`` with
-    labels in ``encoding``; returns ``(sequences, frames, files)``. Files are written atomically,
-    one frame at a time; exporting more sequences into the same ``out`` adds them (the splits,
-    the calibration and ``carlaocc_export.json`` cover every sequence exported there)."""
-    from carlaocc.catalog.formats.carlaocc_npz import check_encoding, save_carlaocc_npz
-    from carlaocc.catalog.splits import SPLIT_NAMES
-    from carlaocc.pipeline.export import (actor_ids, built_label_table, scenes_label_tables, sequence_release_ids,
-                                          sequence_splits, voxelized_sequences)
-    from carlaocc.stages.voxelize.resample import pool_window
-
-    check_encoding(encoding)
-    todo = list(voxelized_sequences(store, voxel_size, sequences))
-    if not todo:
-        key = resolution_key(voxel_size)
-        raise StoreError(f"no voxelized sequence at {key} m in {store.url}: run `carlaocc run --res {key}` first")
+def write_release(job: ExportJob) -> tuple[int, int, int]:
+    """Write the release layout under ``job.out`` from the occupancy built at ``job.voxel_size``
+    with labels in ``job.options["encoding"]``; returns ``(sequences, frames, files)``. Files are
+    written atomically, one frame at a time; exporting more sequences into the same folder adds
+    them (the splits, the calibration and ``carlaocc_export.json`` cover every sequence exported
+    there)."""
+    store, config, out, encoding = job.store, job.config, job.out, job.options["encoding"]
+    todo = voxelized_or_refuse(store, job.voxel_size, job.sequences)
     occ = OccupancyStore(store)
     records = {s.sequence_id: s for s in ParquetTable(store, SequenceRecord).load()}
     numbers, folders = folder_names(list(records.values()))
     splits = sequence_splits(store, [s for s, _, _ in todo])
     grids = [(g, release_grid_spec(g)) for g in rel.RELEASE_GRIDS]
-    scenes_tables = scenes_label_tables(store)
-    tables = {built_label_table(occ, seq, grid, scenes_tables[seq]) for seq, grid, _ in todo}
-    if len(tables) > 1:
-        raise StoreError(f"the sequences to export were built under different label tables ({', '.join(sorted(tables))})"
-                         f": export them apart, or rebuild them under one taxonomy")
-    (table_name,) = tables
+    table_name = one_label_table(store, {s: g for s, g, _ in todo})
     # an earlier export into the same folder: same table and encoding, then its sequences stay
     note = _previous_note(out)
     for key, value in (("format", "carlaocc-release"), ("label_table", table_name), ("encoding", encoding)):
@@ -230,31 +213,29 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
                 n_files += 1
             n_files += _write_images(store, seq, t, folder) + _write_lidar(store, seq, t, folder)
             n_frames += 1
-            if progress:
-                progress(1)
+            job.advance()
         note["towns"][rec.town] = {"number": f"{town_no:02d}", "folder": rel.sequence_folder(town_no, 0)[:-6]}
         note["sequences"][seq] = {"folder": rel.sequence_folder(town_no, seq_no), "split": splits[seq],
                                   "frames": frame_count, "rate_hz": rec.rate_hz}
         note["instances"][seq] = {f"{s}:{i}": v for (s, i), v in sorted(ids.items())}
     # 4. what holds for the whole export: splits of every sequence exported here, calibration, note
-    for split in SPLIT_NAMES:
-        lines = []
-        for info in sorted(note["sequences"].values(), key=lambda v: v["folder"]):
-            if info["split"] == split:
-                town_no, seq_no = int(info["folder"][4:6]), int(info["folder"][-2:])
-                lines.append(rel.split_lines(town_no, seq_no, range(info["frames"])))
-        atomic_write(out / "splits" / f"{split}.txt", lambda fh, b="".join(lines).encode(): fh.write(b))
+    lines: dict[str, list[str]] = {split: [] for split in SPLIT_NAMES}
+    for info in sorted(note["sequences"].values(), key=lambda v: v["folder"]):
+        town_no, seq_no = int(info["folder"][4:6]), int(info["folder"][-2:])
+        lines[info["split"]] += rel.split_lines(town_no, seq_no, range(info["frames"])).splitlines()
+    save_split_lists(out, lines)
     atomic_write(out / "calib" / "calib.yaml", lambda fh: fh.write(_calib(config).encode()))
     atomic_write(out / NOTE, lambda fh: fh.write(json.dumps(note, indent=1).encode()))
     # grid.json: the three grids each frame's files index (LiDAR frame, the release's origins)
-    manifest = {"format": "carlaocc-release", "frame": "lidar (x forward, y left, z up)", "axis_order": ["x", "y", "z"],
-                "index_to_metre": "centre = voxel_origin + (index + 0.5) * voxel_size",
-                "labels": [c.name for c in taxonomy.label_table(note.get("label_table")).classes], "free_label": 0,
-                "label_encoding": encoding,
-                "grids": [{"folder": g.name, "voxel_size": g.voxel_size, "origin": list(g.voxel_origin),
-                           "shape": list(g.volume_size)} for g in rel.RELEASE_GRIDS]}
-    atomic_write(out / "grid.json", lambda fh: fh.write(json.dumps(manifest, indent=1).encode()))
+    labels = [c.name for c in taxonomy.label_table(table_name).classes]
+    grids = [{"folder": g.name, "voxel_size": g.voxel_size, "origin": g.voxel_origin, "shape": g.volume_size}
+             for g in rel.RELEASE_GRIDS]
+    save_grid_manifest(out, grid_manifest("carlaocc-release", "lidar", grids, labels, 0, table_name, encoding=encoding))
     return len(todo), n_frames, n_files + len(SPLIT_NAMES) + 3
 
 
-__all__ = ["export_release", "folder_names", "release_grid_spec"]
+FORMATS = (
+    ExportFormat("carlaocc-release", "the official release's layout: Town<NN>_Opt_Seq<NN>/occupancy/{vs_0_1, "
+                 "vs_0_2_forward_view, vs_0_4_surround_view}, poses, calib, splits, camera maps, LiDAR",
+                 write_release, options={"encoding": LABEL_ENCODINGS}, default_voxel_size=0.1),
+)

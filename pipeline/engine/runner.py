@@ -23,13 +23,13 @@ from carlaocc.catalog.parquet import parquet_problem
 from carlaocc.catalog.signatures import external_signature, output_signature
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.zarrio import ancestor_groups, frame_fingerprint, is_damaged, metadata_problem, parse_frame_key
-# where tasks run (pipeline/executors.py; callers and tests reach these as runner.X too)
-from carlaocc.pipeline.executors import (NANNY_TERMINATE, SYNCHRONOUS, TASK_BASE_BYTES,  # noqa: F401
+# where tasks run (pipeline/engine/executors.py; callers and tests reach these as runner.X too)
+from carlaocc.pipeline.engine.executors import (NANNY_TERMINATE, SYNCHRONOUS, TASK_BASE_BYTES,  # noqa: F401
                                          TASK_BYTES_PER_VOXEL, DaskExecutor, Executor, SynchronousExecutor,
                                          TaskResult, execute_task, local_workers, make_executor, resolve_scheduler,
                                          task_memory)
-from carlaocc.pipeline.registry import STAGE_ALIASES, STAGES
-from carlaocc.pipeline.spec import (Context, Partition, PlanError, Prepared, SelectionError, StageSpec,  # noqa: F401
+from carlaocc.pipeline.engine.registry import STAGE_ALIASES, STAGES
+from carlaocc.pipeline.engine.spec import (Context, Partition, PlanError, Prepared, SelectionError, StageSpec,  # noqa: F401
                                     UpstreamMissing, cache_key)
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import RunRecord

@@ -24,7 +24,7 @@ from typing import Callable
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.signatures import output_signatures
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.runner import outputs_problem
+from carlaocc.pipeline.engine.runner import outputs_problem
 
 
 @dataclass

@@ -8,8 +8,8 @@ module-level and function-level imports alike. ``from P import name`` counts the
 module sits in count by their ``__init__.py`` alone. So editing the procedural town re-runs the
 scenes stage, not every voxelize frame; editing the voxelizer re-runs voxelize, not sensors.
 
-The engine itself (``carlaocc.pipeline.spec``, ``.registry``, ``.runner``) decides when a task
-runs, not what it writes, and is left out.
+The engine itself (``carlaocc.pipeline.engine``: spec, registry, runner, executors, this module)
+decides when a task runs, not what it writes, and is left out.
 """
 
 from __future__ import annotations
@@ -20,8 +20,11 @@ import importlib.util
 from functools import lru_cache
 
 NAMESPACE = "carlaocc"
-ENGINE = frozenset({"carlaocc.pipeline.spec", "carlaocc.pipeline.registry", "carlaocc.pipeline.runner",
-                    "carlaocc.pipeline.code_version"})
+ENGINE = "carlaocc.pipeline.engine"  # the engine package: decides when a task runs, not what it writes
+
+
+def _engine(module: str) -> bool:
+    return module == ENGINE or module.startswith(ENGINE + ".")
 
 
 @lru_cache(maxsize=None)
@@ -137,7 +140,7 @@ def module_closure(root: str) -> tuple[str, ...]:
     todo = [root]
     while todo:
         m = todo.pop()
-        if m in seen or m in ENGINE or _source(m) is None:
+        if m in seen or _engine(m) or _source(m) is None:
             continue
         seen.add(m)
         followed, packages = _imports(m)
@@ -145,7 +148,7 @@ def module_closure(root: str) -> tuple[str, ...]:
         files |= packages
     # the packages every module sits in: their __init__ code runs on import
     files |= {p for m in seen | files if _ours(m) for p in _parents(m) if _source(p)}
-    return tuple(sorted((seen | files) - ENGINE))
+    return tuple(sorted(m for m in seen | files if not _engine(m)))
 
 
 @lru_cache(maxsize=None)

@@ -3,8 +3,8 @@
 A stage is a frozen config (a section of :class:`~carlaocc.schemas.configs.DatasetConfig`), a
 task function that wires catalog readers -> pure ``carlaocc.stages`` compute -> catalog writers
 for one partition, and the partitions it runs over. Each stage's spec lives in its wiring module,
-``carlaocc.pipeline.tasks.<stage>``; :mod:`carlaocc.pipeline.registry` lists them. A stage's code
-version is derived from what its wiring module imports (:mod:`carlaocc.pipeline.code_version`),
+``carlaocc.pipeline.tasks.<stage>``; :mod:`carlaocc.pipeline.engine.registry` lists them. A stage's code
+version is derived from what its wiring module imports (:mod:`carlaocc.pipeline.engine.code_version`),
 so editing the code a stage runs re-runs it, and editing anything else does not.
 """
 
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.code_version import code_version
+from carlaocc.pipeline.engine.code_version import code_version
 from carlaocc.schemas.configs import DatasetConfig, StageConfig
 
 

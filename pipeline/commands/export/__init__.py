@@ -1,0 +1,87 @@
+"""``carlaocc export``: a dataset's occupancy in the layouts models train on.
+
+One module per format family; each declares its formats as :class:`ExportFormat` (name, a line
+for ``--help``, options, writer), and :data:`FORMATS` lists them in this order:
+
+* ``grids``   — ``occ3d``, ``semantickitti``, ``sscbench-kitti360``, ``surroundocc``: ours
+  resampled onto their grids by class priority (export from the finest voxel size built)
+* ``npz``     — ``carlaocc-npz``: our own grid, labels ``semantic << 11 | instance`` (or decimal)
+* ``release`` — ``carlaocc-release``: the official CarlaOcc release's folder layout
+* ``infos``   — ``mmdet3d-infos``: the OpenMMLab pipelines' info files, images, LiDAR, Occ3D gts
+* ``flow``    — ``openocc-v2``, ``uniocc``: semantics, instances and flow in those layouts
+* ``detgt``   — ``det-gt``: ground-truth boxes in the nuScenes detection layout (``eval det``)
+* ``spec``    — what a format is, and what every format shares (sequences, label table, splits)
+
+What a format computes is pure and lives in :mod:`carlaocc.stages.export` (and
+:mod:`carlaocc.stages.voxelize.resample`); the files it writes are encoded in
+:mod:`carlaocc.catalog.formats`. Every export writes ``grid.json`` (the grid its files index and
+``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`) and,
+for a root with splits, ``splits/{train,val,test}.txt`` restricted to the exported sequences.
+Files are written atomically, one frame at a time.
+
+Export is a command, not a registered stage: it writes outside the root, into a folder the user
+names and may move, merge into (``carlaocc-release`` adds sequences to an earlier export) or
+delete, and the root's lineage only vouches for what lives under the root.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from carlaocc.catalog.samples import DatasetError, FrameSamples
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.commands.export import detgt, flow, grids, infos, npz, release
+from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, ExportSummary, voxelized_sequences
+from carlaocc.schemas.configs import DatasetConfig
+
+FORMATS: dict[str, ExportFormat] = {f.name: f for m in (grids, npz, release, infos, flow, detgt) for f in m.FORMATS}
+
+__all__ = ["FORMATS", "ExportFormat", "ExportJob", "ExportSummary", "export", "frame_count", "resolve_voxel_size"]
+
+
+def export_format(name: str) -> ExportFormat:
+    """The format called ``name``; ValueError naming the formats otherwise."""
+    if name not in FORMATS:
+        raise ValueError(f"unknown format {name!r}; formats: {', '.join(FORMATS)}")
+    return FORMATS[name]
+
+
+def resolve_voxel_size(store: Store, fmt: str, voxel_size: float | None) -> float:
+    """The built voxel size (m) an export of ``fmt`` reads: ``voxel_size`` when given, else the
+    format's default, else the finest size built where the format allows it; ValueError when
+    the format needs one."""
+    spec = export_format(fmt)
+    if voxel_size is not None:
+        return voxel_size
+    if spec.default_voxel_size is not None:
+        return spec.default_voxel_size
+    if not spec.finest_by_default:
+        raise ValueError(f"export {fmt} needs --voxel-size (the built voxel size to export from)")
+    try:  # boxes do not depend on it: the finest size built picks the frames
+        return FrameSamples(store.url, occupancy="none", cameras=False, lidar=False, boxes=False).voxel_size
+    except DatasetError as exc:
+        raise StoreError(str(exc)) from None
+
+
+def export(store: Store, config: DatasetConfig, fmt: str, voxel_size: float, out: Path,
+           sequences: list[str] | None = None, progress: Callable[[int], None] | None = None,
+           **options: str) -> ExportSummary:
+    """Write every frame of every voxelized sequence (or ``sequences``) at ``voxel_size`` in
+    ``fmt`` under ``out``. ``options``: the format's own (``encoding`` for the CarlaOcc layouts);
+    one it does not declare, or a value it does not allow, is a ValueError."""
+    spec = export_format(fmt)
+    for key, value in options.items():
+        if key not in spec.options:
+            raise ValueError(f"export {fmt} takes no {key} option (its options: {', '.join(spec.options) or 'none'})")
+        if value not in spec.options[key]:
+            raise ValueError(f"{key} must be one of {', '.join(spec.options[key])}, got {value!r}")
+    chosen = {k: allowed[0] for k, allowed in spec.options.items()} | options
+    job = ExportJob(store, config, fmt, voxel_size, Path(out), tuple(sequences) if sequences else None, progress, chosen)
+    n_seq, n_frames, n_files = spec.write(job)
+    return ExportSummary(fmt, n_seq, n_frames, n_files, Path(out))
+
+
+def frame_count(store: Store, voxel_size: float, sequences: list[str] | None) -> int:
+    """Frames an export would write (for a progress bar)."""
+    return sum(n for _, _, n in voxelized_sequences(store, voxel_size, sequences))
