@@ -1,5 +1,6 @@
-"""DESIGN.md: layers import downward only (pipeline -> stages, catalog -> schemas); stages never
-import catalog, pipeline, distributed or the CLI library; schemas imports nothing of ours.
+"""docs/architecture.md "Layers": layers import downward only (pipeline -> stages, catalog ->
+schemas); stages never import catalog, pipeline, distributed or the CLI library; schemas imports
+nothing of ours.
 
 Everything of ours is imported through the one ``carlaocc`` namespace: a bare ``import stages``
 (or schemas, catalog, pipeline) would load a second copy of each module beside ``carlaocc.stages``,
