@@ -44,7 +44,7 @@ GROUND_Z = -1.73  # ground height in the LiDAR frame (LiDAR 1.73 m above the gro
 REGION_MIN = (-25.6, -25.6, -3.0)
 REGION_MAX = (51.2, 25.6, 10.0)
 
-# semantic ids (DESIGN taxonomy)
+# semantic ids (docs/architecture.md "Taxonomy")
 ROAD, BUILDING, POLE, VEGETATION, CAR = 1, 3, 6, 9, 14
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import fsspec
 
-# Store layout (DESIGN.md "Store layout"): table name -> directory of Parquet files.
+# Store layout (docs/architecture.md "Store layout"): table name -> directory of Parquet files.
 TABLE_DIRS: dict[str, str] = {
     "assets": "admesh/assets",
     "parts": "admesh/parts",

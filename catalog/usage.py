@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from carlaocc.catalog.store import LIDAR_DIR, OCCUPANCY_ZARR, SENSORS_ZARR, Store
 
-# the top-level parts of the layout (DESIGN.md "Store layout"), in the order a report lists them
+# the top-level parts of the layout (docs/architecture.md "Store layout"), in the order a report lists them
 STORE_PARTS: tuple[str, ...] = ("admesh", "scenes", OCCUPANCY_ZARR, SENSORS_ZARR, LIDAR_DIR, "metrics", "catalog")
 OTHER = "other"
 

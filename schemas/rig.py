@@ -108,7 +108,7 @@ class LidarSpec(SensorPlacement):
 
 
 def _reference_cameras() -> tuple[CameraSpec, ...]:
-    # DESIGN.md "Reference rig": front pair, side pair, rear pair at 1.55 m
+    # docs/architecture.md "Reference rig": front pair, side pair, rear pair at 1.55 m
     table = [("camera_00", 0.8, -0.3, 0.0), ("camera_01", 0.8, 0.3, 0.0), ("camera_02", 0.0, -0.46, -90.0),
              ("camera_03", 0.0, 0.46, 90.0), ("camera_04", -0.8, -0.3, 180.0), ("camera_05", -0.8, 0.3, 180.0)]
     return tuple(CameraSpec(name=n, x=x, y=y, z=1.55, yaw_deg=yaw) for n, x, y, yaw in table)

@@ -1,8 +1,8 @@
-"""Layers import downward only (carlaocc -> pipeline -> stages, catalog -> schemas); stages never
-import catalog, pipeline, distributed or the CLI library; schemas imports nothing of ours; the
-public API package ``carlaocc/`` (``carlaocc.data``, ``carlaocc.run``...) is the top layer, which
-nothing below imports. Inside pipeline/, the engine imports no command, and the stages' wiring
-neither. Names starting with ``_`` stay in their module.
+"""docs/architecture.md "Layers": layers import downward only (carlaocc -> pipeline -> stages,
+catalog -> schemas); stages never import catalog, pipeline, distributed or the CLI library;
+schemas imports nothing of ours; the public API package ``carlaocc/`` (``carlaocc.data``,
+``carlaocc.run``...) is the top layer, which nothing below imports. Inside pipeline/, the engine
+imports no command, and the stages' wiring neither. Names starting with ``_`` stay in their module.
 
 Everything of ours is imported through the one ``carlaocc`` namespace: a bare ``import stages``
 (or schemas, catalog, pipeline) would load a second copy of each module beside ``carlaocc.stages``,

@@ -24,8 +24,9 @@ Two label encodings (:data:`LABEL_ENCODINGS`):
 (The scalar dtypes of ``voxel_size`` / ``voxel_origin`` / ``volume_size`` are the writer's
 choice; :func:`load_carlaocc_npz` accepts any real/integer dtype for them.)
 
-Internally instances are uint32 and never wrap (DESIGN.md); the ranges above are an export
-concern: :func:`save_carlaocc_npz` **refuses** ids that do not fit rather than wrapping them, and
+Internally instances are uint32 and never wrap (docs/architecture.md "Instance ids"); the ranges
+above are an export concern: :func:`save_carlaocc_npz` **refuses** ids that do not fit rather than
+wrapping them, and
 :func:`carlaocc.catalog.formats.carlaocc_release.release_instance_ids` gives a sequence's
 instances ids that fit, stable across its frames.
 """

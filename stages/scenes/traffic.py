@@ -9,10 +9,10 @@ in sub-steps of at most :data:`MAX_SUBSTEP`.
   at random). The ego is not an actor record; its pose is the frame's ``ego_pose`` (origin on the
   ground at the vehicle's bottom centre, +X forward) and the sensor poses follow from the rig.
 * **Vehicles** (Car 80 %, Truck 10 %, Bus 10 % of the assets narrow enough for the lanes) spawn
-  on road lanes at the traffic level's density per km of road (DESIGN table, at most 128). A few
-  *escorts* spawn along the ego's route ahead of and behind it, beside it on a parallel lane and
-  ahead of it on a nearby lane running the other way, so the occupancy
-  region holds traffic from the first frame. Each vehicle's target speed is its lane's speed limit
+  on road lanes at the traffic level's density per km of road (docs/architecture.md "Traffic
+  levels", at most 128). A few *escorts* spawn along the ego's route ahead of and behind it,
+  beside it on a parallel lane and ahead of it on a nearby lane running the other way, so the
+  occupancy region holds traffic from the first frame. Each vehicle's target speed is its lane's speed limit
   times ``1 + spread u`` (u uniform in [-1, 1]). Vehicles drive random routes over the lane graph
   with the Intelligent Driver Model (the level's "gap to leader" is the IDM standstill gap);
   leaders are found along the lanes (the vehicle's lane, the lanes it has planned next, and the

@@ -1,4 +1,5 @@
-"""Voxelization stage: panoptic occupancy from the frame's scene meshes (see DESIGN "Occupancy grid").
+"""Voxelization stage: panoptic occupancy from the frame's scene meshes (see docs/architecture.md
+"Occupancy grid").
 
 ``surface_voxels``/``fill_interior`` are the numba kernels (linear indices over a grid),
 ``winding_interior`` the solid fill of meshes with holes (generalized winding numbers) and
