@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, voxel_size_key
 from carlaocc.schemas.rig import RigConfig
@@ -263,8 +263,15 @@ class DatasetConfig(StageConfig):
     splits: SplitsConfig = SplitsConfig()
     voxelize: VoxelizeConfig = VoxelizeConfig()
     sensors: SensorsConfig = SensorsConfig()
-    # ``metrics`` is the section's earlier name, still read
-    quality: QualityConfig = Field(QualityConfig(), validation_alias=AliasChoices("quality", "metrics"))
+    quality: QualityConfig = QualityConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _retired_sections(cls, data):
+        # the quality section's earlier name: refused with the name to use (not read silently)
+        if isinstance(data, dict) and "metrics" in data:
+            raise ValueError("config section 'metrics' was renamed 'quality': rename it in the config file")
+        return data
 
     @model_validator(mode="after")
     def _one_taxonomy(self) -> DatasetConfig:

@@ -130,7 +130,8 @@ def validation_message(source: str, exc: ValidationError) -> str:
     loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
     if err["type"] == "extra_forbidden":
         return f"{source}: unknown key {loc!r}"
-    return f"{source}: {loc}: {err['msg']}"
+    msg = err["msg"].removeprefix("Value error, ")  # a validator's own sentence, without pydantic's prefix
+    return f"{source}: {loc}: {msg}"
 
 
 DATASET_CONFIG = "dataset.yaml"  # a dataset root's own config (``carlaocc ingest carla-recording`` writes it)

@@ -9,5 +9,5 @@ from carlaocc.pipeline.tasks import aggregate, ingest, quality, report, scenes, 
 
 STAGES: dict[str, StageSpec] = {m.SPEC.name: m.SPEC for m in (ingest, scenes, splits, voxelize, sensors, quality,
                                                                 aggregate, report)}
-# earlier stage names, still accepted by --stages
-STAGE_ALIASES: dict[str, str] = {"metrics": "quality"}
+# earlier stage names, refused with the name to use instead
+RETIRED_STAGES: dict[str, str] = {"metrics": "quality"}

@@ -28,7 +28,7 @@ from carlaocc.pipeline.engine.executors import (NANNY_TERMINATE, SYNCHRONOUS, TA
                                          TASK_BYTES_PER_VOXEL, DaskExecutor, Executor, SynchronousExecutor,
                                          TaskResult, execute_task, local_workers, make_executor, resolve_scheduler,
                                          task_memory)
-from carlaocc.pipeline.engine.registry import STAGE_ALIASES, STAGES
+from carlaocc.pipeline.engine.registry import RETIRED_STAGES, STAGES
 from carlaocc.pipeline.engine.spec import (Context, Partition, PlanError, Prepared, SelectionError, StageSpec,  # noqa: F401
                                     UpstreamMissing, cache_key)
 from carlaocc.schemas.configs import DatasetConfig
@@ -231,11 +231,14 @@ def retire_orphans(lineage: LineageLog, stage: str, planned: set[str], removed: 
 
 
 def stage_order(names: list[str] | None, registry: dict[str, StageSpec] | None = None) -> list[StageSpec]:
-    """Registered stages in dependency order, optionally restricted to ``names`` (validated;
-    earlier stage names are read as the stage's name, e.g. ``metrics`` as ``quality``)."""
+    """Registered stages in dependency order, optionally restricted to ``names`` (validated; a
+    retired name, e.g. ``metrics``, is refused with the name it became)."""
     registry = STAGES if registry is None else registry
     if names:
-        names = [STAGE_ALIASES.get(n, n) if n not in registry else n for n in names]
+        retired = [n for n in names if n in RETIRED_STAGES and n not in registry]
+        if retired:
+            new = RETIRED_STAGES[retired[0]]
+            raise PlanError(f"stage {retired[0]!r} was renamed {new!r}: use --stages {new}")
         unknown = [n for n in names if n not in registry]
         if unknown:
             raise PlanError(f"unknown stage {unknown[0]!r} (stages: {', '.join(registry)})")

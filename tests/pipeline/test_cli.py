@@ -131,16 +131,24 @@ def test_query_json_has_no_nan(tmp_path):
     assert r.exit_code == 0 and json.loads(r.output) == [{"value": None, "frame_index": None}]
 
 
-def test_stage_names_and_the_earlier_metrics_name():
+def test_stage_names_and_the_retired_metrics_name(tmp_path):
     from carlaocc.pipeline.engine.registry import STAGES
     from carlaocc.pipeline.engine.runner import PlanError, stage_order
 
     assert list(STAGES) == ["ingest", "scenes", "splits", "voxelize", "sensors", "quality", "aggregate", "report"]
-    assert [s.name for s in stage_order(["metrics", "voxelize"])] == ["voxelize", "quality"]
+    assert [s.name for s in stage_order(["quality", "voxelize"])] == ["voxelize", "quality"]
+    # the earlier name is refused with the one to use, on the command line and in a config file
+    with pytest.raises(PlanError, match="stage 'metrics' was renamed 'quality': use --stages quality"):
+        stage_order(["metrics", "voxelize"])
     with pytest.raises(PlanError, match="unknown stage 'metric'"):
         stage_order(["metric"])
     # the top-level help names every stage
     r = cli.invoke(app, ["--help"])
     assert r.exit_code == 0 and all(f"{name}:" in r.output for name in STAGES)
-    # the config section's earlier name is still read
-    assert DatasetConfig.model_validate({"metrics": {"neighbourhood": 6}}) == DatasetConfig()
+    cfg = tmp_path / "old.yaml"
+    cfg.write_text("metrics:\n  neighbourhood: 6\n")
+    r = cli.invoke(app, ["run", "--config", str(cfg), "--root", str(tmp_path / "new")])
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert r.exit_code == 2 and len(lines) == 1, r.output
+    assert "config section 'metrics' was renamed 'quality'" in lines[0] and "Value error" not in lines[0]
+    assert not (tmp_path / "new").exists()
