@@ -1,6 +1,13 @@
-"""Quality-stage cost per frame on a built root, one core (issue 25: under 1 s a frame at 0.05 m).
+"""The quality stage's speed, one core: its kernels on a synthetic 0.05 m street (issue 7: s_sc <= 1 s
+a frame, s_tc <= 2 s a pair), and with ``--root`` its task on a built root (issue 25: under 1 s a
+frame at 0.05 m).
 
-Runs the quality stage's task (:func:`carlaocc.pipeline.tasks.quality.quality_task`: continuity,
+Kernels (always): a synthetic street in the default region at 0.05 m (1536 x 1024 x 260 voxels,
+409 M; :mod:`benchmarks.street`), frame t+1 the same street seen from a moved sensor. Both scores
+run with ``numba.set_num_threads(1)`` after a warm-up on a small grid; every timing is the best of
+``REPEAT`` runs.
+
+Task (``--root``): runs the quality stage's task (:func:`carlaocc.pipeline.tasks.quality.quality_task`: continuity,
 temporal consistency with both visibility masks, voxels and instances per class) in this process
 with one numba thread over runs of ``--per-task`` frames of one sequence of a built root, and
 prints the CPU seconds per frame (``time.process_time``: every thread of the process) after a
@@ -11,7 +18,8 @@ the stage did before (each array decoded into a dense ``(X, Y, Z)`` frame with `
 the same kernels on the dense frames, one block). All must give the same scores (checked); the
 ratio is printed.
 
-Usage: ``python -m benchmarks.bench_quality --root ROOT [--sequence S] [--res 0.05] [--frames 20]``
+Usage: ``python -m benchmarks.bench_quality`` (kernels), ``python -m benchmarks.bench_quality --root ROOT
+[--sequence S] [--voxel-size 0.05] [--frames 20]`` (kernels and task)
 (a 0.05 m root: ``python -m benchmarks.bench_scale --frames 0 --long-frames 40`` builds one under
 ``--work``'s ``long``).
 """
@@ -20,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 import time
 
@@ -34,7 +43,11 @@ from carlaocc.pipeline.tasks.quality import quality_task
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import FrameRecord, QualityRecord
-from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
+from benchmarks.street import moved_pose, resample_nearest, street
+from carlaocc.stages.quality import (continuity_and_ranges, spatial_continuity_counts, temporal_consistency_counts)
+from carlaocc.stages.quality.temporal import relative_pose, warp_to_voxels
+
+REPEAT = 3
 
 
 def _scratch_root(root: str) -> Store:
@@ -87,24 +100,65 @@ def scores_only(store: Store, seq: str, grid: GridSpec, first: int, stop: int,
     return rows
 
 
+def best(fn, repeat: int = REPEAT) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), out
+
+
+def kernels() -> None:
+    """s_sc and s_tc on the synthetic 0.05 m street, one thread."""
+    grid = GridSpec(voxel_size=0.05)
+    p0, p1 = np.eye(4), moved_pose()
+    t0 = time.perf_counter()
+    s0 = street(grid)
+    # frame t+1 samples frame t at its centres mapped back into frame t (inverse relative pose)
+    A, c = warp_to_voxels(relative_pose(p1, p0), grid.origin, grid.voxel_size, grid.origin, grid.voxel_size)
+    s1 = resample_nearest(s0, A, c)
+    print(f"grid {grid.shape} = {s0.size / 1e6:.0f} M voxels at {grid.voxel_size} m; "
+          f"occupied {np.count_nonzero(s0) / s0.size:.2%}; built in {time.perf_counter() - t0:.1f} s")
+
+    numba.set_num_threads(1)
+    small = s0[:64, :64, :64].copy()
+    spatial_continuity_counts(small)  # warm-up: compile or load from the cache
+    temporal_consistency_counts(small, small, p0, p1, grid.voxel_size, grid.origin)
+
+    t_sc, sc = best(lambda: spatial_continuity_counts(s0))
+    print(f"s_sc  one frame, 1 thread : {t_sc:6.3f} s  (s_sc = {sc.score:.5f}, "
+          f"occupied {int(sc.occupied[1:].sum()):,}, isolated {int(sc.isolated[1:].sum()):,})")
+    t_tc, tc = best(lambda: temporal_consistency_counts(s0, s1, p0, p1, grid.voxel_size, grid.origin))
+    print(f"s_tc  one pair,  1 thread : {t_tc:6.3f} s  (s_tc = {tc.score:.5f}, "
+          f"intersection {tc.total_intersection:,}, union {tc.total_union:,})")
+    m = np.ones(s0.shape, np.bool_)
+    t_m, _ = best(lambda: temporal_consistency_counts(s0, s1, p0, p1, grid.voxel_size, grid.origin,
+                                                      mask_t=m, mask_t1=m))
+    print(f"s_tc  with visibility masks: {t_m:6.3f} s")
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--root", required=True, help="a built root (voxelize and scenes done)")
-    ap.add_argument("--sequence", help="sequence id (default: the root's first at --res)")
-    ap.add_argument("--res", type=float, default=0.05, help="voxel size, m")
+    ap.add_argument("--root", help="a built root (voxelize and scenes done): also time the stage's task on it")
+    ap.add_argument("--sequence", help="sequence id (default: the root's first at --voxel-size)")
+    ap.add_argument("--voxel-size", "--res", dest="voxel_size", type=float, default=0.05, help="voxel size, m")
     ap.add_argument("--frames", type=int, default=20, help="frames to time (after a one-frame warm-up)")
     ap.add_argument("--per-task", type=int, default=20, help="frames per quality task")
-    args = ap.parse_args(argv)
+    args = ap.parse_args([] if argv is None else argv)  # `python -m benchmarks` runs the kernels alone
+    kernels()
+    if not args.root:
+        return
     numba.set_num_threads(1)
     built = Store(args.root)
     occ = OccupancyStore(built)
     zroot = f"{args.root}/occupancy.zarr"
     seqs = sorted(d for d in os.listdir(zroot) if os.path.isdir(f"{zroot}/{d}"))
-    seq = args.sequence or next(s for s in seqs if occ.stored_grid(s, args.res) is not None)
-    grid = occ.stored_grid(seq, args.res)
+    seq = args.sequence or next(s for s in seqs if occ.stored_grid(s, args.voxel_size) is not None)
+    grid = occ.stored_grid(seq, args.voxel_size)
     n = occ.open(seq, grid, "semantic").shape[0]
     frames = min(args.frames, n - 1)
-    print(f"{seq} at {args.res} m: grid {grid.shape} ({np.prod(grid.shape) / 1e6:.0f} M voxels), "
+    print(f"{seq} at {args.voxel_size} m: grid {grid.shape} ({np.prod(grid.shape) / 1e6:.0f} M voxels), "
           f"{frames} frames, runs of {args.per_task}, one thread")
     store = _scratch_root(args.root)
     cfg = QualityConfig(frames_per_task=args.per_task)
@@ -132,4 +186,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

@@ -21,6 +21,7 @@ import time
 import numba
 import numpy as np
 
+from benchmarks.street import BUILDING, CAR, street as semantic_street
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.stages.quality.statistics import frame_statistics
 
@@ -30,8 +31,6 @@ REPEAT = 3
 def street(grid: GridSpec, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Semantic and instance grids of a synthetic street: road, buildings (instances) along both
     sides, cars (instances) on the road."""
-    from benchmarks.bench_metrics import BUILDING, CAR, street as semantic_street
-
     sem = semantic_street(grid, seed)
     inst = np.zeros(sem.shape, np.uint32)
     # number the building and car blobs per x-slab run: enough distinct ids for the kernel

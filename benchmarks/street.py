@@ -1,32 +1,21 @@
-"""Quality-metric speed on full-size 0.05 m frames, one thread (issue 7: s_sc <= 1 s per frame,
-s_tc <= 2 s per pair on one core).
-
-A synthetic street in the default region at 0.05 m (1536 x 1024 x 260 voxels, 409 M), built
-directly in voxel space: a 2-voxel ground slab at z = -1.73 m, solid buildings along both sides,
-cars, poles and trees (blobs with holes, so some voxels are isolated). Frame t+1 is frame t seen
+"""A synthetic street at any voxel size, built directly in voxel space, for the quality and report
+benchmarks: a 2-voxel ground slab at z = -1.73 m, solid buildings along both sides, cars, poles
+and trees (blobs with holes, so some voxels are isolated); and the pose of a second frame seen
 from a sensor moved 0.37 m forward, 0.11 m left, yawed 0.6 degrees and pitched 0.1 degrees
 (nearest-voxel resampling, so the aliasing along the moved boundaries is what keeps s_tc below 1).
-Both metrics run with ``numba.set_num_threads(1)`` after a warm-up on a small grid; every timing
-is the best of ``REPEAT`` runs. Printed, no thresholds.
-
-Usage: ``python -m benchmarks bench_metrics`` (or ``python -m benchmarks.bench_metrics``).
 """
 
 from __future__ import annotations
 
 import math
-import time
 
 import numba
 import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.quality import spatial_continuity_counts, temporal_consistency_counts
-from carlaocc.stages.quality.temporal import relative_pose, warp_to_voxels
 
 ROAD, SIDEWALK, BUILDING, POLE, VEGETATION, CAR = 1, 2, 3, 6, 9, 14
 GROUND_Z = -1.73
-REPEAT = 3
 
 
 def street(grid: GridSpec, seed: int = 0) -> np.ndarray:
@@ -75,7 +64,7 @@ def street(grid: GridSpec, seed: int = 0) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _resample(sem, A, c):  # pragma: no cover - numba
+def resample_nearest(sem, A, c):  # pragma: no cover - numba
     """Grid t+1: label of the grid-t voxel containing each grid-(t+1) centre (q = A v + c)."""
     X, Y, Z = sem.shape
     out = np.zeros_like(sem)
@@ -99,44 +88,3 @@ def moved_pose() -> np.ndarray:
     p = np.eye(4)
     p[:3, :3], p[:3, 3] = rz @ ry, (0.37, 0.11, 0.0)
     return p
-
-
-def best(fn, repeat: int = REPEAT) -> tuple[float, object]:
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
-
-
-def main() -> None:
-    grid = GridSpec(voxel_size=0.05)
-    p0, p1 = np.eye(4), moved_pose()
-    t0 = time.perf_counter()
-    s0 = street(grid)
-    # frame t+1 samples frame t at its centres mapped back into frame t (inverse relative pose)
-    A, c = warp_to_voxels(relative_pose(p1, p0), grid.origin, grid.voxel_size, grid.origin, grid.voxel_size)
-    s1 = _resample(s0, A, c)
-    print(f"grid {grid.shape} = {s0.size / 1e6:.0f} M voxels at {grid.voxel_size} m; "
-          f"occupied {np.count_nonzero(s0) / s0.size:.2%}; built in {time.perf_counter() - t0:.1f} s")
-
-    numba.set_num_threads(1)
-    small = s0[:64, :64, :64].copy()
-    spatial_continuity_counts(small)  # warm-up: compile or load from the cache
-    temporal_consistency_counts(small, small, p0, p1, grid.voxel_size, grid.origin)
-
-    t_sc, sc = best(lambda: spatial_continuity_counts(s0))
-    print(f"s_sc  one frame, 1 thread : {t_sc:6.3f} s  (s_sc = {sc.score:.5f}, "
-          f"occupied {int(sc.occupied[1:].sum()):,}, isolated {int(sc.isolated[1:].sum()):,})")
-    t_tc, tc = best(lambda: temporal_consistency_counts(s0, s1, p0, p1, grid.voxel_size, grid.origin))
-    print(f"s_tc  one pair,  1 thread : {t_tc:6.3f} s  (s_tc = {tc.score:.5f}, "
-          f"intersection {tc.total_intersection:,}, union {tc.total_union:,})")
-    m = np.ones(s0.shape, np.bool_)
-    t_m, _ = best(lambda: temporal_consistency_counts(s0, s1, p0, p1, grid.voxel_size, grid.origin,
-                                                      mask_t=m, mask_t1=m))
-    print(f"s_tc  with visibility masks: {t_m:6.3f} s")
-
-
-if __name__ == "__main__":
-    main()
