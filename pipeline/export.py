@@ -45,7 +45,7 @@ Every export writes ``splits/{train,val,test}.txt`` beside its files: the datase
 layout: one frame per line, in its own numbering).
 
 The grids of the other datasets are filled from ours by class-priority binning
-(:func:`carlaocc.stages.voxelize.resample.resample`); export from the finest resolution you built.
+(:func:`carlaocc.stages.export.resample.resample`); export from the finest resolution you built.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import SequenceRecord
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, downsample_ssc, resample
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, downsample_ssc, resample
 
 FORMATS: tuple[str, ...] = ("occ3d", "semantickitti", "sscbench-kitti360", "surroundocc", "carlaocc-npz",
                              "carlaocc-release", "mmdet3d-infos", "openocc-v2", "uniocc", "det-gt")

@@ -37,7 +37,7 @@ from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
-from carlaocc.stages.voxelize.resample import TargetGrid, resample, resample_panoptic
+from carlaocc.stages.export.resample import TargetGrid, resample, resample_panoptic
 
 OPENOCC_V2 = TargetGrid("openocc-v2", (200, 200, 16), 0.4, (-40.0, -40.0, -1.0), "ego", "openocc_v2", 16)
 """OpenOcc v2: the Occ3D grid and frame (OccNet ray_metrics / nuscenes_occ), its own class order."""

@@ -46,7 +46,7 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.stages.geometry import quaternion_wxyz
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, resample
 
 DETECTION_CLASSES = ("car", "truck", "construction_vehicle", "bus", "trailer", "barrier", "motorcycle", "bicycle",
                      "pedestrian", "traffic_cone")

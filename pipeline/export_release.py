@@ -13,7 +13,7 @@ How our dataset maps onto it:
 
 * **Grids.** The three release grids are pooled from the occupancy built at ``--voxel-size``
   (0.1 m, the release's raw resolution, by default; any size dividing 0.1 m works) with the
-  class-priority rule of :func:`carlaocc.stages.voxelize.resample.pool_window`; at 0.1 m on the
+  class-priority rule of :func:`carlaocc.stages.voxelize.pooling.pool_window`; at 0.1 m on the
   default region ``vs_0_1`` is our grid voxel for voxel.
 * **Towns and sequences.** Our towns get the release's town numbers in order (1..7, 10, then
   11...; a recorded ``TownNN_Opt`` keeps its number); within a town, sequences are numbered in
@@ -175,7 +175,7 @@ def export_release(store: Store, config: DatasetConfig, out: Path, voxel_size: f
     from carlaocc.catalog.splits import SPLIT_NAMES
     from carlaocc.pipeline.export import (actor_ids, built_label_table, scenes_label_tables, sequence_release_ids,
                                           sequence_splits, voxelized_sequences)
-    from carlaocc.stages.voxelize.resample import pool_window
+    from carlaocc.stages.voxelize.pooling import pool_window
 
     check_encoding(encoding)
     todo = list(voxelized_sequences(store, voxel_size, sequences))

@@ -159,7 +159,7 @@ def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarra
     from carlaocc.catalog.store import Store
     from carlaocc.pipeline.export import built_label_table, scenes_label_tables
     from carlaocc.pipeline.export_flow import OPENOCC_V2
-    from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample, resample_panoptic
+    from carlaocc.stages.export.resample import OCC3D_NUSCENES, resample, resample_panoptic
 
     seq, frame = ds.samples[k]
     store = Store(ds.root)

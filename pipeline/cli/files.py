@@ -144,7 +144,7 @@ def compare_resolutions(
     and the coarse grid voxelized directly from the meshes disagree (occupancy and label)."""
     from carlaocc.catalog.occupancy import OccupancyStore
     from carlaocc.pipeline.export import voxelized_sequences
-    from carlaocc.stages.voxelize.resample import pool_to_grid, pooling_disagreement
+    from carlaocc.stages.voxelize.pooling import pool_to_grid, pooling_disagreement
 
     from carlaocc.schemas.grid import resolution_key
 

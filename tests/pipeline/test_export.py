@@ -7,7 +7,7 @@ import numpy as np
 from carlaocc.pipeline.export import SEMANTICKITTI_GRID, _coverage
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.rig import RigConfig
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES
+from carlaocc.stages.export.resample import OCC3D_NUSCENES
 
 
 def test_coverage_without_masks_is_our_region_in_the_target_grid():
