@@ -14,7 +14,7 @@ import pytest
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.stages.geometry import concatenate, is_watertight
 from carlaocc.stages.ingest.procedural.catalogue import _records  # tests may reach into the builders
-from carlaocc.stages.ingest.procedural.people import _pedestrian
+from carlaocc.stages.ingest.procedural.people import pedestrian
 from carlaocc.stages.scenes.people import pedestrians as P
 from carlaocc.stages.scenes.people.gait.cycles import canonical_cycle
 from carlaocc.stages.scenes.people.gait.descriptor import window_descriptor, window_descriptors
@@ -56,7 +56,7 @@ def _errors(pred, ph):
 
 
 def _pedestrian_geometry(subclass: str, seed: int) -> AssetGeometry:
-    parts = _pedestrian(subclass)(np.random.default_rng(seed))
+    parts = pedestrian(subclass)(np.random.default_rng(seed))
     return _records("Pedestrian", subclass, seed, parts)[2]
 
 
