@@ -24,7 +24,7 @@ from carlaocc.catalog.formats import carlaocc_release as rel
 from carlaocc.catalog.formats.carlaocc_npz import npz_bytes, pack_ids
 from carlaocc.pipeline.commands.export.release import release_grid_spec
 from carlaocc.schemas.grid import GridSpec
-from carlaocc.stages.voxelize.resample import pool_window
+from carlaocc.stages.voxelize.pooling import pool_window
 
 
 def _frame(rng) -> tuple[np.ndarray, np.ndarray]:

@@ -33,8 +33,8 @@ def _track(speed: float, frames: int, yaw0: float, phase0: float, gait_step: flo
 def main(argv: list[str] | None = None) -> None:
     from carlaocc.schemas.configs import IngestConfig
     from carlaocc.stages.ingest import ingest_procedural
-    from carlaocc.stages.scenes.pedestrians import gait_model, match_walker_phases, rig_pedestrian
-    from carlaocc.stages.scenes.traffic_walkers import GAIT_STEP
+    from carlaocc.stages.scenes.people.pedestrians import gait_model, match_walker_phases, rig_pedestrian
+    from carlaocc.stages.scenes.traffic.walkers import GAIT_STEP
 
     argv = sys.argv[1:] if argv is None else argv
     walkers = int(argv[0]) if argv else 64

@@ -34,7 +34,7 @@ def _road_surfaces() -> None:
     """Seconds to read an ``.xodr`` file and build the surface meshes of all its roads (0.5 m)."""
     from carlaocc.catalog.opendrive import read_opendrive
     from carlaocc.catalog.towns import resolve_opendrive
-    from carlaocc.stages.scenes.opendrive import road_surface_meshes
+    from carlaocc.stages.scenes.opendrive.geometry import road_surface_meshes
 
     paths = [resolve_opendrive("builtin:crossroads.xodr")]
     paths += [p for p in (OPENDRIVE_DATA / "Town01.xodr", TOWN10) if p.exists()]
@@ -58,8 +58,8 @@ def main(argv: list[str] | None = None) -> None:
     from carlaocc.stages.ingest import ingest_procedural
     from carlaocc.stages.scenes import build_town, simulate_sequence
     from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, region_of_grid
-    from carlaocc.stages.scenes.pedestrians import match_walker_phases, rig_pedestrian
-    from carlaocc.stages.scenes.traffic import ego_starts
+    from carlaocc.stages.scenes.people.pedestrians import match_walker_phases, rig_pedestrian
+    from carlaocc.stages.scenes.traffic.simulation import ego_starts
 
     argv = sys.argv[1:] if argv is None else argv
     frames = int(argv[0]) if argv else 200

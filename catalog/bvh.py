@@ -3,7 +3,7 @@
 ``read_bvh(path)`` / ``parse_bvh(text)`` return a :class:`~carlaocc.schemas.motion.MotionClip`
 holding the skeleton exactly as the file states it -- no unit or axis conversion happens here
 (BVH is Y-up; the Y-up -> Z-up conversion is done once, in
-:func:`carlaocc.stages.scenes.gait.kinematics.forward_kinematics`).
+:func:`carlaocc.stages.scenes.people.gait.kinematics.forward_kinematics`).
 
 ``End Site`` blocks are kept as ``end_offsets`` (NaN rows for joints without one); they carry no
 channels. Malformed input raises :class:`BvhError` naming the 1-based line number.

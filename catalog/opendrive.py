@@ -3,7 +3,7 @@
 
 Only the parts the scene stage needs are read (see the schema module); everything else
 (controllers, userData, vendor extensions, surface CRG, ...) is ignored. Geometry evaluation
-lives in :mod:`carlaocc.stages.scenes.opendrive`, which takes these records.
+lives in :mod:`carlaocc.stages.scenes.opendrive.geometry`, which takes these records.
 
 Why no third-party reader: the only candidates in the package index are ``pyxodr`` (0.1.3,
 2023, read-only wrapper pulling ``lxml``/``shapely``, its own object model and no line numbers

@@ -2,9 +2,9 @@
 file states them.
 
 :func:`carlaocc.catalog.bvh.read_bvh` returns a :class:`MotionClip`; the Skeletal Motion Analyzer
-(:mod:`carlaocc.stages.scenes.gait`) takes it. No unit or axis conversion happens in the clip:
+(:mod:`carlaocc.stages.scenes.people.gait`) takes it. No unit or axis conversion happens in the clip:
 lengths are the file's units, angles degrees, axes the file's (BVH: Y up). The Y-up -> Z-up
-conversion is done once, in :func:`carlaocc.stages.scenes.gait.kinematics.forward_kinematics`.
+conversion is done once, in :func:`carlaocc.stages.scenes.people.gait.kinematics.forward_kinematics`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """OpenDRIVE road-network records: the parsed ``.xodr`` network as plain frozen dataclasses.
 
 :func:`carlaocc.catalog.opendrive.read_opendrive` returns an :class:`OpenDriveNetwork`; the scene
-stage takes these records as they are (:mod:`carlaocc.stages.scenes.opendrive` for the geometry,
-:mod:`carlaocc.stages.scenes.odr_town` for the town).
+stage takes these records as they are (:mod:`carlaocc.stages.scenes.opendrive.geometry` for the geometry,
+:mod:`carlaocc.stages.scenes.opendrive.town` for the town).
 
 Only the parts the scene stage needs are kept: the header, roads (links, road types, planView
 geometries, elevation and superelevation profiles, lane offsets, lane sections with their lanes,

@@ -3,7 +3,8 @@ out. Nothing here opens a path or imports the catalog or the pipeline.
 
 * ``ingest``     — the procedural ADMesh library; standardization of source meshes
 * ``scenes``     — towns, traffic, pedestrians, per-frame panoptic scene assembly
-* ``voxelize``   — exact triangle-box voxelization, fill, composition, flow, visibility masks
+* ``voxelize``   — exact triangle-box voxelization, fill, composition, flow, visibility masks, pooling
+* ``export``     — the exports' pure compute: resampling onto other datasets' grids and label sets
 * ``sensors``    — ray-cast camera maps and LiDAR, simulator artifacts, rectification, normals
 * ``quality``    — dataset-quality scores: spatial continuity, temporal consistency
 * ``report``     — dataset statistics and the report's plots

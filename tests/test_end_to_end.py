@@ -448,7 +448,7 @@ def test_skeletons_lie_on_their_walkers(built):
     _, peds = query(built, f"SELECT count(*) FROM actors WHERE sequence_id = '{seq}' AND semantic_id = "
                            f"{taxonomy.by_name('Pedestrian').id}")
     assert len(rows) == 11 * peds[0][0]
-    from carlaocc.stages.scenes.pedestrians import JOINT_NAMES
+    from carlaocc.stages.scenes.people.pedestrians import JOINT_NAMES
 
     assert [r[2] for r in rows[:11]] == list(JOINT_NAMES)
     grid = GridSpec(voxel_size=RES)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from carlaocc.schemas.opendrive import Geometry
-from carlaocc.stages.scenes.opendrive import evaluate_geometry
+from carlaocc.stages.scenes.opendrive.geometry import evaluate_geometry
 
 W, SW = 3.5, 3.0  # lane, sidewalk width
 PI = math.pi

@@ -36,7 +36,7 @@ from carlaocc.stages.render.occupancy import perspective_view  # noqa: E402
 from carlaocc.stages.render.sheets import draw_text  # noqa: E402
 from carlaocc.stages.scenes import build_town, simulate_sequence  # noqa: E402
 from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame  # noqa: E402
-from carlaocc.stages.scenes.traffic import ego_starts  # noqa: E402
+from carlaocc.stages.scenes.traffic.simulation import ego_starts  # noqa: E402
 from carlaocc.stages.voxelize import voxelize_scene  # noqa: E402
 
 VOXEL = 0.1  # m

@@ -231,7 +231,7 @@ def check_towns(cfg: DatasetConfig) -> None:
     naming the file (exit 2)."""
     from carlaocc.catalog.opendrive import read_opendrive
     from carlaocc.catalog.towns import resolve_opendrive
-    from carlaocc.stages.scenes.odr_network import build_opendrive_network
+    from carlaocc.stages.scenes.opendrive.network import build_opendrive_network
 
     for i, spec in enumerate(cfg.scenes.towns):
         if spec.opendrive is None:

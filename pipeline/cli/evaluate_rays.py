@@ -20,7 +20,7 @@ from carlaocc.pipeline.commands.export.spec import built_label_table, scenes_lab
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.evaluation.rays import RayAccumulator, select_origins
 from carlaocc.stages.geometry import rotation_from_quaternion
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, OPENOCC_V2, resample, resample_panoptic
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, OPENOCC_V2, resample, resample_panoptic
 
 __all__ = ["origins_from_poses", "ray_origins", "ray_pairs"]
 

@@ -16,7 +16,13 @@ from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, fail, load_config, open_store, parse_floats, write_bytes
 from carlaocc.pipeline.commands.export import FORMATS, export, frame_count, resolve_voxel_size
 from carlaocc.pipeline.commands.export.spec import voxelized_sequences
+from carlaocc.pipeline.commands.standalone import (InputError, fill_summary, grid_for, load_inputs, save_result,
+                                                   voxelize_inputs)
+from carlaocc.catalog.formats import FormatError
+from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.schemas.grid import voxel_size_key
+from carlaocc.stages.voxelize.fill import FILL_MODES
+from carlaocc.stages.voxelize.pooling import pool_to_grid, pooling_disagreement
 
 
 @app.command("voxelize")

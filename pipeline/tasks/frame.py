@@ -106,7 +106,7 @@ def pedestrian_rigs(geometry: dict[str, AssetGeometry]):
     """``asset_id -> PedestrianRig`` of the pedestrian assets in ``geometry``, cached per worker by
     asset id and geometry content (each asset's content hashed once per call of this)."""
     from carlaocc.stages.geometry import geometry_hash
-    from carlaocc.stages.scenes.pedestrians import rig_pedestrian
+    from carlaocc.stages.scenes.people.pedestrians import rig_pedestrian
 
     keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key
 

@@ -80,11 +80,11 @@ def read_town_network(spec: TownSpec):
 
 
 def sequence_skeletons(store: Store, actors, frames) -> list:
-    """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.pedestrians.skeleton_rows`):
+    """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.people.pedestrians.skeleton_rows`):
     pedestrian rigs built from their ADMesh geometry (the per-worker cache the frames use)."""
     from carlaocc.pipeline.tasks.frame import load_geometry, pedestrian_rigs
     from carlaocc.schemas import taxonomy
-    from carlaocc.stages.scenes.skeletons import skeleton_rows
+    from carlaocc.stages.scenes.people.skeletons import skeleton_rows
 
     ped = taxonomy.by_name("Pedestrian").id
     ids = {a.asset_id for a in actors if a.semantic_id == ped}
@@ -101,7 +101,7 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
     """Build one town and simulate its sequences; write stuff meshes, placements, the town row,
     sequences, frames, sensor poses and actors."""
     from carlaocc.stages.scenes import build_town, simulate_town
-    from carlaocc.stages.scenes.pedestrians import match_walker_phases
+    from carlaocc.stages.scenes.people.pedestrians import match_walker_phases
 
     index = part.params["town_index"]
     spec = cfg.towns[index]

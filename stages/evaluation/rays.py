@@ -11,7 +11,8 @@ public sources), per evaluated sample:
    (:func:`query_directions`): pitches ``-(pi/2 - atan(k + 1))`` for k = 0..9, then steps of the
    last gap until the pitch reaches 0.21 rad; azimuths every degree.
 3. **First hit** of each ray in a grid, by the exact voxel traversal of
-   :mod:`carlaocc.stages.voxelize.visibility` (Amanatides-Woo, the same slab clipping and setup):
+   :mod:`carlaocc.stages.voxelize.visibility` (Amanatides-Woo, the same slab clipping and setup,
+   :mod:`carlaocc.stages.voxelize.dda`):
    the first occupied voxel it enters; its **depth is where the ray leaves that voxel** (the exit
    face), in metres; a ray that leaves the grid without a hit takes the last voxel it crossed and
    that voxel's exit (normally free). The same origins and directions run through the ground
@@ -47,7 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
-from carlaocc.stages.voxelize.visibility import _axis_setup, _clamp_floor, _slab
+from carlaocc.stages.voxelize.dda import axis_setup, clamp_floor, slab
 
 __all__ = ["RayAccumulator", "RayIoUResult", "RayPQResult", "first_hits", "query_directions", "select_origins",
            "THRESHOLDS", "MIN_SEGMENT_RAYS", "MAX_ORIGINS", "ORIGIN_LIMIT"]
@@ -88,17 +89,17 @@ def select_origins(positions: np.ndarray) -> np.ndarray:
 def _first_hit(occ, nx, ny, nz, ox, oy, oz, dx, dy, dz):
     """(exit t in voxels, linear voxel index) of the first occupied voxel along the ray, or of
     the last voxel it crosses in the grid; (-1, -1) when it misses the grid."""
-    t0, t1 = _slab(ox, dx, nx, 0.0, math.inf)
-    t0, t1 = _slab(oy, dy, ny, t0, t1)
-    t0, t1 = _slab(oz, dz, nz, t0, t1)
+    t0, t1 = slab(ox, dx, nx, 0.0, math.inf)
+    t0, t1 = slab(oy, dy, ny, t0, t1)
+    t0, t1 = slab(oz, dz, nz, t0, t1)
     if not (t0 <= t1):
         return -1.0, -1
-    i = _clamp_floor(ox + t0 * dx, nx)
-    j = _clamp_floor(oy + t0 * dy, ny)
-    k = _clamp_floor(oz + t0 * dz, nz)
-    tmx, tdx, sx, lx = _axis_setup(ox, dx, i, nx)
-    tmy, tdy, sy, ly = _axis_setup(oy, dy, j, ny)
-    tmz, tdz, sz, lz = _axis_setup(oz, dz, k, nz)
+    i = clamp_floor(ox + t0 * dx, nx)
+    j = clamp_floor(oy + t0 * dy, ny)
+    k = clamp_floor(oz + t0 * dz, nz)
+    tmx, tdx, sx, lx = axis_setup(ox, dx, i, nx)
+    tmy, tdy, sy, ly = axis_setup(oy, dy, j, ny)
+    tmz, tdz, sz, lz = axis_setup(oz, dz, k, nz)
     while True:
         t_exit = min(tmx, tmy, tmz)  # where the ray leaves the current voxel
         lin = (i * ny + j) * nz + k

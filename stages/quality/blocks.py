@@ -133,6 +133,22 @@ def as_blocked(grid, name: str) -> BlockedGrid:
     return BlockedGrid.dense(a)
 
 
+def uint8_grid(semantic, name: str) -> BlockedGrid:
+    """A semantic grid (dense array or :class:`BlockedGrid`) as uint8 blocks
+    (ValueError naming ids outside 0..255)."""
+    grid = as_blocked(semantic, name)
+    if grid.dtype == np.bool_:  # occupied / free: class 1 / 0
+        grid = grid.view(np.uint8)
+    if grid.dtype != np.uint8:
+        b = grid.blocks
+        if not np.issubdtype(b.dtype, np.integer):
+            raise ValueError(f"{name} must hold integer class ids, got {b.dtype}")
+        if b.size and (b.min() < 0 or b.max() > 255):
+            raise ValueError(f"{name}: semantic ids must fit uint8 (0..255)")
+        grid = BlockedGrid(b.astype(np.uint8), grid.shape)
+    return grid
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def first_nonzero(flat, words, start, end):  # pragma: no cover - numba
     """Index of the first nonzero byte of ``flat[start:end]`` (``end`` when none); ``words`` is

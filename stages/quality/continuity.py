@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from carlaocc.stages.quality.blocks import BlockedGrid, as_blocked, first_nonzero, last_nonzero
+from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero, uint8_grid
 
 N_CLASSES = 256  # counts are kept per uint8 value; the taxonomy uses 0..29
 
@@ -94,22 +94,6 @@ class ContinuityCounts:
         return ContinuityCounts(self.occupied + other.occupied, self.isolated + other.isolated)
 
 
-def _uint8_grid(semantic, name: str) -> BlockedGrid:
-    """A semantic grid (dense array or :class:`~.blocks.BlockedGrid`) as uint8 blocks
-    (ValueError naming ids outside 0..255)."""
-    grid = as_blocked(semantic, name)
-    if grid.dtype == np.bool_:  # occupied / free: class 1 / 0
-        grid = grid.view(np.uint8)
-    if grid.dtype != np.uint8:
-        b = grid.blocks
-        if not np.issubdtype(b.dtype, np.integer):
-            raise ValueError(f"{name} must hold integer class ids, got {b.dtype}")
-        if b.size and (b.min() < 0 or b.max() > 255):
-            raise ValueError(f"{name}: semantic ids must fit uint8 (0..255)")
-        grid = BlockedGrid(b.astype(np.uint8), grid.shape)
-    return grid
-
-
 def spatial_continuity_counts(semantic: np.ndarray | BlockedGrid) -> ContinuityCounts:
     """Per-class occupied and isolated (6-neighbourhood) voxel counts of a 3D semantic grid
     (uint8 class ids, dense ``(X, Y, Z)`` or :class:`~.blocks.BlockedGrid`)."""
@@ -123,7 +107,7 @@ def continuity_and_ranges(semantic: np.ndarray | BlockedGrid, out: tuple[np.ndar
     grid (dense or :class:`~.blocks.BlockedGrid`, as the store decodes it: no copy): at 0.05 m
     each pass reads 400 MB, free voxels 32 at a time. ``out``: two int32 ``(X, Y)`` arrays to
     fill with the ranges (buffers reused frame after frame)."""
-    grid = _uint8_grid(semantic, "semantic grid")
+    grid = uint8_grid(semantic, "semantic grid")
     X, Y, Z = grid.shape
     if out is None:
         out = (np.empty((X, Y), np.int32), np.empty((X, Y), np.int32))

@@ -51,7 +51,7 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.taxonomy import dynamic_ids
-from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero, words_of
+from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero, uint8_grid, words_of
 
 N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
 
@@ -145,9 +145,7 @@ def _pose(pose, name: str) -> np.ndarray:
 
 def _semantic(a, name: str) -> BlockedGrid:
     """A semantic grid (dense or :class:`~.blocks.BlockedGrid`) as uint8 blocks."""
-    from carlaocc.stages.quality.continuity import _uint8_grid
-
-    return _uint8_grid(a, name)
+    return uint8_grid(a, name)
 
 
 def _masks(m, sem: BlockedGrid, name: str) -> list[np.ndarray]:

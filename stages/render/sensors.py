@@ -164,7 +164,7 @@ def _skeletons(image: np.ndarray, view: CameraView, step: int) -> np.ndarray:
     """``image`` with the view's skeletons drawn, when it has any."""
     if view.skeleton_uv is None or len(view.skeleton_uv) == 0:
         return image
-    from carlaocc.stages.scenes.pedestrians import SKELETON_BONES
+    from carlaocc.stages.scenes.people.pedestrians import SKELETON_BONES
 
     return draw_skeletons(image, view.skeleton_uv, view.skeleton_visible, SKELETON_BONES, step)
 

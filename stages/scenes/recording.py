@@ -1,6 +1,6 @@
 """Recorded towns and sequences: a CARLA recording (read by
 :mod:`carlaocc.catalog.carla_recording`) on the town contract and as scenes records, the way the
-simulated ones are (:mod:`carlaocc.stages.scenes.traffic`). Pure compute on parsed objects.
+simulated ones are (:mod:`carlaocc.stages.scenes.traffic.simulation`). Pure compute on parsed objects.
 
 World frame: the recording's right-handed world (x forward, y left, z up, metres), kept as is.
 

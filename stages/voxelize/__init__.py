@@ -7,8 +7,8 @@
 ``voxelize_scene``/``voxelize_tiles`` compose a frame's meshes in elevation order into
 semantic/instance volumes (whole, or one x-slab at a time); ``visibility_masks`` casts the rig's
 camera and LiDAR rays through them (DDA ray traversal; the rig's rays as vertical fans);
-``instance_flow`` gives dynamic voxels their velocity; ``resample`` pools and resamples onto
-coarser grids and other datasets' grids.
+``instance_flow`` gives dynamic voxels their velocity; ``pooling`` pools onto coarser grids of
+ours (resampling onto other datasets' grids is :mod:`carlaocc.stages.export`).
 """
 
 from carlaocc.stages.voxelize.compose import elevation_order, voxelize_scene, voxelize_tiles

@@ -66,6 +66,8 @@ __all__ = [
     "to_voxel_units",
     "paint_surface",
     "paint_interior",
+    "shape3",
+    "check_mesh",
 ]
 
 # Slack (voxel units) widening every candidate range (bounding ranges, per-column plane ranges,
@@ -658,14 +660,16 @@ def _interior_paint(ptr, zs, i0, j0, nj, ny, nz, out_a, out_b, val_a, val_b):
 # ----------------------------------------------------------------------------------------------
 
 
-def _shape3(shape) -> tuple[int, int, int]:
+def shape3(shape) -> tuple[int, int, int]:
+    """``shape`` as three positive ints (ValueError otherwise)."""
     nx, ny, nz = (int(s) for s in shape)
     if nx <= 0 or ny <= 0 or nz <= 0:
         raise ValueError(f"grid shape must be positive, got {shape!r}")
     return nx, ny, nz
 
 
-def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+def check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, F)``: contiguous float64 ``(n, 3)`` vertices and int64 ``(m, 3)`` faces, every index checked."""
     V = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(F) and (F.min() < 0 or F.max() >= len(V)):
@@ -694,8 +698,8 @@ def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
     Meshes of at least ``PARALLEL_MIN_TRIANGLES`` triangles use numba's threads
     (``numba.set_num_threads``, per calling thread); smaller ones run in the calling thread.
     """
-    nx, ny, nz = _shape3(shape)
-    P, F = _check_mesh(P, faces)
+    nx, ny, nz = shape3(shape)
+    P, F = check_mesh(P, faces)
     if len(F) == 0:
         return
     write_b = out_b is not None
@@ -715,8 +719,8 @@ def surface_voxels(vertices, faces, origin, voxel_size: float, shape) -> np.ndar
     Uses one uint8 scratch mask of the grid's size (409 MB at 0.05 m on the default region; pages
     never touched are never allocated).
     """
-    nx, ny, nz = _shape3(shape)
-    V, F = _check_mesh(vertices, faces)
+    nx, ny, nz = shape3(shape)
+    V, F = check_mesh(vertices, faces)
     if len(F) == 0:
         return np.zeros(0, dtype=np.int64)
     P = to_voxel_units(V, origin, voxel_size)
@@ -760,8 +764,8 @@ def fill_interior(vertices, faces, origin, voxel_size: float, shape) -> np.ndarr
     (z0 <= zc < z1) are inside. Meaningful for closed (watertight) meshes; the mesh may extend
     beyond the grid (crossings outside still count for the parity).
     """
-    nx, ny, nz = _shape3(shape)
-    V, F = _check_mesh(vertices, faces)
+    nx, ny, nz = shape3(shape)
+    V, F = check_mesh(vertices, faces)
     if len(F) == 0:
         return np.zeros(0, dtype=np.int64)
     P = to_voxel_units(V, origin, voxel_size)
@@ -778,8 +782,8 @@ def fill_interior(vertices, faces, origin, voxel_size: float, shape) -> np.ndarr
 def paint_interior(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
     """Write ``val_a``/``val_b`` into flat ``out_a``/``out_b`` at the voxels whose centre is inside
     the closed mesh given in voxel units ``P``."""
-    nx, ny, nz = _shape3(shape)
-    P, F = _check_mesh(P, faces)
+    nx, ny, nz = shape3(shape)
+    P, F = check_mesh(P, faces)
     if len(F) == 0:
         return
     win = _fill_window(P, F, nx, ny)

@@ -34,7 +34,8 @@ Algorithm 1: 3D DDA (any rays; Amanatides & Woo 1987)
 Each ray is traversed in voxel units, where the ray parameter ``t`` is the travelled distance in
 voxels. The ray is first clipped to the grid box ``[0, n]^3`` by a slab test (``t`` from 0, or
 from where it enters when the origin is outside, to where it leaves or reaches ``max_range``);
-rays that miss the grid do nothing. From the voxel of the entry point the traversal steps one
+rays that miss the grid do nothing (:mod:`carlaocc.stages.voxelize.dda` holds the clipping and stepping
+shared with the ray metrics). From the voxel of the entry point the traversal steps one
 voxel at a time along the axis whose next boundary crossing ``tMax`` is nearest. A point exactly
 on a voxel face belongs to the upper voxel (``floor``). Ties (a ray through an edge or corner)
 step x before y before z, so such a ray marks one of the voxels it only touches at that edge; a
@@ -103,6 +104,7 @@ from numba.extending import intrinsic
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
 from carlaocc.stages.scratch import scratch
+from carlaocc.stages.voxelize.dda import axis_setup, clamp_floor, slab
 
 __all__ = [
     "PARALLEL_MIN_FANS",
@@ -282,47 +284,6 @@ def _unpack_block(mask, ny, i0, j0, bx, by, nz, W, out, out32, use32):
 # ----------------------------------------------------------------------------------------------
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _axis_setup(o, d, i, n):
-    """Per-axis DDA state for origin coordinate ``o`` and direction ``d`` (voxel units) from voxel
-    ``i`` of an axis of ``n`` voxels: (tMax, tDelta, step, voxels left before leaving the grid);
-    a zero component gets infinite tMax/tDelta (no division by zero) and never steps."""
-    if d > 0.0:
-        return (i + 1.0 - o) / d, 1.0 / d, 1, n - 1 - i
-    if d < 0.0:
-        return (i - o) / d, -1.0 / d, -1, i
-    return math.inf, math.inf, 0, n  # never steps along this axis (never the minimum)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _slab(o, d, n, t0, t1):
-    """Clip [t0, t1] to the slab [0, n] of one axis (voxel units); empty when t0 > t1 after."""
-    if d != 0.0:
-        inv = 1.0 / d
-        ta = (0.0 - o) * inv
-        tb = (n - o) * inv
-        if ta > tb:
-            ta, tb = tb, ta
-        t0 = max(t0, ta)
-        t1 = min(t1, tb)
-    elif not (o >= 0.0 and o < n):
-        # parallel to the slab and outside it (a ray in the plane o == n belongs to voxel n)
-        t0 = 1.0
-        t1 = 0.0
-    return t0, t1
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _clamp_floor(x, n):
-    """Voxel of coordinate x (floor), clamped to [0, n - 1]."""
-    i = int(math.floor(min(max(x, -1.0), n + 1.0)))  # noqa: RUF046 (an int for numba whatever floor returns)
-    if i < 0:
-        return 0
-    if i > n - 1:
-        return n - 1
-    return i
-
-
 @njit(cache=True, nogil=True)
 def _trace(occ, mask, nx, ny, nz, W, ox, oy, oz, dx, dy, dz, t_range):
     """Traverse one ray (origin o, direction d, both in voxel units; t_range voxels) through the
@@ -335,19 +296,19 @@ def _trace(occ, mask, nx, ny, nz, W, ox, oy, oz, dx, dy, dz, t_range):
     dy /= norm
     dz /= norm
     # 1. clip the ray [0, t_range] to the grid box [0, n]^3 (slab test); a miss does nothing
-    t0, t1 = _slab(ox, dx, nx, 0.0, t_range)
-    t0, t1 = _slab(oy, dy, ny, t0, t1)
-    t0, t1 = _slab(oz, dz, nz, t0, t1)
+    t0, t1 = slab(ox, dx, nx, 0.0, t_range)
+    t0, t1 = slab(oy, dy, ny, t0, t1)
+    t0, t1 = slab(oz, dz, nz, t0, t1)
     if not (t0 <= t1):
         return
     # 2. entry voxel: the one containing the entry point (clamped against rounding at the faces)
-    i = _clamp_floor(ox + t0 * dx, nx)
-    j = _clamp_floor(oy + t0 * dy, ny)
-    k = _clamp_floor(oz + t0 * dz, nz)
+    i = clamp_floor(ox + t0 * dx, nx)
+    j = clamp_floor(oy + t0 * dy, ny)
+    k = clamp_floor(oz + t0 * dz, nz)
     # 3. per axis: t of the next boundary crossing, t between crossings, step, voxels left
-    tmx, tdx, sx, lx = _axis_setup(ox, dx, i, nx)
-    tmy, tdy, sy, ly = _axis_setup(oy, dy, j, ny)
-    tmz, tdz, sz, lz = _axis_setup(oz, dz, k, nz)
+    tmx, tdx, sx, lx = axis_setup(ox, dx, i, nx)
+    tmy, tdy, sy, ly = axis_setup(oy, dy, j, ny)
+    tmz, tdz, sz, lz = axis_setup(oz, dz, k, nz)
     # 4. march: mark the voxel (bits gathered per word in a register), stop on the first occupied
     #    one, else step to the nearest crossing (ties: x, then y, then z); stop before a crossing
     #    at t >= t1 or when leaving the grid
@@ -627,16 +588,16 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
     if n == 0 or not (math.isfinite(ox + oy + oz) and t_range >= 0.0):
         return
     # 1. clip the horizontal line to the grid's footprint [0, nx] x [0, ny] (slab test in r)
-    r0, r1 = _slab(ox, hx, nx, 0.0, math.inf)
-    r0, r1 = _slab(oy, hy, ny, r0, r1)
+    r0, r1 = slab(ox, hx, nx, 0.0, math.inf)
+    r0, r1 = slab(oy, hy, ny, r0, r1)
     if not (r0 <= r1):
         return
     # 2. 2D DDA state of the entry column; horizontal range limit of each ray; the largest gap
     #    between neighbouring slopes (rays are less than a voxel apart while gmax * r < 1)
-    i = _clamp_floor(ox + r0 * hx, nx)
-    j = _clamp_floor(oy + r0 * hy, ny)
-    tmx, tdx, sx, lx = _axis_setup(ox, hx, i, nx)
-    tmy, tdy, sy, ly = _axis_setup(oy, hy, j, ny)
+    i = clamp_floor(ox + r0 * hx, nx)
+    j = clamp_floor(oy + r0 * hy, ny)
+    tmx, tdx, sx, lx = axis_setup(ox, hx, i, nx)
+    tmy, tdy, sy, ly = axis_setup(oy, hy, j, ny)
     gmax = 0.0
     ns = 0
     for v in range(n):

@@ -62,7 +62,7 @@ from numba import njit, prange
 
 from scipy import ndimage
 
-from carlaocc.stages.voxelize.kernels import _check_mesh, _shape3, paint_surface, to_voxel_units
+from carlaocc.stages.voxelize.kernels import check_mesh, paint_surface, shape3, to_voxel_units
 
 __all__ = ["WindingTree", "winding_tree", "winding_numbers", "winding_interior", "paint_winding_interior",
            "BETA", "LEAF_SIZE", "INSIDE"]
@@ -204,7 +204,7 @@ def _build(P, F, leaf_size):
 def winding_tree(vertices, faces) -> WindingTree:
     """The tree of a triangle mesh (any units and frame; triangles with a non-finite corner are
     left out). An empty mesh gives a tree whose winding number is 0 everywhere."""
-    V, F = _check_mesh(vertices, faces)
+    V, F = check_mesh(vertices, faces)
     if len(F):
         F = F[np.isfinite(V[F].reshape(len(F), -1)).all(axis=1)]
     F = np.ascontiguousarray(F)
@@ -465,7 +465,7 @@ def _classify(P: np.ndarray, F: np.ndarray, shape, tree: WindingTree | None, shi
     """Sorted C-order linear indices of the grid voxels (voxel units ``P``; ``shape``) whose centre
     has a winding number above :data:`INSIDE`. ``tree`` (built on ``P + shift``) and ``shift``
     let a caller build the tree once and classify tile after tile."""
-    nx, ny, nz = _shape3(shape)
+    nx, ny, nz = shape3(shape)
     fin = P[np.isfinite(P).all(axis=1)]
     if len(fin) == 0:
         return np.zeros(0, dtype=np.int64)
@@ -533,7 +533,7 @@ def winding_interior(vertices, faces, origin, voxel_size: float, shape) -> np.nd
     disagree, is evaluated on a lattice of every :data:`LATTICE`-th voxel, cells whose corners (in
     the same component) disagree being evaluated down to voxel by voxel.
     """
-    V, F = _check_mesh(vertices, faces)
+    V, F = check_mesh(vertices, faces)
     if len(F) == 0:
         return np.zeros(0, dtype=np.int64)
     P = to_voxel_units(V, origin, voxel_size)
@@ -545,7 +545,7 @@ def paint_winding_interior(P, faces, shape, out_a, out_b, val_a, val_b, tree: Wi
     """Write ``val_a``/``val_b`` into flat ``out_a``/``out_b`` at the voxels whose centre has a
     winding number above 0.5, for the mesh in voxel units ``P``. ``tree`` may be the tree of
     ``P + shift`` (a tile's voxel units plus the tile's offset), built once per mesh."""
-    P, F = _check_mesh(P, faces)
+    P, F = check_mesh(P, faces)
     if len(F) == 0:
         return
     idx = _classify(P, F, shape, tree, shift)

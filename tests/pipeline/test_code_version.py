@@ -20,14 +20,14 @@ def test_each_stage_covers_its_compute_and_its_wiring():
     assert {"carlaocc.stages.quality.continuity", "carlaocc.stages.quality.temporal"} <= closure("quality")
     assert {"carlaocc.stages.report.statistics", "carlaocc.stages.report.plots"} <= closure("report")
     assert any(m.startswith("carlaocc.stages.ingest.procedural") for m in closure("ingest"))
-    assert any(m.startswith("carlaocc.stages.scenes.town") for m in closure("scenes"))
+    assert any(m.startswith("carlaocc.stages.scenes.town.") for m in closure("scenes"))
 
 
 def test_a_stage_does_not_cover_code_it_never_runs():
     # editing the procedural town or the traffic re-runs the scenes stage, not every voxelized frame
     for stage in ("voxelize", "sensors", "quality"):
         ran = closure(stage)
-        assert not any(m.startswith(("carlaocc.stages.scenes.town", "carlaocc.stages.scenes.traffic",
+        assert not any(m.startswith(("carlaocc.stages.scenes.town.", "carlaocc.stages.scenes.traffic.",
                                      "carlaocc.stages.ingest", "carlaocc.stages.report")) for m in ran), stage
     assert not any(m.startswith("carlaocc.stages.voxelize") for m in closure("quality"))
     assert not any(m.startswith("carlaocc.stages.quality") for m in closure("voxelize"))

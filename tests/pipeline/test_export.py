@@ -7,7 +7,7 @@ import numpy as np
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.stages.export.boxes import grid_coverage
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, SEMANTICKITTI_GRID
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, SEMANTICKITTI_GRID
 
 
 def test_coverage_without_masks_is_our_region_in_the_target_grid():

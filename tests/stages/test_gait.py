@@ -9,12 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from carlaocc.stages.scenes import gait
-from carlaocc.stages.scenes.gait.cycles import canonical_cycle, detect_gait_cycles
-from carlaocc.stages.scenes.gait.kinematics import BVH_TO_ZUP, clip_positions, forward_kinematics, select_gait_joints
-from carlaocc.stages.scenes.gait.matching import GaitModel, phase_accuracy
-from carlaocc.stages.scenes.gait.walker import add_joint_noise, procedural_walk, resample_walk
+from carlaocc.stages.scenes.people import gait
+from carlaocc.stages.scenes.people.gait.cycles import canonical_cycle, detect_gait_cycles
+from carlaocc.stages.scenes.people.gait.kinematics import (
+    BVH_TO_ZUP, clip_positions, forward_kinematics, select_gait_joints,
+)
+from carlaocc.stages.scenes.people.gait.matching import GaitModel, phase_accuracy
+from carlaocc.stages.scenes.people.gait.walker import add_joint_noise, procedural_walk, resample_walk
 from shared_data import require, shared_path
+
+GAIT = "carlaocc.stages.scenes.people.gait."
 
 CLIP = shared_path("motion/cmu_131_01_walk_metres.bvh")
 SPEEDS = (0.8, 1.2, 1.6)
@@ -207,5 +211,5 @@ def test_gait_modules_are_pure_compute():
                 mods.add(node.module)
         ours = {m for m in mods if m.startswith("carlaocc.")}
         assert mods - ours <= {"__future__", "collections.abc", "dataclasses", "typing", "numpy"}, path.name
-        assert all(m == "carlaocc.schemas.motion" or m.startswith("carlaocc.stages.scenes.gait.") for m in ours), path.name
+        assert all(m == "carlaocc.schemas.motion" or m.startswith(GAIT) for m in ours), path.name
         assert "open(" not in src

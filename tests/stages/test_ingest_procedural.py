@@ -17,7 +17,7 @@ ID = {name: taxonomy.by_name(name).id for name in (
     "Car", "Truck", "Bus", "Train", "Building", "Vegetation", "Pole", "TrafficLight", "TrafficSign", "Pedestrian",
     "Static",
 )}  # fmt: skip
-POLE_RADIUS_ASSUMED = 0.09  # stages.scenes.town.POLE_RADIUS: every procedural pole is within 5 cm of it
+POLE_RADIUS_ASSUMED = 0.09  # stages.scenes.placing.POLE_RADIUS: every procedural pole is within 5 cm of it
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,8 @@ from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.geometry import pose_from_list
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes.network import check_network
-from carlaocc.stages.scenes.odr_network import build_opendrive_network
-from carlaocc.stages.scenes.odr_town import build_opendrive_town, build_opendrive_town_with_stats
+from carlaocc.stages.scenes.opendrive.network import build_opendrive_network
+from carlaocc.stages.scenes.opendrive.town import build_opendrive_town, build_opendrive_town_with_stats
 from shared_data import needs, shared_path
 
 DATA = shared_path("opendrive")
@@ -328,7 +328,7 @@ def test_crossroads_signals(crossroads, extents):
         by.setdefault(a.subclass, []).append((pole, yaw, T[2, 3]))
     assert len(by["vehicle_signal"]) == 4 and len(by["stop"]) == 3 and len(by["yield"]) == 1
     assert len(by["speed_limit"]) == 2
-    from carlaocc.stages.scenes import opendrive as od
+    from carlaocc.stages.scenes.opendrive import geometry as od
 
     for road in odr.roads:
         for sig in road.signals:

@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from scipy.special import fresnel
 
 from carlaocc.schemas.opendrive import Geometry, LaneRecord, LaneSection, Poly3Record, Road, RoadMark
-from carlaocc.stages.scenes import opendrive as od
+from carlaocc.stages.scenes.opendrive import geometry as od
 from shared_data import needs, shared_path
 
 DATA = shared_path("opendrive")

@@ -14,13 +14,15 @@ import pytest
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.stages.geometry import concatenate, is_watertight
 from carlaocc.stages.ingest.procedural.catalogue import _records  # tests may reach into the builders
-from carlaocc.stages.ingest.procedural.people import _pedestrian
-from carlaocc.stages.scenes import pedestrians as P
-from carlaocc.stages.scenes.gait.cycles import canonical_cycle
-from carlaocc.stages.scenes.gait.descriptor import window_descriptor, window_descriptors
-from carlaocc.stages.scenes.gait.matching import GaitModel
-from carlaocc.stages.scenes.gait.walker import add_joint_noise, procedural_walk
-from carlaocc.stages.scenes.traffic_walkers import GAIT_STEP  # the simulation's step length / body height
+from carlaocc.stages.ingest.procedural.people import pedestrian
+from carlaocc.stages.scenes.people import pedestrians as P
+from carlaocc.stages.scenes.people.gait.cycles import canonical_cycle
+from carlaocc.stages.scenes.people.gait.descriptor import window_descriptor, window_descriptors
+from carlaocc.stages.scenes.people.gait.matching import GaitModel
+from carlaocc.stages.scenes.people.gait.walker import add_joint_noise, procedural_walk
+from carlaocc.stages.scenes.traffic.walkers import GAIT_STEP  # the simulation's step length / body height
+
+GAIT = "carlaocc.stages.scenes.people.gait."
 
 D = 32
 RATE = 20.0
@@ -54,7 +56,7 @@ def _errors(pred, ph):
 
 
 def _pedestrian_geometry(subclass: str, seed: int) -> AssetGeometry:
-    parts = _pedestrian(subclass)(np.random.default_rng(seed))
+    parts = pedestrian(subclass)(np.random.default_rng(seed))
     return _records("Pedestrian", subclass, seed, parts)[2]
 
 
@@ -336,5 +338,5 @@ def test_pedestrians_module_is_pure_compute():
             mods.add(node.module)
     ours = {m for m in mods if m.startswith("carlaocc.")}
     assert mods - ours <= {"__future__", "re", "dataclasses", "functools", "numpy"}
-    assert all(m == "carlaocc.schemas.meshes" or m.startswith("carlaocc.stages.scenes.gait.") for m in ours), ours
+    assert all(m == "carlaocc.schemas.meshes" or m.startswith(GAIT) for m in ours), ours
     assert "open(" not in src

@@ -1,4 +1,4 @@
-"""Multi-resolution pooling and resampling to other datasets' grids (stages/voxelize/resample.py).
+"""Multi-resolution pooling and resampling to other datasets' grids (stages/voxelize/pooling.py, stages/export/resample.py).
 
 Orientation tests place objects at known LiDAR-frame positions (x forward, y left, z up) and check
 the exact target voxel index, so a swapped or mirrored axis fails.
@@ -25,17 +25,13 @@ from carlaocc.schemas.taxonomy import (
     mapping,
     thing_ids,
 )
-from carlaocc.stages.voxelize.resample import (
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, _bin_reduce, resample
+from carlaocc.stages.voxelize.pooling import (
     DEFAULT_POOLING_PRIORITY,
-    OCC3D_NUSCENES,
-    SSCBENCH_KITTI360,
-    TargetGrid,
-    _bin_reduce,
     pool_instances,
     pool_to_grid,
     pooling_disagreement,
     rank_table,
-    resample,
 )
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -435,7 +431,7 @@ def test_classes_mapped_to_target_empty_do_not_erase_road():
 @given(seed=st.integers(0, 10**6), f=st.sampled_from([1, 2, 4]), shift=st.tuples(st.integers(-6, 6), st.integers(-6, 6),
                                                                                   st.integers(-6, 6)))
 def test_pool_window_agrees_with_brute_force(seed, f, shift):
-    from carlaocc.stages.voxelize.resample import pool_window, rank_table
+    from carlaocc.stages.voxelize.pooling import pool_window, rank_table
 
     rng = np.random.default_rng(seed)
     fine = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(1.2, 1.0, 0.8), voxel_size=0.1)
@@ -460,7 +456,7 @@ def test_pool_window_agrees_with_brute_force(seed, f, shift):
 
 
 def test_pool_window_of_the_release_grids_on_the_default_region():
-    from carlaocc.stages.voxelize.resample import pool_window
+    from carlaocc.stages.voxelize.pooling import pool_window
 
     fine = GridSpec(voxel_size=0.1)  # 768 x 512 x 130 from (-25.6, -25.6, -3)
     sem = np.zeros(fine.shape, np.uint8)

@@ -21,7 +21,7 @@ from carlaocc.stages.geometry import (pose_from_list, pose_matrix, pose_to_list,
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes import build_town, simulate_sequence
 from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame
-from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts
+from carlaocc.stages.scenes.traffic.simulation import TRAFFIC_LEVELS, TrafficLevel, ego_starts
 from carlaocc.stages.voxelize import voxelize_scene
 
 VOXEL = 0.1  # m

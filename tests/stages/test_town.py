@@ -1,4 +1,4 @@
-"""Procedural towns in three styles on the town contract (stages.scenes.town and its town_* modules)."""
+"""Procedural towns in three styles on the town contract (the stages.scenes.town package)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.geometry import is_watertight, pose_from_list, transform_points
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes.network import check_network
-from carlaocc.stages.scenes.town import build_procedural_town, town_name
-from carlaocc.stages.scenes.town_layout import LANE_WIDTH, STYLES
+from carlaocc.stages.scenes.town.build import build_procedural_town, town_name
+from carlaocc.stages.scenes.town.layout import LANE_WIDTH, STYLES
 
 THINGS = set(taxonomy.thing_ids())
 CURB = ScenesConfig().curb_height

@@ -11,10 +11,12 @@ import pytest
 from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.geometry import pose_from_list
 from carlaocc.stages.ingest import ingest_procedural
-from carlaocc.stages.scenes import traffic
+from carlaocc.stages.scenes.traffic import simulation as traffic
 from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
-from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts, simulate_sequence, simulate_town
-from carlaocc.stages.scenes.traffic_vehicles import EGO_GAP, Vehicle
+from carlaocc.stages.scenes.traffic.simulation import (
+    TRAFFIC_LEVELS, TrafficLevel, ego_starts, simulate_sequence, simulate_town,
+)
+from carlaocc.stages.scenes.traffic.vehicles import EGO_GAP, Vehicle
 
 R_CENTRE = 30.0  # m, road centre line radius
 HALF = 0.22  # rad: the junction spans angles -HALF .. HALF
@@ -267,8 +269,8 @@ def test_traffic_module_constants_match_design():
 
 
 def test_spawned_followers_start_slow_enough_to_stop_behind_their_leader(lib):
-    from carlaocc.stages.scenes.traffic import safe_start_speeds
-    from carlaocc.stages.scenes.traffic_vehicles import IDM_DECEL, Vehicle
+    from carlaocc.stages.scenes.traffic.simulation import safe_start_speeds
+    from carlaocc.stages.scenes.traffic.vehicles import IDM_DECEL, Vehicle
 
     car = next(a for a in lib.assets if a.category == "Car")
     L = float(car.extent[0])

@@ -11,7 +11,7 @@ import pytest
 from carlaocc.schemas.configs import IngestConfig, ScenesConfig, TownSpec
 from carlaocc.stages.ingest import ingest_procedural
 from carlaocc.stages.scenes import build_town, simulate_sequence
-from carlaocc.stages.scenes.traffic import TRAFFIC_LEVELS, TrafficLevel, ego_starts
+from carlaocc.stages.scenes.traffic.simulation import TRAFFIC_LEVELS, TrafficLevel, ego_starts
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_traffic import _boxes, _overlap  # noqa: E402

@@ -13,7 +13,7 @@ for ``--help``, options, writer), and :data:`FORMATS` lists them in this order:
 * ``spec``    — what a format is, and what every format shares (sequences, label table, splits)
 
 What a format computes is pure and lives in :mod:`carlaocc.stages.export` (and
-:mod:`carlaocc.stages.voxelize.resample`); the files it writes are encoded in
+:mod:`carlaocc.stages.export.resample`); the files it writes are encoded in
 :mod:`carlaocc.catalog.formats`. Every export writes ``grid.json`` (the grid its files index and
 ``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`) and,
 for a root with splits, ``splits/{train,val,test}.txt`` restricted to the exported sequences.

@@ -37,7 +37,7 @@ from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, fra
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.flow import uniocc_flow
 from carlaocc.stages.geometry import boxes_in_frame
-from carlaocc.stages.voxelize.resample import OPENOCC_V2, UNIOCC, resample, resample_panoptic
+from carlaocc.stages.export.resample import OPENOCC_V2, UNIOCC, resample, resample_panoptic
 
 GRIDS = {"openocc-v2": OPENOCC_V2, "uniocc": UNIOCC}
 NOTES = {"openocc-v2": {"flow": "flow[..., 0:2]: vx, vy along the ego axes, m/s (world motion; 0 static)"},

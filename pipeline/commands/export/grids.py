@@ -1,5 +1,5 @@
 """Ours resampled onto other datasets' grids by class priority
-(:func:`carlaocc.stages.voxelize.resample.resample`; export from the finest voxel size built):
+(:func:`carlaocc.stages.export.resample.resample`; export from the finest voxel size built):
 
 * ``occ3d``: ``gts/<sequence>/<frame:06d>/labels.npz`` -- Occ3D-nuScenes grid (200 x 200 x 16,
   0.4 m, ego frame, range [-40, -40, -1, 40, 40, 5.4] m), Occ3D labels (free = 17), with
@@ -40,7 +40,7 @@ from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, one
                                                     sequence_splits, voxelized_or_refuse)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import grid_coverage
-from carlaocc.stages.voxelize.resample import (OCC3D_NUSCENES, SEMANTICKITTI_GRID, SSCBENCH_KITTI360, SURROUNDOCC_GRID,
+from carlaocc.stages.export.resample import (OCC3D_NUSCENES, SEMANTICKITTI_GRID, SSCBENCH_KITTI360, SURROUNDOCC_GRID,
                                                TargetGrid, downsample_ssc, resample)
 
 

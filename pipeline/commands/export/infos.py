@@ -43,7 +43,7 @@ from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, fra
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import points_in_boxes
 from carlaocc.stages.geometry import boxes_in_frame, quaternion_wxyz
-from carlaocc.stages.voxelize.resample import OCC3D_NUSCENES, resample
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, resample
 
 DETECTION_CLASSES = ("car", "truck", "construction_vehicle", "bus", "trailer", "barrier", "motorcycle", "bicycle",
                      "pedestrian", "traffic_cone")

@@ -13,7 +13,7 @@ How our dataset maps onto it:
 
 * **Grids.** The three release grids are pooled from the occupancy built at ``--voxel-size``
   (0.1 m, the release's raw resolution, by default; any size dividing 0.1 m works) with the
-  class-priority rule of :func:`carlaocc.stages.voxelize.resample.pool_window`; at 0.1 m on the
+  class-priority rule of :func:`carlaocc.stages.voxelize.pooling.pool_window`; at 0.1 m on the
   default region ``vs_0_1`` is our grid voxel for voxel.
 * **Towns and sequences.** Our towns get the release's town numbers in order (1..7, 10, then
   11...; a recorded ``TownNN_Opt`` keeps its number); within a town, sequences are numbered in
@@ -54,7 +54,7 @@ from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import FrameRecord, SequenceRecord
 from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.sensors import camera_poses
-from carlaocc.stages.voxelize.resample import pool_window
+from carlaocc.stages.voxelize.pooling import pool_window
 
 LEVEL_ORDER = {"none": 0, "low": 1, "medium": 2, "high": 3}
 

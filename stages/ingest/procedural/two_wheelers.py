@@ -10,8 +10,8 @@ import numpy as np
 
 from carlaocc.schemas.meshes import MeshPart
 from carlaocc.stages.ingest.procedural.primitives import (
-    _PAINTS, Builder, _beam, _box, _cylinder, _ellipsoid, _extrude, _frustum, _glass, _part, _pick, _u,
-    _union,
+    PAINTS, Builder, beam, box, cylinder, ellipsoid, extrude, frustum, glass_part, part, pick, uniform,
+    union,
 )
 
 
@@ -42,9 +42,9 @@ _MOTOS: dict[str, dict] = {
 def _bicycle_parts(rng: np.random.Generator, kind: str) -> tuple[list[MeshPart], dict[str, np.ndarray]]:
     """Bicycle parts (class Bicycle) of ``kind`` (:data:`_BIKES`) and the rider anchor points."""
     s = _BIKES[kind]
-    r, tw, wb = _u(rng, *s["r"]), s["tw"], _u(rng, *s["wb"])
-    seat_z, bar_z, bar_w, t = _u(rng, *s["seat"]), _u(rng, *s["bar"]), _u(rng, *s["bar_w"]), s["tube"]
-    frame_c = _pick(rng, _PAINTS)
+    r, tw, wb = uniform(rng, *s["r"]), s["tw"], uniform(rng, *s["wb"])
+    seat_z, bar_z, bar_w, t = uniform(rng, *s["seat"]), uniform(rng, *s["bar"]), uniform(rng, *s["bar_w"]), s["tube"]
+    frame_c = pick(rng, PAINTS)
     xf, xr = wb / 2, -wb / 2
     cargo = kind == "cargo_bike"
     rf = 0.25 if cargo else r  # a long-john cargo bike has a small front wheel
@@ -53,37 +53,37 @@ def _bicycle_parts(rng: np.random.Generator, kind: str) -> tuple[list[MeshPart],
     bar = np.array([xr + 0.85, 0.0, bar_z]) if cargo else np.array([xf - 0.12, 0.0, bar_z])
 
     def tube(name: str, p0, p1, size: float = t) -> MeshPart:
-        return _part(name, _beam(p0, p1, size, size), "Bicycle", "metal", color=frame_c)
+        return part(name, beam(p0, p1, size, size), "Bicycle", "metal", color=frame_c)
 
     parts = [
-        _part("wheel_front", _cylinder(rf, (xf, -tw / 2, rf), (xf, tw / 2, rf), 20), "Bicycle", "rubber"),
-        _part("wheel_rear", _cylinder(r, (xr, -tw / 2, r), (xr, tw / 2, r), 20), "Bicycle", "rubber"),
+        part("wheel_front", cylinder(rf, (xf, -tw / 2, rf), (xf, tw / 2, rf), 20), "Bicycle", "rubber"),
+        part("wheel_rear", cylinder(r, (xr, -tw / 2, r), (xr, tw / 2, r), 20), "Bicycle", "rubber"),
         tube("top_tube", seat + (0.05, 0, -0.08), bar + (-0.05, 0, -0.12)),
         tube("down_tube", pedal, bar + (-0.03, 0, -0.18)),
         tube("seat_tube", pedal + (0.0, 0, 0.02), seat + (0.0, 0, -0.04)),
         tube("chain_stay", pedal + (-0.02, 0, 0.0), (xr + 0.02, 0.0, r)),
-        _part("saddle", _box(seat + (-0.12, -0.07, -0.02), seat + (0.12, 0.07, 0.04)), "Bicycle", "leather"),
-        _part("handlebar", _box(bar + (-0.02, -bar_w / 2, -0.02), bar + (0.02, bar_w / 2, 0.02)), "Bicycle", "metal"),
+        part("saddle", box(seat + (-0.12, -0.07, -0.02), seat + (0.12, 0.07, 0.04)), "Bicycle", "leather"),
+        part("handlebar", box(bar + (-0.02, -bar_w / 2, -0.02), bar + (0.02, bar_w / 2, 0.02)), "Bicycle", "metal"),
     ]
     if cargo:
         parts += [
             tube("cargo_beam", pedal + (0.02, 0, 0.0), (xf - 0.12, 0.0, 0.30)),
             tube("fork", (xf - 0.12, 0.0, 0.33), (xf - 0.01, 0.0, rf + 0.02)),
-            _part("cargo_box", _box((bar[0] + 0.12, -0.33, 0.36), (xf - 0.30, 0.33, 0.85)), "Bicycle", "wood"),
+            part("cargo_box", box((bar[0] + 0.12, -0.33, 0.36), (xf - 0.30, 0.33, 0.85)), "Bicycle", "wood"),
         ]
     else:
         fork_t = t * 1.6 if kind == "mountain_bike" else t
         parts.append(tube("fork", bar + (-0.02, 0, -0.10), (xf - 0.01, 0.0, r + 0.02), fork_t))
     if kind == "city_bike":
-        parts.append(_part("rack", _box((xr - 0.15, -0.08, 2 * r + 0.05), (xr + 0.22, 0.08, 2 * r + 0.08)), "Bicycle",
+        parts.append(part("rack", box((xr - 0.15, -0.08, 2 * r + 0.05), (xr + 0.22, 0.08, 2 * r + 0.08)), "Bicycle",
                            "metal"))  # fmt: skip
         if rng.uniform() < 0.5:
-            basket = _box((bar[0] + 0.06, -0.18, bar_z - 0.33), (bar[0] + 0.40, 0.18, bar_z - 0.06))
-            parts.append(_part("basket", basket, "Bicycle", "wood"))
+            basket = box((bar[0] + 0.06, -0.18, bar_z - 0.33), (bar[0] + 0.40, 0.18, bar_z - 0.06))
+            parts.append(part("basket", basket, "Bicycle", "wood"))
     elif kind == "road_bike":
-        drops = _union(*[_beam(bar + (0.0, sy * (bar_w / 2 - 0.02), 0.0), bar + (0.09, sy * (bar_w / 2 - 0.02), -0.13),
+        drops = union(*[beam(bar + (0.0, sy * (bar_w / 2 - 0.02), 0.0), bar + (0.09, sy * (bar_w / 2 - 0.02), -0.13),
                                0.025, 0.025) for sy in (-1.0, 1.0)])  # fmt: skip
-        parts.append(_part("drops", drops, "Bicycle", "metal"))
+        parts.append(part("drops", drops, "Bicycle", "metal"))
     return parts, {"seat": seat, "bar": bar, "pedal": pedal}
 
 
@@ -91,71 +91,71 @@ def _motorcycle_parts(rng: np.random.Generator, kind: str) -> tuple[list[MeshPar
     """Motorcycle / scooter / moped parts (class Motorcycle) of ``kind`` (:data:`_MOTOS`) and the
     rider anchor points."""
     s = _MOTOS[kind]
-    r, tw, wb = _u(rng, *s["r"]), s["tw"], _u(rng, *s["wb"])
-    seat_z, bar_z, bar_w = _u(rng, *s["seat"]), _u(rng, *s["bar"]), _u(rng, *s["bar_w"])
-    paint = _pick(rng, _PAINTS)
+    r, tw, wb = uniform(rng, *s["r"]), s["tw"], uniform(rng, *s["wb"])
+    seat_z, bar_z, bar_w = uniform(rng, *s["seat"]), uniform(rng, *s["bar"]), uniform(rng, *s["bar_w"])
+    paint = pick(rng, PAINTS)
     sem = "Motorcycle"
     xf, xr = wb / 2, -wb / 2
     seat = np.array([xr + (0.45 if kind == "cruiser" else 0.35 if kind == "scooter" else 0.30), 0.0, seat_z])
     bar = np.array([xf - 0.12, 0.0, bar_z])
     peg = np.array([s["peg"][0], 0.0, s["peg"][1]])
     parts = [
-        _part("wheel_front", _cylinder(r, (xf, -tw / 2, r), (xf, tw / 2, r), 20), sem, "rubber"),
-        _part("wheel_rear", _cylinder(r, (xr, -tw / 2, r), (xr, tw / 2, r), 20), sem, "rubber"),
-        _part("fork", _beam(bar + (-0.03, 0, -0.06), (xf - 0.02, 0.0, r + 0.05), 0.07, 0.07), sem, "metal"),
-        _part("handlebar", _box(bar + (-0.02, -bar_w / 2, -0.02), bar + (0.02, bar_w / 2, 0.02)), sem, "metal"),
+        part("wheel_front", cylinder(r, (xf, -tw / 2, r), (xf, tw / 2, r), 20), sem, "rubber"),
+        part("wheel_rear", cylinder(r, (xr, -tw / 2, r), (xr, tw / 2, r), 20), sem, "rubber"),
+        part("fork", beam(bar + (-0.03, 0, -0.06), (xf - 0.02, 0.0, r + 0.05), 0.07, 0.07), sem, "metal"),
+        part("handlebar", box(bar + (-0.02, -bar_w / 2, -0.02), bar + (0.02, bar_w / 2, 0.02)), sem, "metal"),
     ]
     windscreen = kind == "sport" or rng.uniform() < 0.35
     if kind == "sport":
         parts += [
-            _part("engine", _frustum((xr + 0.35, -0.20, 0.28), (xf - 0.35, 0.20, 0.62),
+            part("engine", frustum((xr + 0.35, -0.20, 0.28), (xf - 0.35, 0.20, 0.62),
                                      (xr + 0.30, -0.17), (xf - 0.40, 0.17)), sem, "metal"),  # fmt: skip
-            _part("tank", _box((0.0, -0.17, 0.62), (xf - 0.25, 0.17, bar_z - 0.18)), sem, "paint", color=paint),
-            _part("seat", _box((xr + 0.05, -0.15, 0.62), (-0.02, 0.15, seat_z)), sem, "leather"),
+            part("tank", box((0.0, -0.17, 0.62), (xf - 0.25, 0.17, bar_z - 0.18)), sem, "paint", color=paint),
+            part("seat", box((xr + 0.05, -0.15, 0.62), (-0.02, 0.15, seat_z)), sem, "leather"),
         ]
     elif kind == "cruiser":
         xt = (0.05 + xf - 0.35) / 2
         parts += [
-            _part("engine", _frustum((xr + 0.45, -0.22, 0.24), (xf - 0.45, 0.22, 0.62),
+            part("engine", frustum((xr + 0.45, -0.22, 0.24), (xf - 0.45, 0.22, 0.62),
                                      (xr + 0.40, -0.18), (xf - 0.50, 0.18)), sem, "metal"),  # fmt: skip
-            _part("tank", _ellipsoid((xt, 0.0, bar_z - 0.30), ((xf - 0.35 - 0.05) / 2, 0.16, 0.11)), sem, "paint",
+            part("tank", ellipsoid((xt, 0.0, bar_z - 0.30), ((xf - 0.35 - 0.05) / 2, 0.16, 0.11)), sem, "paint",
                   color=paint),  # fmt: skip
-            _part("seat", _box((xr + 0.20, -0.17, 0.55), (0.0, 0.17, seat_z)), sem, "leather"),
-            _part("exhaust", _cylinder(0.05, (xr + 0.05, -0.26, 0.36), (0.35, -0.26, 0.30), 10), sem, "metal",
+            part("seat", box((xr + 0.20, -0.17, 0.55), (0.0, 0.17, seat_z)), sem, "leather"),
+            part("exhaust", cylinder(0.05, (xr + 0.05, -0.26, 0.36), (0.35, -0.26, 0.30), 10), sem, "metal",
                   color=(200, 200, 205, 255)),  # fmt: skip
         ]
     elif kind == "scooter":
         parts += [
-            _part("floorboard", _box((xr + 0.45, -0.15, 0.22), (xf - 0.36, 0.15, 0.32)), sem, "plastic"),
-            _part("legshield", _extrude([(xf - 0.34, 0.22), (xf - 0.22, 0.22), (xf - 0.13, 0.95), (xf - 0.25, 0.95)],
+            part("floorboard", box((xr + 0.45, -0.15, 0.22), (xf - 0.36, 0.15, 0.32)), sem, "plastic"),
+            part("legshield", extrude([(xf - 0.34, 0.22), (xf - 0.22, 0.22), (xf - 0.13, 0.95), (xf - 0.25, 0.95)],
                                         -0.21, 0.21), sem, "paint", color=paint),  # fmt: skip
-            _part("rear_body", _ellipsoid((xr + 0.33, 0.0, 0.50), (0.42, 0.19, 0.22)), sem, "paint", color=paint),
-            _part("seat", _box((xr + 0.08, -0.14, 0.66), (xr + 0.68, 0.14, seat_z)), sem, "leather"),
+            part("rear_body", ellipsoid((xr + 0.33, 0.0, 0.50), (0.42, 0.19, 0.22)), sem, "paint", color=paint),
+            part("seat", box((xr + 0.08, -0.14, 0.66), (xr + 0.68, 0.14, seat_z)), sem, "leather"),
         ]
     else:  # moped: a light frame with a small engine and tank
         parts += [
-            _part("frame", _beam((xr + 0.30, 0.0, 0.62), bar + (-0.05, 0, -0.15), 0.05, 0.05), sem, "metal",
+            part("frame", beam((xr + 0.30, 0.0, 0.62), bar + (-0.05, 0, -0.15), 0.05, 0.05), sem, "metal",
                   color=paint),
-            _part("engine", _box((-0.25, -0.12, 0.20), (0.15, 0.12, 0.45)), sem, "metal"),
-            _part("tank", _box((xr + 0.05, -0.13, 0.50), (xr + 0.55, 0.13, 0.62)), sem, "paint", color=paint),
-            _part("seat", _box((xr + 0.10, -0.13, 0.64), (xr + 0.60, 0.13, seat_z)), sem, "leather"),
+            part("engine", box((-0.25, -0.12, 0.20), (0.15, 0.12, 0.45)), sem, "metal"),
+            part("tank", box((xr + 0.05, -0.13, 0.50), (xr + 0.55, 0.13, 0.62)), sem, "paint", color=paint),
+            part("seat", box((xr + 0.10, -0.13, 0.64), (xr + 0.60, 0.13, seat_z)), sem, "leather"),
         ]
     if windscreen:
-        screen = _beam(bar + (-0.02, 0, 0.02), bar + (0.10, 0, 0.30), 0.36, 0.01)
-        parts.append(_glass("windscreen", screen, sem))
+        screen = beam(bar + (-0.02, 0, 0.02), bar + (0.10, 0, 0.30), 0.36, 0.01)
+        parts.append(glass_part("windscreen", screen, sem))
     return parts, {"seat": seat, "bar": bar, "pedal": peg}
 
 
-def _two_wheeler(rng: np.random.Generator, kind: str) -> tuple[list[MeshPart], dict[str, np.ndarray]]:
+def two_wheeler(rng: np.random.Generator, kind: str) -> tuple[list[MeshPart], dict[str, np.ndarray]]:
     """Bicycle or motorcycle parts of ``kind`` and the rider anchor points (``seat``, ``bar``,
     ``pedal``: hip, hands and feet of a rider)."""
     return _bicycle_parts(rng, kind) if kind in _BIKES else _motorcycle_parts(rng, kind)
 
 
-def _parked(kind: str) -> Builder:
+def parked(kind: str) -> Builder:
     """A parked bicycle or motorcycle of ``kind`` (no rider)."""
 
     def build(rng: np.random.Generator) -> list[MeshPart]:
-        return _two_wheeler(rng, kind)[0]
+        return two_wheeler(rng, kind)[0]
 
     return build

@@ -1,7 +1,7 @@
-"""The plan of a procedural town (:mod:`carlaocc.stages.scenes.town`): the style rules, road
+"""The plan of a procedural town (:mod:`carlaocc.stages.scenes.town.build`): the style rules, road
 cross-sections, the grid of junctions and road segments, and the draft the concern modules
-(:mod:`~carlaocc.stages.scenes.town_roads`, :mod:`~carlaocc.stages.scenes.town_walkways`,
-:mod:`~carlaocc.stages.scenes.town_buildings`, :mod:`~carlaocc.stages.scenes.town_furniture`) build
+(:mod:`~carlaocc.stages.scenes.town.roads`, :mod:`~carlaocc.stages.scenes.town.walkways`,
+:mod:`~carlaocc.stages.scenes.town.buildings`, :mod:`~carlaocc.stages.scenes.town.furniture`) build
 the town into.
 
 World frame: metres, right-handed, Z up, the road surface at z = 0; junction ``(i, j)`` is where
@@ -20,7 +20,7 @@ from carlaocc.schemas.configs import TownSpec
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.scenes.network import polyline_lengths
 from carlaocc.stages.scenes.placing import POLE_RADIUS, AssetPools, rot2
-from carlaocc.stages.scenes.town_geometry import SAMPLE, Footprints
+from carlaocc.stages.scenes.town.geometry import SAMPLE, Footprints
 
 __all__ = [
     "STYLES", "STYLE_RULES", "LANE_WIDTH", "TOWN_MARGIN", "ZEBRA", "STUFF_KINDS", "CrossSection", "Style", "Segment",

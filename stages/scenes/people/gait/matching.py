@@ -1,7 +1,7 @@
 """Phase matching: :class:`GaitModel` stores per-phase mean descriptors mu_d (d = 0..D-1) and one
 diagonal covariance Sigma, both calibrated on phase-labelled training walks; ``phase(window)``
 returns ``argmax_d log N(delta_hat; mu_d, Sigma)`` and its log-likelihood (descriptors:
-:mod:`carlaocc.stages.scenes.gait.descriptor`). A window whose mean horizontal pelvis speed is
+:mod:`carlaocc.stages.scenes.people.gait.descriptor`). A window whose mean horizontal pelvis speed is
 below ``standing_speed`` is *standing*: phase ``None``.
 """
 
@@ -13,8 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from carlaocc.stages.scenes.gait.descriptor import window_descriptor, window_descriptors
-from carlaocc.stages.scenes.gait.walker import Walk
+from carlaocc.stages.scenes.people.gait.descriptor import window_descriptor, window_descriptors
+from carlaocc.stages.scenes.people.gait.walker import Walk
 
 
 class PhaseMatch(NamedTuple):

@@ -1,6 +1,6 @@
-"""Walkers of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic`): pedestrians on the walk
+"""Walkers of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic.simulation`): pedestrians on the walk
 graph (sidewalks, and crosswalks when their junction is reserved for them in
-:mod:`~carlaocc.stages.scenes.traffic_junctions`), keeping right, yielding to the walker ahead and
+:mod:`~carlaocc.stages.scenes.traffic.junctions`), keeping right, yielding to the walker ahead and
 stepping aside for oncoming ones; the gait phase advances by walked distance.
 
 World frame of the town: metres, Z up; time in seconds, speeds in m/s. A walker walks along
@@ -17,7 +17,7 @@ import numpy as np
 
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.scenes.network import Walkway
-from carlaocc.stages.scenes.traffic_junctions import JunctionReservations
+from carlaocc.stages.scenes.traffic.junctions import JunctionReservations
 
 __all__ = ["GAIT_STEP", "STAND_SPEED", "Walker", "WalkerTraffic"]
 

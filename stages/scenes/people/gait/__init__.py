@@ -17,5 +17,5 @@ Modules:
 - ``matching``    the Gaussian phase model (:class:`matching.GaitModel`) and its accuracy
 
 The applied half (pedestrians matched and posed in a town's traffic) is
-:mod:`carlaocc.stages.scenes.pedestrians`.
+:mod:`carlaocc.stages.scenes.people.pedestrians`.
 """

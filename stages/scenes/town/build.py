@@ -6,7 +6,7 @@ World frame: metres, right-handed, Z up, the road surface at z = 0. Every style 
 ry[j]``; in the arterial style the middle row is the arterial, shifted sideways between junctions by
 smooth S-curves (sampled at <= 1 m, straight for 6 m beyond each junction zone), so every junction
 is axis-aligned. Each road has a cross-section
-(:class:`~carlaocc.stages.scenes.town_layout.CrossSection`): ``lanes`` lanes of 3.5 m each way
+(:class:`~carlaocc.stages.scenes.town.layout.CrossSection`): ``lanes`` lanes of 3.5 m each way
 (right-hand traffic), an optional raised median (grass, kerbed, with a guard rail) and an optional
 parking strip along each kerb. ``block_size`` is the kerb-to-kerb distance between neighbouring
 roads.
@@ -38,12 +38,12 @@ connector and road lanes lies on the carriageway except parked cars, which stay 
 strips.
 
 The town is built by concern, in this order (the order of the random draws and placements): junction
-control (:mod:`~carlaocc.stages.scenes.town_furniture`), then per segment its road
-(:mod:`~carlaocc.stages.scenes.town_roads`) and sidewalks
-(:mod:`~carlaocc.stages.scenes.town_walkways`), per junction its road and sidewalk corners, the
+control (:mod:`~carlaocc.stages.scenes.town.furniture`), then per segment its road
+(:mod:`~carlaocc.stages.scenes.town.roads`) and sidewalks
+(:mod:`~carlaocc.stages.scenes.town.walkways`), per junction its road and sidewalk corners, the
 block grounds and the outer ring, the lane graph and walk graph, the buildings
-(:mod:`~carlaocc.stages.scenes.town_buildings`) and the furniture; the plan they share is
-:mod:`~carlaocc.stages.scenes.town_layout`."""
+(:mod:`~carlaocc.stages.scenes.town.buildings`) and the furniture; the plan they share is
+:mod:`~carlaocc.stages.scenes.town.layout`."""
 
 from __future__ import annotations
 
@@ -57,11 +57,11 @@ from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.geometry import concatenate
 from carlaocc.stages.scenes.network import RoadNetwork, Town
 from carlaocc.stages.scenes.placing import AssetPools, Placer, stuff_geometry
-from carlaocc.stages.scenes.town_buildings import place_buildings
-from carlaocc.stages.scenes.town_furniture import place_furniture, signalised
-from carlaocc.stages.scenes.town_layout import STYLE_RULES, STYLES, TOWN_MARGIN, Layout, TownDraft
-from carlaocc.stages.scenes.town_roads import junction_surfaces, lane_graph, road_length, road_surfaces
-from carlaocc.stages.scenes.town_walkways import (
+from carlaocc.stages.scenes.town.buildings import place_buildings
+from carlaocc.stages.scenes.town.furniture import place_furniture, signalised
+from carlaocc.stages.scenes.town.layout import STYLE_RULES, STYLES, TOWN_MARGIN, Layout, TownDraft
+from carlaocc.stages.scenes.town.roads import junction_surfaces, lane_graph, road_length, road_surfaces
+from carlaocc.stages.scenes.town.walkways import (
     block_ground,
     junction_corners,
     outer_ground,

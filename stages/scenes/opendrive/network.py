@@ -1,6 +1,6 @@
 """OpenDRIVE town network: the lane graph and the walk graph of a parsed network
 (:mod:`carlaocc.schemas.opendrive`) on the town contract (:mod:`carlaocc.stages.scenes.network`);
-part of :mod:`carlaocc.stages.scenes.odr_town`.
+part of :mod:`carlaocc.stages.scenes.opendrive.town`.
 
 World frame = the file's inertial frame (metres, right-handed, Z up).
 
@@ -35,9 +35,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from carlaocc.schemas.opendrive import OpenDriveNetwork, Road
-from carlaocc.stages.scenes import opendrive as od
+from carlaocc.stages.scenes.opendrive import geometry as od
 from carlaocc.stages.scenes.network import URBAN_SPEED_LIMIT, Lane, RoadNetwork, Walkway
-from carlaocc.stages.scenes.odr_surfaces import SECTION_MIN
+from carlaocc.stages.scenes.opendrive.surfaces import SECTION_MIN
 
 __all__ = ["build_opendrive_network", "LANE_STEP", "JOIN_TOL", "WALK_JOIN", "MIN_LANE_WIDTH"]
 

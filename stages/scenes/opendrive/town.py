@@ -6,9 +6,9 @@ World frame = the file's inertial frame (metres, right-handed, Z up).
 
 How the town is made (all deterministic from ``(scenes.seed, index)`` and the asset set):
 
-* **Surfaces, road marks, footprint raster, terrain**: :mod:`carlaocc.stages.scenes.odr_surfaces`.
+* **Surfaces, road marks, footprint raster, terrain**: :mod:`carlaocc.stages.scenes.opendrive.surfaces`.
 * **Lanes, walkways, crosswalks** (the lane and walk graphs):
-  :mod:`carlaocc.stages.scenes.odr_network`.
+  :mod:`carlaocc.stages.scenes.opendrive.network`.
 * **Signals** (here). Type ``1000001`` (CARLA) or any dynamic ``1000xxx`` signal becomes a
   TrafficLight/vehicle_signal, other types a TrafficSign of the mapped sub-class
   (:data:`SIGN_SUBCLASSES`, e.g. 206 stop, 205 yield, 274 speed_limit; unmapped types any sign).
@@ -41,10 +41,10 @@ from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.opendrive import OpenDriveNetwork, Signal
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.geometry import concatenate
-from carlaocc.stages.scenes import opendrive as od
+from carlaocc.stages.scenes.opendrive import geometry as od
 from carlaocc.stages.scenes.network import Town
-from carlaocc.stages.scenes.odr_network import build_opendrive_network
-from carlaocc.stages.scenes.odr_surfaces import (
+from carlaocc.stages.scenes.opendrive.network import build_opendrive_network
+from carlaocc.stages.scenes.opendrive.surfaces import (
     CELL,
     MARGIN,
     MESH_ORDER,

@@ -1,4 +1,4 @@
-"""Buildings of a procedural town (:mod:`carlaocc.stages.scenes.town`): street-facing buildings
+"""Buildings of a procedural town (:mod:`carlaocc.stages.scenes.town.build`): street-facing buildings
 filling the lots along every block side, and the lot frontages of the suburb (fences with hedges)
 and the arterial style (walls on the main road, fences elsewhere), each with a 3 m gate.
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from carlaocc.stages.scenes.placing import yaw_of
-from carlaocc.stages.scenes.town_geometry import (
+from carlaocc.stages.scenes.town.geometry import (
     Footprints,
     inside,
     offset_line,
@@ -21,7 +21,7 @@ from carlaocc.stages.scenes.town_geometry import (
     ribbon,
     sub_line,
 )
-from carlaocc.stages.scenes.town_layout import Segment, TownDraft
+from carlaocc.stages.scenes.town.layout import Segment, TownDraft
 
 __all__ = ["frontage", "place_buildings"]
 

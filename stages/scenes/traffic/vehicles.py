@@ -1,6 +1,6 @@
-"""Vehicles of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic`): vehicles on the lane
+"""Vehicles of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic.simulation`): vehicles on the lane
 graph driven by the Intelligent Driver Model, leaders found along the lanes, MOBIL-style lane
-changes and junction reservations (:mod:`~carlaocc.stages.scenes.traffic_junctions`).
+changes and junction reservations (:mod:`~carlaocc.stages.scenes.traffic.junctions`).
 
 World frame of the town: metres, Z up; time in seconds, speeds in m/s, accelerations in m/s2.
 A vehicle's position is its centre's arc length ``s`` (m) along its lane; gaps are bumper to
@@ -17,7 +17,7 @@ import numpy as np
 
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.scenes.network import Lane
-from carlaocc.stages.scenes.traffic_junctions import JunctionReservations
+from carlaocc.stages.scenes.traffic.junctions import JunctionReservations
 
 __all__ = [
     "EGO_GAP", "IDM_DECEL", "LANE_CHANGE_TIME", "LOOKAHEAD", "LaneOccupancy", "Vehicle", "VehicleTraffic", "idm",

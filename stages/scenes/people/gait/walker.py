@@ -1,7 +1,7 @@
 """Walk sources: phase-labelled walks (:class:`Walk`) made by the procedural articulated walker
 (:func:`procedural_walk`, posed by :func:`articulated_pose`) or resampled from a recorded one
 (:func:`resample_walk`), and joint noise (:func:`add_joint_noise`). Gait-joint positions in our
-Z-up frame; metres, seconds, radians; phases in [0, 1) (see :mod:`carlaocc.stages.scenes.gait.cycles`).
+Z-up frame; metres, seconds, radians; phases in [0, 1) (see :mod:`carlaocc.stages.scenes.people.gait.cycles`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from carlaocc.stages.scenes.gait.kinematics import PELVIS, UP
+from carlaocc.stages.scenes.people.gait.kinematics import PELVIS, UP
 
 
 @dataclass(frozen=True)

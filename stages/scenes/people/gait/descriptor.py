@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from carlaocc.stages.scenes.gait.kinematics import (
+from carlaocc.stages.scenes.people.gait.kinematics import (
     L_ANKLE,
     L_HIP,
     L_KNEE,

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from carlaocc.stages.scenes.gait.descriptor import frame_features
-from carlaocc.stages.scenes.gait.kinematics import PELVIS, UP, horizontal_unit
+from carlaocc.stages.scenes.people.gait.descriptor import frame_features
+from carlaocc.stages.scenes.people.gait.kinematics import PELVIS, UP, horizontal_unit
 
 
 def _smooth(x: np.ndarray, n: int) -> np.ndarray:

@@ -31,9 +31,9 @@ in sub-steps of at most :data:`MAX_SUBSTEP`.
   distance over the gait cycle (two steps of 0.415 x body height) and is missing while standing;
   the Skeletal Motion Analyzer matches the canonical ``phase_index`` of every walker frame.
 
-The vehicles live in :mod:`~carlaocc.stages.scenes.traffic_vehicles`, the walkers in
-:mod:`~carlaocc.stages.scenes.traffic_walkers`, the junction reservations they share in
-:mod:`~carlaocc.stages.scenes.traffic_junctions`; this module spawns them, integrates and records.
+The vehicles live in :mod:`~carlaocc.stages.scenes.traffic.vehicles`, the walkers in
+:mod:`~carlaocc.stages.scenes.traffic.walkers`, the junction reservations they share in
+:mod:`~carlaocc.stages.scenes.traffic.junctions`; this module spawns them, integrates and records.
 
 Recorded per frame: the frame (ego and LiDAR poses), every rig sensor's pose, and every actor
 within ``actor_range`` m of the ego: stable instance id (numbered above the town's placements),
@@ -56,9 +56,9 @@ from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
 from carlaocc.stages.geometry import angular_velocity, box_center, pose_matrix, pose_to_list, tilt_to_normal
 from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town
-from carlaocc.stages.scenes.traffic_junctions import JunctionReservations
-from carlaocc.stages.scenes.traffic_vehicles import EGO_GAP, IDM_DECEL, Vehicle, VehicleTraffic, vehicle_pose
-from carlaocc.stages.scenes.traffic_walkers import STAND_SPEED, Walker, WalkerTraffic
+from carlaocc.stages.scenes.traffic.junctions import JunctionReservations
+from carlaocc.stages.scenes.traffic.vehicles import EGO_GAP, IDM_DECEL, Vehicle, VehicleTraffic, vehicle_pose
+from carlaocc.stages.scenes.traffic.walkers import STAND_SPEED, Walker, WalkerTraffic
 
 __all__ = [
     "SequenceResult", "Simulation", "TrafficLevel", "TRAFFIC_LEVELS", "simulate_sequence", "simulate_town",

@@ -1,10 +1,10 @@
-"""Street furniture and vegetation of a procedural town (:mod:`carlaocc.stages.scenes.town`): which
+"""Street furniture and vegetation of a procedural town (:mod:`carlaocc.stages.scenes.town.build`): which
 junctions are signalised, traffic lights and stop signs at the junctions, street lights, street
 trees, traffic signs, benches, bins, hydrants and bicycles along the sidewalks, parked cars in
 the suburb's parking strips, trees in the lots and in the terrain margin.
 
 World frame: metres, Z up, yaw in radians. Pole-like assets are placed by their pole axis (see
-:meth:`~carlaocc.stages.scenes.town_layout.TownDraft.pole`); every placement keeps its footprint
+:meth:`~carlaocc.stages.scenes.town.layout.TownDraft.pole`); every placement keeps its footprint
 free of the others'. Sidewalk depths are measured from the kerb: poles ``min(0.5, 0.4 S)``, the
 furniture zone ``min(1.2, 0.45 S)`` wide."""
 
@@ -15,8 +15,8 @@ import math
 import numpy as np
 
 from carlaocc.stages.scenes.placing import yaw_of
-from carlaocc.stages.scenes.town_geometry import Footprints, inside, point_at
-from carlaocc.stages.scenes.town_layout import TOWN_MARGIN, TownDraft
+from carlaocc.stages.scenes.town.geometry import Footprints, inside, point_at
+from carlaocc.stages.scenes.town.layout import TOWN_MARGIN, TownDraft
 
 __all__ = ["place_furniture", "signalised"]
 

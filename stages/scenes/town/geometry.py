@@ -1,4 +1,4 @@
-"""Plan geometry of the procedural towns (:mod:`carlaocc.stages.scenes.town`): polylines in the xy
+"""Plan geometry of the procedural towns (:mod:`carlaocc.stages.scenes.town.build`): polylines in the xy
 plane, closed slabs extruded along them, rectangles around junctions, polygon tests and the oriented
 footprints that keep placed things apart.
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.records import SkeletonRecord
 from carlaocc.stages.geometry import invert_pose, pose_from_list, transform_points
-from carlaocc.stages.scenes.pedestrians import JOINT_NAMES
+from carlaocc.stages.scenes.people.pedestrians import JOINT_NAMES
 
 __all__ = ["skeleton_rows"]
 
@@ -18,7 +18,7 @@ def skeleton_rows(actors, frames, rig_of) -> list:
     (asset -> world) into the world frame, then into the frame's LiDAR frame.
 
     ``actors`` ActorStateRecords and ``frames`` FrameRecords of one sequence; ``rig_of(asset_id)``
-    the asset's :class:`~carlaocc.stages.scenes.pedestrians.PedestrianRig`. Rows are ordered by
+    the asset's :class:`~carlaocc.stages.scenes.people.pedestrians.PedestrianRig`. Rows are ordered by
     (frame, instance, joint)."""
     ped = taxonomy.by_name("Pedestrian").id
     to_lidar = {f.frame_index: invert_pose(pose_from_list(f.lidar_pose)) for f in frames}

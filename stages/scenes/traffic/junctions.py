@@ -1,4 +1,4 @@
-"""Junction reservations of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic`): a vehicle
+"""Junction reservations of a traffic sequence (:mod:`carlaocc.stages.scenes.traffic.simulation`): a vehicle
 enters a junction's connector lanes only while it holds the junction alone; walkers on its
 crosswalks hold it together. Requests are served first come, first served (by integration step, then
 kind and index), so crossing traffic and pedestrians never share a junction unsafely."""

@@ -1,4 +1,4 @@
-"""Walkways of a procedural town (:mod:`carlaocc.stages.scenes.town`): the sidewalks along the roads
+"""Walkways of a procedural town (:mod:`carlaocc.stages.scenes.town.build`): the sidewalks along the roads
 with their kerbs, the sidewalk corners of the junction zones, the ground of each block (grass at
 kerb height, the lot outline the buildings fill, the walk loop around it), the outer sidewalk ring
 with its terrain margin, and the walk graph (a walkway along each loop between crosswalk ends, and a
@@ -16,7 +16,7 @@ import numpy as np
 
 from carlaocc.stages.scenes.network import Walkway, polyline_lengths
 from carlaocc.stages.scenes.placing import STUFF_TILE, SURFACE, slab, slabs
-from carlaocc.stages.scenes.town_geometry import (
+from carlaocc.stages.scenes.town.geometry import (
     densify,
     offset_line,
     project_on_loop,
@@ -25,7 +25,7 @@ from carlaocc.stages.scenes.town_geometry import (
     strip,
     sub_line,
 )
-from carlaocc.stages.scenes.town_layout import TOWN_MARGIN, ZEBRA, Segment, TownDraft
+from carlaocc.stages.scenes.town.layout import TOWN_MARGIN, ZEBRA, Segment, TownDraft
 
 __all__ = ["CROSSWALK_Z", "block_ground", "junction_corners", "outer_ground", "sidewalks_along", "walk_graph"]
 

@@ -1,4 +1,4 @@
-"""Roads of a procedural town (:mod:`carlaocc.stages.scenes.town`): the carriageway surfaces of road
+"""Roads of a procedural town (:mod:`carlaocc.stages.scenes.town.build`): the carriageway surfaces of road
 segments and junction boxes (with the arterial's kerbed grass median and guard rail), the road
 markings (centre, lane, edge and parking lines, zebras, stop lines) and the lane graph (road
 lanes and the connector lanes crossing each junction).
@@ -14,8 +14,8 @@ import numpy as np
 
 from carlaocc.stages.scenes.network import Lane
 from carlaocc.stages.scenes.placing import SURFACE, slabs
-from carlaocc.stages.scenes.town_geometry import SAMPLE, arm_rect, bezier, densify, offset_line, ribbon, sub_line
-from carlaocc.stages.scenes.town_layout import LANE_WIDTH, ZEBRA, Layout, Segment, TownDraft
+from carlaocc.stages.scenes.town.geometry import SAMPLE, arm_rect, bezier, densify, offset_line, ribbon, sub_line
+from carlaocc.stages.scenes.town.layout import LANE_WIDTH, ZEBRA, Layout, Segment, TownDraft
 
 __all__ = ["MARKING_TOP", "junction_surfaces", "lane_graph", "road_length", "road_surfaces"]
 

@@ -1,5 +1,5 @@
 """OpenDRIVE town ground: lane surfaces, road marks, the footprint raster and terrain, from a
-parsed network (:mod:`carlaocc.schemas.opendrive`); part of :mod:`carlaocc.stages.scenes.odr_town`.
+parsed network (:mod:`carlaocc.schemas.opendrive`); part of :mod:`carlaocc.stages.scenes.opendrive.town`.
 
 World frame = the file's inertial frame (metres, right-handed, Z up).
 
@@ -7,12 +7,12 @@ World frame = the file's inertial frame (metres, right-handed, Z up).
   triangle strip between its borders (sampled every <= 0.5 m plus every geometry start; line,
   arc, spiral, poly3 and paramPoly3 reference lines, lane offsets and widths, elevation and
   superelevation). Strips are grouped by surface kind
-  (:func:`carlaocc.stages.scenes.opendrive.surface_kind`) into stuff meshes, see
+  (:func:`carlaocc.stages.scenes.opendrive.geometry.surface_kind`) into stuff meshes, see
   :data:`SURFACE_MESHES`. The drivable lanes of junction connecting roads go to the ``junction``
   mesh (class Road), with the holes the connectors leave inside the junction filled by 0.5 m
   cells at the mean junction height (:func:`junction_fill`). Sidewalk and curb lanes are raised
   by ``curb_height``; a vertical kerb face runs along every raised strip's inner border where its
-  inner neighbour is not raised. Road marks (:func:`carlaocc.stages.scenes.opendrive.road_marks`)
+  inner neighbour is not raised. Road marks (:func:`carlaocc.stages.scenes.opendrive.geometry.road_marks`)
   on driving / shoulder / centre lanes are lifted :data:`MARK_LIFT` above the road (class
   RoadLine; :func:`road_mark_meshes`).
 * **Footprint raster** (:class:`FootprintRaster`). All surfaces are sampled every <= 0.25 m into a
@@ -31,7 +31,7 @@ import numpy as np
 from scipy import ndimage
 
 from carlaocc.schemas.opendrive import OpenDriveNetwork
-from carlaocc.stages.scenes import opendrive as od
+from carlaocc.stages.scenes.opendrive import geometry as od
 
 __all__ = ["CELL", "SURF_STEP", "SECTION_MIN", "MARGIN", "MARK_LIFT", "TERRAIN_DZ", "SURFACE_MESHES", "MESH_ORDER",
            "FootprintRaster", "lane_surfaces", "junction_fill", "road_mark_meshes", "nearest_surface",

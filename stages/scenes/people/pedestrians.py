@@ -7,10 +7,10 @@ Two halves:
 * **Matching** (:func:`match_walker_phases`): the traffic simulation gives each walker a world
   track (asset-origin positions, heading yaws) and a simulated gait phase per frame. We synthesize
   the skeleton an observer would see -- the procedural articulated walker
-  (:func:`carlaocc.stages.scenes.gait.walker.articulated_pose`) posed at the simulated phase,
+  (:func:`carlaocc.stages.scenes.people.gait.walker.articulated_pose`) posed at the simulated phase,
   scaled to the body height, placed on the track, with 1.5 cm Gaussian joint noise -- and match
   every frame to one of the D canonical phases of :func:`walk_cycle` with the Gaussian phase
-  likelihood of :func:`gait_model` (a :class:`~carlaocc.stages.scenes.gait.matching.GaitModel`
+  likelihood of :func:`gait_model` (a :class:`~carlaocc.stages.scenes.people.gait.matching.GaitModel`
   calibrated on noisy procedural walks at several speeds and strides).
 * **Posing** (:func:`rig_pedestrian`, :meth:`PedestrianRig.posed`): the asset's vertices are bound
   to a skeleton fitted to the asset (rest = the asset as modelled) and deformed into the canonical
@@ -29,10 +29,10 @@ from functools import lru_cache
 import numpy as np
 
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
-from carlaocc.stages.scenes.gait.cycles import CanonicalCycle
-from carlaocc.stages.scenes.gait.descriptor import frame_features, window_descriptors, window_frame_features
-from carlaocc.stages.scenes.gait.matching import GaitModel
-from carlaocc.stages.scenes.gait.walker import add_joint_noise, articulated_pose, procedural_walk, walker_stride
+from carlaocc.stages.scenes.people.gait.cycles import CanonicalCycle
+from carlaocc.stages.scenes.people.gait.descriptor import frame_features, window_descriptors, window_frame_features
+from carlaocc.stages.scenes.people.gait.matching import GaitModel
+from carlaocc.stages.scenes.people.gait.walker import add_joint_noise, articulated_pose, procedural_walk, walker_stride
 
 STANDING = -1  # phase index of a pedestrian standing still (rest pose)
 
@@ -66,7 +66,7 @@ _LIMB = re.compile(r"^(leg|arm)[_\- ]?(l|left|r|right)$")
 @lru_cache(maxsize=8)
 def walk_cycle(D: int = 32) -> CanonicalCycle:
     """Canonical walk cycle of D phases of the procedural walker at 1.2 m/s (default proportions):
-    phase d is :func:`carlaocc.stages.scenes.gait.walker.articulated_pose` at the walker's own
+    phase d is :func:`carlaocc.stages.scenes.people.gait.walker.articulated_pose` at the walker's own
     phase ``d / D`` -- the phase the training walks of :func:`gait_model` are labelled with and the
     traffic simulation's ``gait_phase`` -- in the heading frame, pelvis horizontally at the origin.
     Phase 0 is the left thigh's maximum flexion, which is also (within a phase) the left ankle's
