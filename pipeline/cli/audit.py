@@ -1,5 +1,6 @@
 """``carlaocc audit``: the paper's quality scores of other occupancy datasets on disk (the work
-is :mod:`carlaocc.pipeline.commands.audit`)."""
+is :mod:`carlaocc.pipeline.commands.audit`, imported when the command runs: see
+``carlaocc.pipeline.cli``, "Imports")."""
 
 from __future__ import annotations
 
@@ -10,7 +11,6 @@ import typer
 from carlaocc.catalog.formats import FORMATS, DatasetInputError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import fail
-from carlaocc.pipeline.commands.audit import audit_command
 
 
 @app.command("audit")
@@ -42,6 +42,8 @@ def audit_cli(
     named by frame numbers (semantickitti, surroundocc, carlaocc-npz) are in numeric order; occ3d
     sample tokens carry no time order, so its frames take the order of the keyed --poses list.
     Frames without a keyed pose are left out of s_tc (the summary line counts them)."""
+    from carlaocc.pipeline.commands.audit import audit_command
+
     try:
         _, table = audit_command(fmt, paths, poses, calib, json_out, per_frame)
     except DatasetInputError as exc:

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import re
-
 import time
 from pathlib import Path
 from typing import Annotated, Optional
@@ -14,10 +13,10 @@ from pydantic import ValidationError
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
-from carlaocc.pipeline.cli.common import (ConfigOpt, VoxelSizeOpt, RootOpt, RichProgress, parse_voxel_sizes, open_store,
-                                         validation_message, check_towns, fail, load_config,
-                                         plan_config, PresetOpt, MapsOpt, LimitFramesOpt, SequencesOpt,
-                                         TaxonomyOpt, sequence_patterns)
+from carlaocc.pipeline.cli.common import (ConfigOpt, LimitFramesOpt, MapsOpt, PresetOpt, RichProgress, RootOpt,
+                                          SequencesOpt, TaxonomyOpt, VoxelSizeOpt, check_towns, fail, load_config,
+                                          open_store, parse_voxel_sizes, plan_config, sequence_patterns,
+                                          validation_message)
 
 
 @app.command()
@@ -92,7 +91,7 @@ def ingest(
 ) -> None:
     """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
     are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
-    from carlaocc.pipeline.tasks.ingest import IngestError, ingest_source
+    from carlaocc.pipeline.commands.ingest import IngestError, ingest_source
     from carlaocc.pipeline.engine.runner import PlanError, resolve_scheduler
     from carlaocc.schemas.configs import SourceIngestConfig
 

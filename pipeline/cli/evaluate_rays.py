@@ -11,16 +11,9 @@ from typing import Annotated, Optional
 import numpy as np
 import typer
 
-from carlaocc.catalog.occupancy import OccupancyStore
-from carlaocc.catalog.samples import DatasetError, FrameSamples
-from carlaocc.catalog.store import Store
 from carlaocc.pipeline.cli.evaluate import (InputError, JsonOpt, eval_app, finite_json, load_arrays, percent,
                                            run_checked, write_json)
-from carlaocc.pipeline.commands.export.spec import built_label_table, scenes_label_tables
 from carlaocc.schemas import taxonomy
-from carlaocc.stages.evaluation.rays import RayAccumulator, select_origins
-from carlaocc.stages.geometry import rotation_from_quaternion
-from carlaocc.stages.export.resample import OCC3D_NUSCENES, OPENOCC_V2, resample, resample_panoptic
 
 __all__ = ["origins_from_poses", "ray_origins", "ray_pairs"]
 
@@ -38,6 +31,7 @@ def _is_root(path: Path) -> bool:
 
 def _root_index(path: Path, opt: str):
     """``(dataset, {token: sample index})`` of a built root, tokens ``<sequence>_<frame:06d>``."""
+    from carlaocc.catalog.samples import DatasetError, FrameSamples
     try:
         ds = FrameSamples(str(path), occupancy="none", cameras=False, lidar=False, boxes=False)
     except DatasetError as exc:
@@ -80,6 +74,7 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
     info ``token``, ``scene_name``, ``timestamp``, ``lidar2ego_*`` and ``ego2global_*``
     translation + quaternion w x y z): the LiDAR positions of the scene's frames in the sample's
     ego frame (SparseOcc's ego_pose_dataset), then :func:`select_origins`."""
+    from carlaocc.stages.geometry import rotation_from_quaternion
     def pose(t, q) -> np.ndarray:
         try:
             t, q = np.asarray(t, float).reshape(3), np.asarray(q, float).reshape(4)
@@ -122,6 +117,7 @@ def ray_origins(infos_files: list[Path]) -> dict[str, np.ndarray]:
 
 def origins_from_poses(by_scene: dict[str, list]) -> dict[str, np.ndarray]:
     """``token -> origins`` from ``scene -> [(timestamp, token, lidar_to_world, ego_to_world)]``."""
+    from carlaocc.stages.evaluation.rays import select_origins
     out = {}
     for frames in by_scene.values():
         frames.sort(key=lambda r: r[0])
@@ -136,6 +132,7 @@ def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
     """A carlaocc root as ground truth: ``(pairs, origins, loader)`` where each pair's ground truth
     is resampled from the root's occupancy onto the Occ3D grid when scored (the prediction tree is
     keyed by the tokens ``<sequence>_<frame:06d>``), origins from the root's poses."""
+    from carlaocc.catalog.samples import DatasetError, FrameSamples
     try:
         ds = FrameSamples(str(gt), occupancy="none", cameras=False, lidar=False, boxes=False)
     except DatasetError as exc:
@@ -154,6 +151,10 @@ def _root_ground_truth(gt: Path, pred: Path, classes: str, panoptic: bool):
 def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarray]:
     """One root frame on the Occ3D grid (ego frame, 0.4 m) in ``classes``' ids: semantics, and
     instances and flow (vx, vy m/s) for RayPQ / mAVE."""
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.store import Store
+    from carlaocc.pipeline.commands.export.spec import built_label_table, scenes_label_tables
+    from carlaocc.stages.export.resample import OCC3D_NUSCENES, OPENOCC_V2, resample, resample_panoptic
     seq, frame = ds.samples[k]
     store = Store(ds.root)
     occ = OccupancyStore(store)
@@ -176,6 +177,8 @@ def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarra
 
 def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, relative: bool, origin: str,
               panoptic: bool, json_out: Path | None) -> None:
+    from carlaocc.stages.evaluation.rays import RayAccumulator
+
     if classes not in RAY_CLASSES:
         raise InputError(f"--classes {classes!r}: one of {', '.join(RAY_CLASSES)}")
     names = list(taxonomy.TARGETS[RAY_CLASSES[classes]])

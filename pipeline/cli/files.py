@@ -1,5 +1,8 @@
 """Commands on mesh and grid files outside the pipeline's stages: ``voxelize`` (any mesh files
-to a grid), ``export`` (to the layouts models train on), ``compare-resolutions``."""
+to a grid), ``export`` (to the layouts models train on), ``compare-resolutions``.
+
+Each command imports its work when it runs (see ``carlaocc.pipeline.cli``, "Imports"); the
+export command's help lists the registered formats, read from the registry when asked."""
 
 from __future__ import annotations
 
@@ -10,19 +13,12 @@ from typing import Annotated, Optional
 import typer
 
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from typer.core import TyperCommand
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, fail, load_config, open_store, parse_floats, write_bytes
-from carlaocc.pipeline.commands.export import FORMATS, export, frame_count, resolve_voxel_size
-from carlaocc.pipeline.commands.export.spec import voxelized_sequences
-from carlaocc.pipeline.commands.standalone import (InputError, fill_summary, grid_for, load_inputs, save_result,
-                                                   voxelize_inputs)
-from carlaocc.catalog.formats import FormatError
-from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.schemas.grid import voxel_size_key
-from carlaocc.stages.voxelize.fill import FILL_MODES
-from carlaocc.stages.voxelize.pooling import pool_to_grid, pooling_disagreement
 
 
 @app.command("voxelize")
@@ -40,6 +36,10 @@ def voxelize_files(
     not watertight), without a dataset. Prints where the voxels came from: surface, fill, and
     hole handling (filled voxels a flood fill from outside would not have found). Things get instance ids 1, 2, ... in argument order. The grid defaults to
     the meshes' bounding box snapped to multiples of the voxel size."""
+    from carlaocc.pipeline.commands.standalone import (InputError, fill_summary, grid_for, load_inputs, save_result,
+                                                       voxelize_inputs)
+    from carlaocc.stages.voxelize.fill import FILL_MODES
+
     if fill not in FILL_MODES:
         fail(f"--fill must be one of {', '.join(FILL_MODES)}, got {fill!r}")
     if out.suffix.lower() not in (".npz", ".zarr"):
@@ -63,16 +63,29 @@ def voxelize_files(
     typer.echo(fill_summary(result, fill))
 
 
-EXPORT_HELP = ("Export the occupancy in the layouts models train on (the formats, what each writes under --out):\n\n"
-               + "\n\n".join(f"{f.name}: {f.description}" for f in FORMATS.values())
-               + "\n\nEvery occupancy export writes grid.json (frame, origin, voxel size, axes, labels, "
-               "centre = origin + (index + 0.5) * voxel size) and the dataset's splits beside it "
-               "(splits/{train,val,test}.txt).")
+def export_help() -> str:
+    """The export command's help: every registered format and what it writes under --out."""
+    from carlaocc.pipeline.commands.export import FORMATS
+
+    return ("Export the occupancy in the layouts models train on (the formats, what each writes under --out):\n\n"
+            + "\n\n".join(f"{f.name}: {f.description}" for f in FORMATS.values())
+            + "\n\nEvery occupancy export writes grid.json (frame, origin, voxel size, axes, labels, "
+            "centre = origin + (index + 0.5) * voxel size) and the dataset's splits beside it "
+            "(splits/{train,val,test}.txt).")
 
 
-@app.command("export", help=EXPORT_HELP)
+class ExportCommand(TyperCommand):
+    """``carlaocc export``, whose full help is built from the format registry when it is shown."""
+
+    def format_help_text(self, ctx, formatter) -> None:
+        self.help = export_help()
+        super().format_help_text(ctx, formatter)
+
+
+@app.command("export", cls=ExportCommand,
+             short_help="Export the occupancy in the layouts models train on (export --help lists them).")
 def export_cmd(
-    fmt: Annotated[str, typer.Argument(help=" | ".join(FORMATS))],
+    fmt: Annotated[str, typer.Argument(help="the format (listed above)")],
     out: Annotated[Path, typer.Option("--out", help="directory to write the dataset layout into")],
     voxel_size: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="the built voxel size (m) to export from (the finest gives the best resampling; carlaocc-release: 0.1 by default, any size dividing 0.1; det-gt: the finest built)")] = None,
     root: RootOpt = "data",
@@ -80,6 +93,9 @@ def export_cmd(
     sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to export (default: all voxelized)")] = None,
     label_encoding: Annotated[Optional[str], typer.Option("--label-encoding", help="carlaocc-npz / carlaocc-release labels: bits (semantic << 11 | instance, what the release's code writes and its loader reads; default) | decimal (semantic * 1000 + instance, the release's documentation; the files say so in a label_encoding key)")] = None,
 ) -> None:
+    from carlaocc.catalog.formats import FormatError
+    from carlaocc.pipeline.commands.export import FORMATS, export, frame_count, resolve_voxel_size
+
     if fmt not in FORMATS:
         fail(f"unknown format {fmt!r}; formats: {', '.join(FORMATS)}")
     options = {}
@@ -125,6 +141,10 @@ def compare_resolutions(
 ) -> None:
     """Pool the fine grid onto the coarse one by class priority and count where the pooled grid
     and the coarse grid voxelized directly from the meshes disagree (occupancy and label)."""
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.pipeline.commands.export.spec import voxelized_sequences
+    from carlaocc.stages.voxelize.pooling import pool_to_grid, pooling_disagreement
+
     load_config(config, root)  # a bad --config is refused like everywhere else
     store = open_store(root, writable=False)
     if not (fine > 0 and coarse > fine):

@@ -27,6 +27,8 @@ import numpy as np
 from carlaocc.catalog.formats import DatasetFormat, DatasetInputError, atomic_write, dataset_format
 from carlaocc.catalog.formats.layout import LabelGrid, collect_inputs, read_frame
 from carlaocc.catalog.formats.poses import KeyedPoses, PosedSequence, load_kitti_calib, load_poses, plan_sequences
+from carlaocc.stages.quality import (column_ranges, sequence_continuity, sequence_temporal, spatial_continuity_counts,
+                                     static_table, temporal_consistency_counts)
 
 if TYPE_CHECKING:
     from carlaocc.stages.quality import ContinuityCounts, TemporalCounts
@@ -103,8 +105,6 @@ def audit(fmt: DatasetFormat, sequences: Sequence[PosedSequence]) -> AuditResult
     """s_sc per frame and over all frames; where the sequences carry poses, s_tc per pair of
     consecutive frames with a pose **within** one sequence, and over all pairs (counts summed over
     the sequences). Frames are read and scored one at a time (two in memory)."""
-    from carlaocc.stages.quality import (column_ranges, sequence_continuity, sequence_temporal,
-                                         spatial_continuity_counts, static_table, temporal_consistency_counts)
 
     static = static_table(fmt.dynamic)
     has_poses = any(s.poses is not None for s in sequences)

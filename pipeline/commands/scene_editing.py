@@ -22,17 +22,11 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.tasks.frame import frame_scene, load_geometry
 from carlaocc.pipeline.tasks.scenes import is_edited, sequence_skeletons
 from carlaocc.schemas import taxonomy
-from carlaocc.schemas.records import (
-    ActorStateRecord,
-    AssetRecord,
-    FrameRecord,
-    PlacementRecord,
-    RunRecord,
-    SensorPoseRecord,
-    SequenceRecord,
-    SkeletonRecord,
-)
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, RunRecord,
+                                      SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
 from carlaocc.stages.geometry import box_center, pose_from_list
+from carlaocc.stages.scenes.assembly import flatten, town_mesh
+from carlaocc.stages.scenes.placing import box_corners_aabb
 
 SWAP_STAGE = "scenes-swap"
 LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relative footprint/height difference
@@ -41,7 +35,6 @@ LENGTH_TOLERANCE, WIDTH_TOLERANCE, HEIGHT_TOLERANCE = 0.20, 0.15, 0.35  # relati
 def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
     """The whole town's static mesh (world frame) as GLB with per-face semantic and instance ids;
     returns (bytes, triangles, placements)."""
-    from carlaocc.stages.scenes.assembly import town_mesh
 
     t_place = ParquetTable(store, PlacementRecord)
     if not t_place.exists(f"town={town}"):
@@ -56,7 +49,6 @@ def town_mesh_glb(store: Store, town: str) -> tuple[bytes, int, int]:
 def town_label_table(store: Store, town: str) -> str:
     """The label table a town was built under (its ``towns`` row; ``carlaocc-v1`` before the
     column existed)."""
-    from carlaocc.schemas.records import TownRecord
 
     t = ParquetTable(store, TownRecord)
     rows = t.load([f"town={town}"]) if t.exists(f"town={town}") else []
@@ -65,7 +57,6 @@ def town_label_table(store: Store, town: str) -> str:
 
 def frame_mesh_glb(store: Store, sequence_id: str, frame_index: int, region) -> tuple[bytes, int]:
     """One frame's panoptic scene (LiDAR frame) cut to ``region`` as GLB; returns (bytes, triangles)."""
-    from carlaocc.stages.scenes.assembly import flatten
 
     seqs = ParquetTable(store, SequenceRecord)
     town = seqs.load([sequence_id])[0].town if seqs.exists(sequence_id) else ""
@@ -124,7 +115,6 @@ def _swapped_placement(p: PlacementRecord, new: AssetRecord | None) -> Placement
     its box), its world AABB that of the new box."""
     if new is None:
         return p
-    from carlaocc.stages.scenes.placing import box_corners_aabb
 
     l, w, h = (float(e) for e in new.extent)
     lo, hi = box_corners_aabb((-l / 2, -w / 2, 0.0), (l / 2, w / 2, h), np.array(p.pose, dtype=np.float64).reshape(4, 4))

@@ -18,16 +18,25 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
+import zarr
+from pydantic import ValidationError
 
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.pipeline.tasks.frame import load_geometry
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import SceneMesh
 from carlaocc.stages.geometry import is_watertight
+from carlaocc.stages.ingest.repair import DEGENERATE_REL
+from carlaocc.stages.voxelize import voxelize_scene
+from carlaocc.stages.voxelize.breakdown import fill_breakdown
+from carlaocc.stages.voxelize.fill import fill_method, fills
 
 MAX_VOXELS = 2**31  # a grid beyond this is almost always a unit mistake (millimetres as metres)
 
@@ -48,8 +57,6 @@ class VoxelizeResult:
 def fill_summary(result: VoxelizeResult, fill: str) -> str:
     """One line on where the voxels came from: surface, fill (and how: parity or winding
     numbers, per mesh), and hole handling (filled voxels a flood fill would not have found)."""
-    from carlaocc.stages.voxelize.breakdown import fill_breakdown
-    from carlaocc.stages.voxelize.fill import fill_method, fills
 
     b = fill_breakdown(result.meshes, result.grid, fill, solid=result.semantic)
     methods = [fill_method(fills(m.semantic_id, m.part, fill), m.closed) for m in result.meshes]
@@ -59,8 +66,6 @@ def fill_summary(result: VoxelizeResult, fill: str) -> str:
 
 
 def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds for a corrupt file
@@ -82,7 +87,6 @@ def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _has_area(V: np.ndarray, F: np.ndarray) -> bool:
     """Whether any face is non-degenerate, by the ingest stage's rule (``DEGENERATE_REL``)."""
-    from carlaocc.stages.ingest.repair import DEGENERATE_REL
 
     used = V[np.unique(F)]
     diag2 = float(np.sum((used.max(axis=0) - used.min(axis=0)) ** 2))
@@ -118,8 +122,6 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     labels = iter(_classes(classes, len(files)))
     assets = {}
     if missing:
-        from carlaocc.pipeline.tasks.frame import load_geometry
-
         try:
             assets = load_geometry(store, set(missing), [])
         except StoreError as exc:
@@ -172,7 +174,6 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
         raise InputError(f"the grid would have {total:,} voxels ({shape[0]}x{shape[1]}x{shape[2]} at {voxel_size} m): "
                          f"are the meshes in millimetres? give a larger --voxel-size or --origin/--shape")
     hi = tuple(o + n * voxel_size for o, n in zip(origin, shape))
-    from pydantic import ValidationError
 
     try:
         return GridSpec(region_min=tuple(origin), region_max=hi, voxel_size=voxel_size)
@@ -184,10 +185,6 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
 
 
 def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:
-    from carlaocc.stages.voxelize import voxelize_scene
-
-    import time
-
     t0 = time.perf_counter()
     semantic, instance = voxelize_scene(meshes, grid, fill=fill)
     return VoxelizeResult(grid, semantic, instance, meshes, time.perf_counter() - t0)
@@ -206,8 +203,6 @@ def save_result(result: VoxelizeResult, out: Path) -> None:
                             shape=np.asarray(g.shape, np.int64))
         tmp.replace(out)
     elif suffix == ".zarr":
-        import zarr
-
         root = zarr.open_group(str(out), mode="w")
         X, Y, Z = g.shape
         chunks = (min(128, X), min(128, Y), Z)

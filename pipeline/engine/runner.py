@@ -16,21 +16,22 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Callable
 
+import fsspec
 import numpy as np
 
 from carlaocc.catalog.lineage import DAMAGED_SUFFIX, LineageLog
 from carlaocc.catalog.parquet import parquet_problem
 from carlaocc.catalog.signatures import external_signature, output_signature
-from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.store import Store, StoreError, fingerprint_bytes
 from carlaocc.catalog.zarrio import ancestor_groups, frame_fingerprint, is_damaged, metadata_problem, parse_frame_key
 # where tasks run (pipeline/engine/executors.py; callers and tests reach these as runner.X too)
 from carlaocc.pipeline.engine.executors import (NANNY_TERMINATE, SYNCHRONOUS, TASK_BASE_BYTES,  # noqa: F401
-                                         TASK_BYTES_PER_VOXEL, DaskExecutor, Executor, SynchronousExecutor,
-                                         TaskResult, execute_task, local_workers, make_executor, resolve_scheduler,
-                                         task_memory)
+                                                TASK_BYTES_PER_VOXEL, DaskExecutor, Executor, SynchronousExecutor,
+                                                TaskResult, execute_task, local_workers, make_executor,
+                                                resolve_scheduler, task_memory)
 from carlaocc.pipeline.engine.registry import RETIRED_STAGES, STAGES
-from carlaocc.pipeline.engine.spec import (Context, Partition, PlanError, Prepared, SelectionError, StageSpec,  # noqa: F401
-                                    UpstreamMissing, cache_key)
+from carlaocc.pipeline.engine.spec import (Context, Partition, PlanError, Prepared, SelectionError,  # noqa: F401
+                                           StageSpec, UpstreamMissing, cache_key)
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.records import RunRecord
 
@@ -64,10 +65,6 @@ def _digest(outputs: str) -> str:
 
 def file_fingerprint(path: str) -> str:
     """Fingerprint of an external input file (a local path or fsspec URL); "missing" if absent."""
-    import fsspec
-
-    from carlaocc.catalog.store import fingerprint_bytes
-
     try:
         fs, p = fsspec.core.url_to_fs(path)
         if fs.isfile(p) is False and fs.exists(p):

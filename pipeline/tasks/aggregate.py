@@ -21,6 +21,8 @@ from carlaocc.pipeline.tasks.quality import quality_partitions
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.records import (ActorStateRecord, ClassQualityRecord, ClassStatisticsRecord,
                                       FrameStatisticsRecord, QualityRecord)
+from carlaocc.stages.quality import pooled_continuity, pooled_temporal
+from carlaocc.stages.quality.statistics import SequenceStatistics, pair_keys
 
 
 def aggregate_partitions(ctx: Context) -> list[Partition]:
@@ -49,8 +51,6 @@ def _load(store: Store, model, keys: list[str]):
 def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
     """The sequence rows of the quality table and the sequence's class statistics, from the
     per-frame rows of its quality tasks."""
-    from carlaocc.stages.quality import pooled_continuity, pooled_temporal
-    from carlaocc.stages.quality.statistics import SequenceStatistics, pair_keys
 
     seq_id, voxel_size, keys = part.params["sequence_id"], part.params["voxel_size"], part.params["quality_keys"]
     frame_rows = [r for r in _load(store, QualityRecord, keys) if r.frame_index is not None]

@@ -13,14 +13,19 @@ import hashlib
 from collections import OrderedDict
 
 import numpy as np
+import pyarrow.compute as pc
 
 from carlaocc.catalog.meshes import load_glb_arrays
-from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.parquet import ParquetTable, from_table
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.textures import textures_from_npz
-from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, PartRecord, PlacementRecord, SequenceRecord
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
-from carlaocc.stages.geometry import is_watertight
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PartRecord, PlacementRecord,
+                                      SequenceRecord)
+from carlaocc.schemas.taxonomy import thing_ids
+from carlaocc.stages.geometry import geometry_hash, is_watertight
+from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
+from carlaocc.stages.scenes.people.pedestrians import rig_pedestrian
 
 # per-worker caches: asset geometry by file content, pedestrian rigs, each town's placement index
 _GEOMETRY_CACHE: OrderedDict[tuple, AssetGeometry] = OrderedDict()
@@ -105,8 +110,6 @@ def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementR
 def pedestrian_rigs(geometry: dict[str, AssetGeometry]):
     """``asset_id -> PedestrianRig`` of the pedestrian assets in ``geometry``, cached per worker by
     asset id and geometry content (each asset's content hashed once per call of this)."""
-    from carlaocc.stages.geometry import geometry_hash
-    from carlaocc.stages.scenes.people.pedestrians import rig_pedestrian
 
     keys: dict[str, tuple[str, str]] = {}  # asset id -> cache key
 
@@ -128,9 +131,6 @@ def pedestrian_geometry(geometry: dict[str, AssetGeometry]):
 
 def frame_rows(store: Store, model, seq_id: str, frame_index: int) -> list:
     """The rows of one frame of a per-sequence table (filtered in Arrow before validation)."""
-    import pyarrow.compute as pc
-
-    from carlaocc.catalog.parquet import from_table
 
     table = ParquetTable(store, model).load_arrow([seq_id])
     return from_table(model, table.filter(pc.equal(table["frame_index"], frame_index)))
@@ -155,8 +155,6 @@ class FrameInputs:
 def frame_inputs(store: Store, seq_id: str, frame_index: int, region, taxonomy: str | None = None) -> FrameInputs:
     """The rows and panoptic scene (LiDAR frame, cut to ``region`` = (lo, hi)) of one frame;
     ``taxonomy`` names the label table whose stuff parts carry instance 0 (None: the default)."""
-    from carlaocc.schemas.taxonomy import thing_ids
-    from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame, frame_region
 
     t_seq = ParquetTable(store, SequenceRecord)
     sequences = t_seq.load([seq_id]) if t_seq.exists(seq_id) else []

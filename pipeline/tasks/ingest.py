@@ -1,5 +1,6 @@
-"""The ingest stage: the procedural ADMesh library (``carlaocc run``), and one external mesh
-source (``carlaocc ingest KIND PATH``) as one task per source item.
+"""The ingest stage: the procedural ADMesh library (``carlaocc run``), and the stage over one
+external mesh source (``carlaocc ingest KIND PATH``, :mod:`carlaocc.pipeline.commands.ingest`)
+as one task per source item.
 
 Each source item's partition carries the item's files (and the category map) as external inputs,
 so a re-run re-ingests exactly the items whose bytes changed. Items that vanished from the source
@@ -12,23 +13,20 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections import Counter
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 from carlaocc.catalog.meshes import MeshStore
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.catalog.sources.base import SourceError
+from carlaocc.catalog.sources.base import SourceError, SourceItem
 from carlaocc.catalog.sources.registry import adapter
-from carlaocc.catalog.store import ADMESH_MESHES, ADMESH_TEXTURES, Store
+from carlaocc.catalog.store import Store
 from carlaocc.catalog.textures import TextureStore, has_texture
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, PROCEDURAL_SOURCE
-
-if TYPE_CHECKING:
-    from carlaocc.pipeline.engine.runner import Progress
-from carlaocc.schemas.configs import DatasetConfig, IngestConfig, SourceIngestConfig
+from carlaocc.schemas.configs import IngestConfig, SourceIngestConfig
 from carlaocc.schemas.records import AssetRecord, PartRecord, QuarantineRecord
+from carlaocc.stages.ingest import ingest_procedural
+from carlaocc.stages.ingest.checks import Rejection
+from carlaocc.stages.ingest.standardize import standardize
 
 STAGE = "ingest"
 
@@ -44,7 +42,6 @@ def _ingest_partitions(ctx: Context) -> list[Partition]:
 
 def ingest_task(store: Store, cfg: IngestConfig, part: Partition) -> dict[str, str]:
     """Generate the procedural ADMesh library; write meshes, assets and parts."""
-    from carlaocc.stages.ingest import ingest_procedural
 
     result = ingest_procedural(cfg)
     meshes = MeshStore(store)
@@ -88,10 +85,6 @@ def ingest_source_task(store: Store, cfg: SourceIngestConfig, part: Partition) -
     """Read one source item, standardize it, and write its mesh and records — or its quarantine
     row. The other outcome's files of the same item are removed, so an item that turned bad (or
     good) is never listed twice."""
-    from carlaocc.catalog.sources.base import SourceError, SourceItem
-    from carlaocc.catalog.sources.registry import adapter
-    from carlaocc.stages.ingest.checks import Rejection
-    from carlaocc.stages.ingest.standardize import standardize
 
     item = SourceItem(key=part.params["item_key"], files=tuple(part.files), meta=part.params.get("meta", {}))
     key = source_table_key(cfg, item.key)
@@ -184,69 +177,3 @@ def source_spec(cfg: SourceIngestConfig, exclude: tuple[str, ...] = ()) -> Stage
         task=ingest_source_task,
         config_of=lambda _: cfg,
     )
-
-
-@dataclass
-class IngestSummary:
-    items: int
-    ran: int
-    skipped: int
-    failed: list = field(default_factory=list)
-    ingested: int = 0
-    quarantined: Counter = field(default_factory=Counter)
-    pruned: int = 0
-    excluded: tuple[str, ...] = ()  # directories of the source skipped (the dataset root inside it)
-
-
-def prune_vanished(store: Store, cfg: SourceIngestConfig, keys: set[str]) -> int:
-    """Remove the table files of items of this source root that are no longer listed."""
-    prefix = f"source={cfg.kind}/{root_digest(cfg.root)}-"
-    live = {source_table_key(cfg, k) for k in keys}
-    removed = 0
-    for model in (AssetRecord, PartRecord, QuarantineRecord):
-        table = ParquetTable(store, model)
-        for rel in table.paths():
-            key = rel[len(table.dir) + 1 : -len(".parquet")]
-            if key.startswith(prefix) and key not in live:
-                store.remove(rel)
-                removed += model is AssetRecord or model is QuarantineRecord
-    return removed
-
-
-def prune_orphan_meshes(store: Store) -> int:
-    """Remove standardized meshes (and their textures) no asset row references any more (an item
-    that changed, turned bad or vanished leaves its old GLB behind)."""
-    assets = ParquetTable(store, AssetRecord).load()
-    referenced = {a.mesh_path for a in assets} | {a.texture_path for a in assets if a.texture_path}
-    orphans = [rel for rel in store.glob(ADMESH_MESHES, ".glb") + store.glob(ADMESH_TEXTURES, ".npz")
-               if rel not in referenced]
-    for rel in orphans:
-        store.remove(rel)
-    return len(orphans)
-
-
-def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None = None, force: bool = False,
-                  progress: Progress | None = None, workers: int | None = None, log=lambda s: None) -> IngestSummary:
-    """Ingest one source into the store's ADMesh library."""
-    from carlaocc.pipeline.engine.runner import StageOutcome, run  # the engine runs this stage alone
-
-    excluded = dataset_roots_inside(store, cfg)
-    spec = source_spec(cfg, excluded)
-    parts = spec.partitions(None)
-    outcomes: list[StageOutcome] = run(store, DatasetConfig(), (), None, scheduler, force, progress, workers,
-                                       log, registry={STAGE: spec})
-    (o,) = outcomes
-    summary = IngestSummary(items=len(parts), ran=o.ran, skipped=o.skipped, failed=o.failed, excluded=excluded)
-    summary.pruned = prune_vanished(store, cfg, {p.params["item_key"] for p in parts})
-    prune_orphan_meshes(store)
-    # what the library now holds of this source
-    prefix = f"source={cfg.kind}/{root_digest(cfg.root)}-"
-    for model in (AssetRecord, QuarantineRecord):
-        table = ParquetTable(store, model)
-        keys = [rel[len(table.dir) + 1 : -len(".parquet")] for rel in table.paths()]
-        rows = table.load([k for k in keys if k.startswith(prefix)])
-        if model is AssetRecord:
-            summary.ingested = len({r.asset_id for r in rows})  # duplicates are one asset
-        else:
-            summary.quarantined = Counter(r.reason for r in rows)
-    return summary

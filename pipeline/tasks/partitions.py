@@ -4,6 +4,8 @@ stage's code version does not take in the wiring of the stages it only names).""
 
 from __future__ import annotations
 
+from fnmatch import fnmatchcase
+
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.pipeline.engine.spec import Context, SelectionError, UpstreamMissing
 from carlaocc.schemas.records import SequenceRecord
@@ -21,7 +23,6 @@ def sequences(ctx: Context, selected: bool = True) -> list[SequenceRecord]:
     """The sequences of the configured towns, by id -- only those matching the run's sequence
     selection (``--sequences`` patterns) unless ``selected`` is False; UpstreamMissing before
     the scenes stage ran, SelectionError when the patterns match none."""
-    from fnmatch import fnmatchcase
 
     towns = {town_key(i) for i in range(len(ctx.config.scenes.towns))}
     seqs = [s for s in ParquetTable(ctx.store, SequenceRecord).load() if s.town in towns]

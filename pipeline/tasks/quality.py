@@ -19,7 +19,10 @@ from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, FrameStatisticsRecord, QualityRecord
+from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
 from carlaocc.stages.quality.blocks import BlockedGrid
+from carlaocc.stages.quality.statistics import N_CLASSES, block_pairs, split_pairs
+from carlaocc.stages.scratch import scratch
 
 FRAME_TABLES = (QualityRecord, ClassQualityRecord, FrameStatisticsRecord)  # one file of each per task
 
@@ -81,7 +84,6 @@ def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, 
     continuity counts (``occupied``, per class id), the pairs from the frame's stored instance
     chunks only (an instance chunk that is not stored is all zero: most of a frame, and never
     decoded), each read with its block of ``sem`` within the columns' occupied ``ranges``."""
-    from carlaocc.stages.quality.statistics import N_CLASSES, block_pairs
 
     if occupied[N_CLASSES:].any():
         bad = N_CLASSES + int(np.flatnonzero(occupied[N_CLASSES:])[0])
@@ -110,7 +112,6 @@ def _frame_statistics(occ: OccupancyStore, seq_id: str, grid: GridSpec, t: int, 
 def _frame_buffer(name: str, shape: tuple[int, int, int], block: tuple[int, int]) -> BlockedGrid:
     """A uint8 block-major frame buffer of the calling thread (:func:`carlaocc.stages.scratch.scratch`,
     contents left from its last use: :meth:`OccupancyStore.read_blocks` writes every block)."""
-    from carlaocc.stages.scratch import scratch
 
     X, Y, Z = shape
     layout = (-(-X // block[0]), -(-Y // block[1]), block[0], block[1], Z)
@@ -126,9 +127,6 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     ``[first, stop)`` (frame ``stop`` is read for the last one). Its visibility mask is
     ``mask_camera | mask_lidar`` (observed by any sensor of the rig): whichever of the two arrays
     the sequence has; no mask when it has neither."""
-    from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
-    from carlaocc.stages.quality.statistics import split_pairs
-    from carlaocc.stages.scratch import scratch
 
     seq_id, voxel_size = part.params["sequence_id"], part.params["voxel_size"]
     first, stop = part.params["first"], part.params["stop"]

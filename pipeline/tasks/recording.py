@@ -12,11 +12,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
+from carlaocc.catalog.carla_recording import (DEPTH_RANGE, RecordingError, decode_depth, decode_semantics, discover,
+                                              model_key, read_actor_info, read_calib, read_mesh, read_poses,
+                                              read_traffic)
+from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sources.carla_recording import WALK_CYCLE, model_offset
 from carlaocc.catalog.store import StoreError
-from carlaocc.schemas.configs import ScenesConfig, TownSpec
+from carlaocc.pipeline.tasks.partitions import town_key
+from carlaocc.schemas.configs import DatasetConfig, ScenesConfig, TownSpec
+from carlaocc.schemas.records import AssetRecord, FrameRecord
+from carlaocc.schemas.rig import CameraSpec
 from carlaocc.schemas.taxonomy import thing_ids
-from carlaocc.schemas.records import AssetRecord
+from carlaocc.stages.scenes.recording import RecordedAsset, RecordedFrame, WalkFrame, recorded_sequence, recorded_town
+from carlaocc.stages.sensors import CameraMaps
 
 __all__ = ["RecordedTown", "recorded_scenes", "recording_files", "rig_from_calib"]
 
@@ -44,7 +54,6 @@ def recording_files(spec: TownSpec) -> tuple[str, ...]:
     """The files whose bytes define a recorded town (fingerprinted with its scenes partition):
     calibration, actor list and meshes, vehicle models and the walk cycle, pose files and traffic
     of its sequences (not the images: the sensors stage's frames name those)."""
-    from carlaocc.catalog.carla_recording import RecordingError, discover
 
     try:
         rec = discover(spec.recording)
@@ -74,7 +83,6 @@ def rig_from_calib(calib, base):
     """The rig of a recording: the six cameras of its calibration (camera-to-LiDAR transforms,
     size, fov) on the LiDAR of ``base`` (a RigConfig, its LiDAR at (0, 0, z) on the ego, unturned,
     as the recording's; camera pitch and roll are not representable and must be 0)."""
-    from carlaocc.schemas.rig import CameraSpec
 
     lidar_z = base.lidar.z
     cams = []
@@ -106,10 +114,6 @@ def _check_rig(rig, calib, label: str) -> None:
 
 
 def _walk_cycle(rec, assets: dict[str, AssetRecord], skipped) -> list:
-    from carlaocc.catalog.carla_recording import RecordingError, read_mesh
-    from carlaocc.catalog.sources.carla_recording import WALK_CYCLE, model_offset
-    from carlaocc.stages.scenes.recording import WalkFrame
-
     folder = rec.root / "SceneMeshes" / "fg_actors" / WALK_CYCLE
     cycle = []
     rz90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -150,11 +154,6 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
     Items that cannot be read (a missing mesh, a bad pose line, an actor with a NaN transform, a
     blueprint without a model) are left out and listed in ``skipped``; a recording without any
     usable static mesh or frame raises StoreError naming it."""
-    from carlaocc.catalog.carla_recording import (RecordingError, discover, model_key, read_actor_info, read_calib,
-                                                  read_mesh, read_poses, read_traffic)
-    from carlaocc.catalog.parquet import ParquetTable
-    from carlaocc.catalog.sources.carla_recording import model_offset
-    from carlaocc.stages.scenes.recording import RecordedAsset, RecordedFrame, recorded_sequence, recorded_town
 
     label = f"town {name} (recording {spec.recording})"
     try:
@@ -237,8 +236,6 @@ def recording_config(recording: str, existing=None):
     recorded towns; simulated towns keep drawing from ``asset_sources``). ``existing`` (a
     DatasetConfig) is extended: its towns of the same recording and map are replaced in place,
     others kept, new ones appended; its rig must be the recording's (StoreError otherwise)."""
-    from carlaocc.catalog.carla_recording import RecordingError, discover, read_calib
-    from carlaocc.schemas.configs import DatasetConfig
 
     try:
         rec = discover(recording)
@@ -274,10 +271,6 @@ def recorded_frames(store, scenes: ScenesConfig, seq) -> list[dict] | None:
     image files of each rig camera (``{"depth": path, "semantic": path, "rgb": path}``, the raw
     ``depth_carla``/``semantics_carla`` preferred over the release's rectified ``depth``/
     ``semantics``; files that do not exist left out). None for simulated sequences."""
-    from carlaocc.catalog.carla_recording import RecordingError, discover
-    from carlaocc.catalog.parquet import ParquetTable
-    from carlaocc.pipeline.tasks.partitions import town_key
-    from carlaocc.schemas.records import FrameRecord
 
     spec = next((t for i, t in enumerate(scenes.towns) if town_key(i) == seq.town and t.style == "carla-recording"), None)
     if spec is None:
@@ -313,10 +306,6 @@ def read_frame_images(files: dict, cam):
     """One camera's raw maps (``CameraMaps``: planar depth, 0 where the PNG saturates at 80 m;
     semantic ids, unknown colours 0) and RGB (None without a file) from its recorded PNGs.
     StoreError naming the camera when its depth or semantic image is missing or malformed."""
-    from PIL import Image
-
-    from carlaocc.catalog.carla_recording import DEPTH_RANGE, RecordingError, decode_depth, decode_semantics
-    from carlaocc.stages.sensors import CameraMaps
 
     missing = [k for k in ("depth", "semantic") if k not in files]
     if missing:

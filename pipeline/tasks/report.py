@@ -16,14 +16,16 @@ from __future__ import annotations
 import numpy as np
 
 from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.images import png_bytes
 from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.usage import store_usage
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
-from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.pipeline.tasks.aggregate import aggregate_partitions
+from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.pipeline.tasks.report_page import PLOTS_DIR, REPORT_HTML, SENSOR_STEP, render_html, stage_lineage
 from carlaocc.pipeline.tasks.scenes import scenes_partitions
 from carlaocc.pipeline.tasks.sensors import sensors_partitions
@@ -31,6 +33,10 @@ from carlaocc.schemas.configs import DatasetConfig, QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import (AssetRecord, AssetStatisticsRecord, ClassStatisticsRecord, QualityRecord,
                                       SequenceRecord)
+from carlaocc.stages.render.figures import occupancy_figure
+from carlaocc.stages.render.sensors import CameraView, sensor_sheet
+from carlaocc.stages.report import plots
+from carlaocc.stages.report.statistics import asset_distribution, motion_share, resolution_totals
 
 TABLE_KEY = "dataset"
 FRAME_HEIGHT = 380  # pixels of the rendered occupancy frame's panels
@@ -39,8 +45,6 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     """The occupancy figure of one frame (BEV, 3D view, legend); instances coloured per object
     unless the grid is larger than :data:`RENDER_INSTANCE_VOXELS` (a 0.05 m instance frame is
     1.6 GB: such frames are drawn by class from the semantic grid alone)."""
-    from carlaocc.catalog.images import png_bytes
-    from carlaocc.stages.render.figures import occupancy_figure
 
     occ = OccupancyStore(store)
     small = int(np.prod(grid.shape)) <= RENDER_INSTANCE_VOXELS and occ.exists(seq, grid, "instance")
@@ -53,9 +57,6 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
 
 def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
     """The camera contact sheet of one frame (rectified maps only), or None without cameras."""
-    from carlaocc.catalog.images import png_bytes
-    from carlaocc.catalog.sensors import SensorStore
-    from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
     sensors = SensorStore(store)
     views = []
@@ -75,8 +76,6 @@ def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
 
 def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
     """Statistics tables, plots and ``metrics/report.html`` of the requested resolutions."""
-    from carlaocc.stages.report import plots
-    from carlaocc.stages.report.statistics import asset_distribution, motion_share, resolution_totals
 
     grids = [GridSpec.model_validate(g) for g in part.params["grids"]]
     seq_ids = list(part.params["sequences"])
@@ -157,7 +156,6 @@ def _report_partitions(ctx: Context) -> list[Partition]:
     partition (the sequences' statistics and scores), the scenes and ingest partitions, and the
     frame it renders: its occupancy at the finest size, and its cameras once the sensors stage has
     run."""
-    from carlaocc.catalog.lineage import LineageLog
 
     needs: set[tuple[str, str]] = set()
     for p in scenes_partitions(ctx):

@@ -21,6 +21,7 @@ from carlaocc.catalog.store import LIDAR_DIR
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import AssetStatisticsRecord, QualityRecord, RunRecord, SequenceRecord
+from carlaocc.stages.report.plots import metric_label
 from carlaocc.stages.report.statistics import ResolutionStats
 
 REPORT_HTML = "metrics/report.html"
@@ -155,7 +156,6 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
                 images: dict[str, bytes], label_table: str | None = None) -> str:
     """The report page: one string of HTML with every picture inlined (``images``: name -> PNG);
     ``label_table``: the dataset's (which classes are things)."""
-    from carlaocc.stages.report.plots import metric_label
 
     table = taxonomy.label_table(label_table)
     res_keys = ", ".join(f"{g.key} m" for g in grids)

@@ -7,15 +7,23 @@ placements, town row, sequences, frames, sensor poses and actors. A recorded tow
 from __future__ import annotations
 
 from carlaocc.catalog.admesh import dedupe_assets
+from carlaocc.catalog.lineage import LineageLog
 from carlaocc.catalog.meshes import MeshStore
+from carlaocc.catalog.opendrive import read_opendrive
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.towns import resolve_opendrive
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
+from carlaocc.pipeline.tasks.frame import load_geometry, pedestrian_rigs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, town_key
+from carlaocc.pipeline.tasks.recording import recorded_scenes, recording_files
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, QuarantineRecord,
                                       SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
+from carlaocc.stages.scenes import build_town, simulate_town
+from carlaocc.stages.scenes.people.pedestrians import match_walker_phases
+from carlaocc.stages.scenes.people.skeletons import skeleton_rows
 
 
 
@@ -23,12 +31,9 @@ def _town_files(spec) -> tuple[str, ...]:
     """Input files of a town (its OpenDRIVE file, its recording's poses and traffic),
     fingerprinted with the partition."""
     if spec.recording is not None:
-        from carlaocc.pipeline.tasks.recording import recording_files
-
         return recording_files(spec)
     if spec.opendrive is None:
         return ()
-    from carlaocc.catalog.towns import resolve_opendrive
 
     try:
         return (str(resolve_opendrive(spec.opendrive)),)
@@ -45,8 +50,6 @@ def scenes_partitions(ctx: Context) -> list[Partition]:
     recorded = ("carla-recording",) if any(t.style == "carla-recording" for t in ctx.config.scenes.towns) else ()
     others = tuple(s for s in sources if s != "procedural") + tuple(r for r in recorded if r not in sources)
     if others:
-        from carlaocc.catalog.lineage import LineageLog
-
         latest = LineageLog(ctx.store).latest("ingest")
         needs += [("ingest", k) for k, r in sorted(latest.items())
                   if r.status == "completed" and k.split(":")[0] in others]
@@ -73,8 +76,6 @@ def read_town_network(spec: TownSpec):
     """The parsed OpenDRIVE network of an opendrive town spec (None for procedural ones)."""
     if spec.style != "opendrive":
         return None
-    from carlaocc.catalog.opendrive import read_opendrive
-    from carlaocc.catalog.towns import resolve_opendrive
 
     return read_opendrive(resolve_opendrive(spec.opendrive))
 
@@ -82,9 +83,6 @@ def read_town_network(spec: TownSpec):
 def sequence_skeletons(store: Store, actors, frames) -> list:
     """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.people.pedestrians.skeleton_rows`):
     pedestrian rigs built from their ADMesh geometry (the per-worker cache the frames use)."""
-    from carlaocc.pipeline.tasks.frame import load_geometry, pedestrian_rigs
-    from carlaocc.schemas import taxonomy
-    from carlaocc.stages.scenes.people.skeletons import skeleton_rows
 
     ped = taxonomy.by_name("Pedestrian").id
     ids = {a.asset_id for a in actors if a.semantic_id == ped}
@@ -100,16 +98,12 @@ def is_edited(sequence_id: str) -> bool:
 def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, str]:
     """Build one town and simulate its sequences; write stuff meshes, placements, the town row,
     sequences, frames, sensor poses and actors."""
-    from carlaocc.stages.scenes import build_town, simulate_town
-    from carlaocc.stages.scenes.people.pedestrians import match_walker_phases
 
     index = part.params["town_index"]
     spec = cfg.towns[index]
     outputs: dict[str, str] = {}
     t_quarantine = ParquetTable(store, QuarantineRecord)
     if spec.style == "carla-recording":
-        from carlaocc.pipeline.tasks.recording import recorded_scenes
-
         recorded = recorded_scenes(store, cfg, spec, index, town_key(index))
         town = recorded.town
         assets = ParquetTable(store, AssetRecord).load()

@@ -12,11 +12,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from carlaocc.catalog.parquet import ParquetTable
+from carlaocc.catalog.sensors import CAMERA_MAPS, LidarStore, SensorStore
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.frame import frame_inputs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
+from carlaocc.pipeline.tasks.recording import read_frame_images, recorded_frames
 from carlaocc.schemas.configs import DatasetConfig, SensorsConfig
+from carlaocc.schemas.records import RectificationRecord
+from carlaocc.schemas.rig import RigConfig
+from carlaocc.stages.sensors import CameraMaps, camera_poses, recorded_stats, rectify_cameras, simulate_frame
+from carlaocc.stages.threads import kernel_threads
 
 if TYPE_CHECKING:
     from carlaocc.stages.sensors import CameraMaps
@@ -33,7 +39,6 @@ RECORDED_ARRAYS = ("depth_raw", "semantic_raw", "rgb")  # what a recorded sequen
 def sensors_partitions(ctx: Context) -> list[Partition]:
     """One per (sequence, frame). A frame of a recorded town (``carla-recording``) also names the
     recording's image files of that frame (fingerprinted: a changed image re-runs the frame)."""
-    from carlaocc.pipeline.tasks.recording import recorded_frames
 
     out = []
     for seq in sequences(ctx):
@@ -53,8 +58,6 @@ def _sensors_prepare(ctx: Context, to_run: list[Partition], partitions: list[Par
     """Create the camera arrays of every sequence about to be written (intrinsics and extrinsics
     in their attributes); a replaced array invalidates every frame of its sequence. The recorded
     path creates only the arrays it writes and leaves the recorder's ``*_raw`` arrays alone."""
-    from carlaocc.catalog.sensors import CAMERA_MAPS, SensorStore
-    from carlaocc.stages.sensors import camera_poses
 
     cfg = sensors_config(ctx.config)
     rig = cfg.rig
@@ -90,7 +93,6 @@ def sensor_region(cfg: SensorsConfig) -> tuple[np.ndarray, np.ndarray]:
 def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
     """The camera arrays the sensors stage writes under ``cfg`` (the recorded path reads the raw
     ones, written by the recorder, and never writes them)."""
-    from carlaocc.catalog.sensors import CAMERA_MAPS
 
     raw = ("depth_raw", "semantic_raw", "instance_raw") if cfg.source == "raycast" else ()
     rgb = ("rgb",) if cfg.source == "raycast" and cfg.rgb else ()
@@ -100,7 +102,6 @@ def sensor_arrays(cfg: SensorsConfig) -> tuple[str, ...]:
 def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
     """The raw maps a recorder wrote for one camera and frame (depth_raw and semantic_raw are
     required, instance_raw optional), with a clear error naming what is missing."""
-    from carlaocc.stages.sensors import CameraMaps
 
     def read(name: str, required: bool):
         # a stored chunk is the recorder's image (an all-zero image has no chunk: for depth and
@@ -122,11 +123,6 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     clean maps, simulates the raw ones and rectifies them; the recorded path rectifies the raw
     maps already in sensors.zarr. Both write the rectified depth/semantic/instance, the D2NT
     normals and a rectification record per camera."""
-    from carlaocc.catalog.sensors import LidarStore, SensorStore
-    from carlaocc.schemas.records import RectificationRecord
-    from carlaocc.schemas.rig import RigConfig
-    from carlaocc.stages.sensors import recorded_stats, rectify_cameras, simulate_frame
-    from carlaocc.stages.threads import kernel_threads
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     rig = cfg.rig or RigConfig()
@@ -134,7 +130,6 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     sensors = SensorStore(store)
     cams = cfg.selected_cameras(rig)
     outputs: dict[str, str] = {}
-    from carlaocc.pipeline.tasks.recording import read_frame_images
 
     recorded = part.params.get("recorded")
     rgb: dict[str, np.ndarray] = {}

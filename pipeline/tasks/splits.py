@@ -9,6 +9,7 @@ from carlaocc.catalog.store import Store
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.partitions import sequences, town_key
 from carlaocc.schemas.configs import SplitsConfig
+from carlaocc.stages.splits import assign_splits
 
 
 def splits_partitions(ctx: Context) -> list[Partition]:
@@ -21,7 +22,6 @@ def splits_partitions(ctx: Context) -> list[Partition]:
 
 def splits_task(store: Store, cfg: SplitsConfig, part: Partition) -> dict[str, str]:
     """Assign the partition's sequences and write the three split files."""
-    from carlaocc.stages.splits import assign_splits
 
     assignment = assign_splits(part.params["sequences"], cfg.seed, cfg.val_fraction, cfg.test_fraction)
     return SplitStore(store).save(assignment)

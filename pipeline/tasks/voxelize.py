@@ -15,6 +15,13 @@ from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.frame import FrameInputs, frame_inputs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
 from carlaocc.schemas.configs import DatasetConfig, VoxelizeConfig
+from carlaocc.schemas.rig import RigConfig
+from carlaocc.stages.geometry import pose_from_list
+from carlaocc.stages.scenes.assembly import region_of_grid
+from carlaocc.stages.scratch import scratch
+from carlaocc.stages.voxelize import voxelize_tiles
+from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
+from carlaocc.stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
 
 
 def voxelize_config(config: DatasetConfig) -> VoxelizeConfig:
@@ -64,8 +71,6 @@ def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
 def _frame_flow(inputs: FrameInputs):
     """``(tile, tile_origin, voxel_size) -> (flat indices, float16 (N, 3) flow) | None``: the flow
     of the voxels of the frame's actors in a tile (None when it holds none: its flow is zero)."""
-    from carlaocc.stages.geometry import pose_from_list
-    from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
 
     actors = [a for a in inputs.actors if a.instance_id > 0]
     ids = np.asarray([a.instance_id for a in actors], dtype=np.uint32)
@@ -91,11 +96,6 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     instance and flow tile by tile (x-slabs of whole chunks), then the camera and LiDAR masks,
     traced through the frame's occupancy packed tile by tile and written chunk by chunk from
     their bits (no array of the whole frame is ever held)."""
-    from carlaocc.schemas.rig import RigConfig
-    from carlaocc.stages.scenes.assembly import region_of_grid
-    from carlaocc.stages.scratch import scratch
-    from carlaocc.stages.voxelize import voxelize_tiles
-    from carlaocc.stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
 
     seq_id, frame_index = part.params["sequence_id"], part.params["frame_index"]
     grid = cfg.grid(part.params["voxel_size"])
