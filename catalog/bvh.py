@@ -11,6 +11,7 @@ channels. Malformed input raises :class:`BvhError` naming the 1-based line numbe
 
 from __future__ import annotations
 
+import fsspec
 import numpy as np
 
 from carlaocc.schemas.motion import MotionClip
@@ -176,7 +177,6 @@ def parse_bvh(text: str) -> MotionClip:
 
 def read_bvh(path: str) -> MotionClip:
     """Read a BVH file (local path or fsspec URL) in place."""
-    import fsspec
 
     with fsspec.open(str(path), "rt", encoding="utf-8") as fh:
         text = fh.read()

@@ -3,7 +3,6 @@
 The layout (the CarlaOcc authors' data collection, scene export and release: fengyi233/carlaocc
 ``data_collection/src/data_saver.py``, ``utils/transforms.py``, ``utils/load_utils.py``,
 ``scene_exportation/``; checked fact by fact there, written anew here)::
-
     <root>/calib/calib.yaml                       cameras: size, fov, intrinsics, camera-to-LiDAR
     <root>/SceneMeshes/<Town>_Opt/actor_info.json the static actors: name, class, instance id,
                                                   OBJ file, world bounds
@@ -50,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from carlaocc.catalog.sources.obj import ObjError, read_obj
 from carlaocc.schemas.taxonomy import by_id, by_name
@@ -204,8 +204,6 @@ def model_key(blueprint: str) -> str:
 
 
 def _yaml(path: Path):
-    import yaml
-
     try:
         return yaml.safe_load(path.read_text())
     except FileNotFoundError:

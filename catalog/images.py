@@ -3,6 +3,7 @@ grey images, written atomically."""
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 
@@ -38,8 +39,6 @@ def save_png(store: Store | None, path: str, image: np.ndarray) -> str:
     """Write a PNG into the store (store-relative path) or, with ``store=None``, to a local path."""
     data = png_bytes(image)
     if store is None:
-        import os
-
         target = Store(os.path.dirname(os.path.abspath(path)) or ".")
         return target.write_bytes(os.path.basename(path), data)
     return store.write_bytes(path, data)

@@ -17,11 +17,14 @@ keeps its signature: that is what ``verify`` is for.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import os
 import posixpath
 
+import fsspec
+
 from carlaocc.catalog.store import Store
-from carlaocc.catalog.zarrio import parse_frame_key
+from carlaocc.catalog.zarrio import parse_frame_key, parse_metadata
 
 # keys of an fsspec info dict that identify an object's version, most specific first
 _VERSION_KEYS = ("ETag", "etag", "e_tag", "md5Hash", "generation", "VersionId")
@@ -65,7 +68,6 @@ _CHUNK_GRIDS: dict[tuple[str, str], tuple[int, ...] | None] = {}  # (zarr.json, 
 def _chunk_grid(store: Store, meta_rel: str, meta_sig: str) -> tuple[int, ...] | None:
     """Chunks along each axis after the frame axis of the array whose metadata is ``meta_rel``
     (read once per version of the file), None when it is not an array's Zarr v3 metadata."""
-    from carlaocc.catalog.zarrio import parse_metadata
 
     key = (store.path(meta_rel), meta_sig)
     if key not in _CHUNK_GRIDS:
@@ -84,7 +86,6 @@ def _chunk_grid(store: Store, meta_rel: str, meta_sig: str) -> tuple[int, ...] |
 def _local_chunks(base: str, frame: int, grid: tuple[int, ...]) -> list[tuple[str, str]]:
     """(chunk key, signature or "-" when not stored) of every chunk a frame can have: one
     ``stat`` each, no directory listing (a frame's chunk directories nest one level per axis)."""
-    import itertools
 
     out = []
     for idx in itertools.product(*(range(n) for n in grid)):
@@ -151,7 +152,6 @@ def external_signature(path: str) -> str | None:
     try:
         if "://" not in path or path.startswith("file://"):
             return _local_signature(os.stat(path.removeprefix("file://")))
-        import fsspec
 
         fs, p = fsspec.core.url_to_fs(path)
         return info_signature(fs.info(p))

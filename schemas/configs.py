@@ -13,6 +13,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import DEFAULT_REGION_MAX, DEFAULT_REGION_MIN, GridSpec, voxel_size_key
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.schemas.taxonomy import DEFAULT_LABEL_TABLE, LabelTableName
@@ -178,8 +179,6 @@ class SimulatorArtifacts(StageConfig):
 
     @model_validator(mode="after")
     def _known_classes(self) -> SimulatorArtifacts:
-        from carlaocc.schemas import taxonomy
-
         for name in self.unlabelled_classes:
             try:
                 taxonomy.by_name(name)

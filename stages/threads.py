@@ -13,7 +13,7 @@ def set_kernel_threads(n: int | None) -> None:
     _THREADS = int(n or 0)
     if not _THREADS:
         return
-    import numba
+    import numba  # 0.3 s to import: paid only when a thread count is set
 
     numba.set_num_threads(min(_THREADS, numba.config.NUMBA_NUM_THREADS))
     try:

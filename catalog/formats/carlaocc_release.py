@@ -3,7 +3,6 @@
 Facts from the authors' repository (fengyi233/carlaocc: ``docs/source/occ_generation.rst``,
 ``tutorials/dataset.py``, ``utils/load_utils.py``, ``occupancy_generation/generators/``,
 ``data_collection/src/data_saver.py``), written anew here::
-
     <out>/calib/calib.yaml                          cam_settings (width, height, fov, intrinsics) and
                                                     sensors.cam_XX.transform (camera body -> LiDAR, 4x4)
     <out>/splits/{train,val,test}.txt               one line per frame: '<town number> <sequence number> <frame>'
@@ -32,10 +31,12 @@ attenuation rate).
 from __future__ import annotations
 
 import io
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import yaml
 
 from carlaocc.catalog.formats.carlaocc_npz import LABEL_LIMITS, check_encoding
 
@@ -86,7 +87,6 @@ def town_numbers(towns: Sequence[str]) -> dict[str, int]:
     """Release town numbers of our towns, in order: a town already named like the release's
     (``Town03_Opt``, ``Town10HD_Opt``) keeps its number; the others take the free numbers of
     1..7, 10, then 11, 12, ... (the release's eight towns first). ``ValueError`` past 99."""
-    import re
 
     taken: dict[str, int] = {}
     for t in towns:
@@ -127,7 +127,6 @@ def release_instance_ids(semantic_ids: np.ndarray, instance_ids: np.ndarray, mov
 
     ``moving``: our ids of the simulated actors. Per class, deterministic and stable across the
     sequence's frames; what would collide is renumbered, never merged:
-
     * ``bits`` (the release's code): placed objects keep their id when every placed id of the
       class is in 1..999, else they are numbered 1, 2, ... in id order; moving ones take
       ``1000 + id % 1000`` when that is unique in the class, else 1000, 1001, ... in id order.
@@ -195,7 +194,6 @@ def calib_yaml(width: int, height: int, fov_deg: float, intrinsics: np.ndarray,
                camera_to_lidar: Mapping[str, np.ndarray]) -> str:
     """``calib/calib.yaml``: ``cam_settings`` and ``sensors.cam_XX.transform`` (camera body frame,
     x forward, y left, z up, to the LiDAR frame; 4x4)."""
-    import yaml
 
     def r6(a):
         return [[round(float(v), 6) for v in row] for row in np.asarray(a)]

@@ -12,6 +12,7 @@ import posixpath
 from urllib.parse import unquote
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 
 MAX_TEXTURE_SIDE = 1024
@@ -22,7 +23,6 @@ a camera never sees more of one asset's texture, and the ADMesh library stays sm
 def texture_image(img) -> np.ndarray:
     """An (H, W, 3) uint8 RGB array of a PIL image (palette, grey and alpha images converted),
     its long side at most :data:`MAX_TEXTURE_SIDE`."""
-    from PIL import Image
 
     if img.mode in ("P", "PA", "LA", "RGBA", "La"):
         img = img.convert("RGBA")  # palette and alpha images: through RGBA (no warning, no surprise)
@@ -37,7 +37,6 @@ def texture_image(img) -> np.ndarray:
 def read_texture(path: str) -> np.ndarray | None:
     """The image file at ``path`` as :func:`texture_image` gives it; None when it is missing or
     unreadable (the part keeps its texture by reference and its material colour)."""
-    from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(path) as img:

@@ -23,6 +23,7 @@ import numpy as np
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.render.colours import instance_colors
 from carlaocc.stages.render.sheets import contact_sheet
+from carlaocc.stages.scenes.people.pedestrians import SKELETON_BONES
 
 _DEPTH_T = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
 _DEPTH_RGB = np.array([[20, 12, 50], [95, 30, 120], [200, 60, 90], [250, 150, 50], [252, 250, 190]], dtype=np.float64)
@@ -164,7 +165,6 @@ def _skeletons(image: np.ndarray, view: CameraView, step: int) -> np.ndarray:
     """``image`` with the view's skeletons drawn, when it has any."""
     if view.skeleton_uv is None or len(view.skeleton_uv) == 0:
         return image
-    from carlaocc.stages.scenes.people.pedestrians import SKELETON_BONES
 
     return draw_skeletons(image, view.skeleton_uv, view.skeleton_visible, SKELETON_BONES, step)
 

@@ -19,6 +19,8 @@ from collections.abc import Sequence
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import AssetRecord
 from carlaocc.stages.scenes.network import Lane, RoadNetwork, Town, Walkway, check_network
+from carlaocc.stages.scenes.opendrive.town import build_opendrive_town
+from carlaocc.stages.scenes.town.build import build_procedural_town
 from carlaocc.stages.scenes.traffic.simulation import (
     TRAFFIC_LEVELS, SequenceResult, ego_starts, simulate_sequence, simulate_town,
 )
@@ -37,9 +39,5 @@ def build_town(
     if spec.style == "opendrive":
         if opendrive is None:
             raise ValueError(f"town {index}: the opendrive style needs the parsed network of {spec.opendrive}")
-        from carlaocc.stages.scenes.opendrive.town import build_opendrive_town
-
         return build_opendrive_town(opendrive, spec, scenes, index, assets, source)
-    from carlaocc.stages.scenes.town.build import build_procedural_town
-
     return build_procedural_town(spec, scenes, index, assets)

@@ -23,8 +23,11 @@ from carlaocc.schemas.rig import CameraSpec, RigConfig
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors.artifacts import unlabelled_meshes
 from carlaocc.stages.sensors.normals import depth_normals
-from carlaocc.stages.sensors.raycast import CameraMaps, RayScene, covered_pixels, lidar_scan, render_camera
+from carlaocc.stages.sensors.raycast import (CameraMaps, RayScene, camera_ray_bundle, covered_pixels, lidar_scan,
+                                             render_camera)
 from carlaocc.stages.sensors.rectify import Rectification, compact_mesh, rectify
+from carlaocc.stages.sensors.shading import base_colours, face_normals, render_rgb, sun_direction
+from carlaocc.stages.voxelize.visibility import sensor_to_lidar
 
 
 @dataclass(frozen=True)
@@ -68,7 +71,6 @@ class SensorFrame:
 
 def camera_poses(rig: RigConfig) -> dict[str, np.ndarray]:
     """4x4 pose of each camera's OpenCV optical frame in the LiDAR frame."""
-    from carlaocc.stages.voxelize.visibility import sensor_to_lidar
 
     return sensor_to_lidar(rig)
 
@@ -135,9 +137,6 @@ def simulate_frame(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConfi
     rectified = rectify_cameras(scene, rig, cfg, raw, nthreads=nthreads)
     rgb = {}
     if cfg.rgb:
-        from carlaocc.stages.sensors.raycast import camera_ray_bundle
-        from carlaocc.stages.sensors.shading import base_colours, face_normals, render_rgb, sun_direction
-
         R = np.eye(3) if world_to_scene is None else np.asarray(world_to_scene, dtype=np.float64)[:3, :3]
         sun, up = sun_direction(cfg.sun_azimuth_deg, cfg.sun_elevation_deg, R), R @ np.array([0.0, 0.0, 1.0])
         # per triangle, once for the frame's cameras: normals and base colours

@@ -24,6 +24,7 @@ import numpy as np
 
 from carlaocc.schemas.rig import CameraSpec, LidarSpec
 from carlaocc.stages.scenes.assembly import PanopticMesh
+from carlaocc.stages.voxelize.visibility import lidar_directions
 
 SKY = 11  # taxonomy id of Sky: the label of pixels whose ray meets no surface
 UNLABELLED = 0  # the empty label a simulator's semantic pass leaves on assets it does not render
@@ -54,7 +55,7 @@ class RayScene:
     """
 
     def __init__(self, mesh: PanopticMesh, unlabelled: np.ndarray | None = None, nthreads: int = 0):
-        import open3d as o3d
+        import open3d as o3d  # 1.0 s to import (python -X importtime): paid only by tasks that cast rays
 
         self.mesh = mesh
         n = len(mesh.faces)
@@ -89,7 +90,7 @@ class RayScene:
 
     def cast_rays(self, rays: np.ndarray, nthreads: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`cast` of rays given as one (N, 6) float32 array ``[ox, oy, oz, dx, dy, dz]``."""
-        import open3d as o3d
+        import open3d as o3d  # 1.0 s to import (python -X importtime): paid only by tasks that cast rays
 
         n = len(rays)
         if self.triangle_count == 0 or n == 0:
@@ -258,8 +259,6 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
 
 @lru_cache(maxsize=8)
 def _lidar_beams(lidar: LidarSpec) -> tuple[np.ndarray, np.ndarray]:
-    from carlaocc.stages.voxelize.visibility import lidar_directions
-
     d = lidar_directions(lidar)
     steps = len(d) // lidar.channels
     channel = np.repeat(np.arange(lidar.channels, dtype=np.uint8), steps)
