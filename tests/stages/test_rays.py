@@ -1,5 +1,6 @@
 """RayIoU / RayPQ (stages/evaluation/rays.py): the known answers of training-formats.md section 10,
-the first-hit traversal against a brute-force march in tiny steps, and RayPQ's matching rules."""
+the first-hit traversal against every voxel's exact slab interval (a march in small steps misses
+the slivers a ray clips, as seed 46 found), and RayPQ's matching rules."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from carlaocc.schemas import taxonomy
@@ -52,30 +53,28 @@ def test_index_to_metre_and_exit_face_depth():
                       )[0][0] == pytest.approx(2.2)
 
 
-def _brute(occ, o, d, vs, origin, step=2e-3):
-    """March in tiny steps (voxel units): the first occupied voxel and where the ray leaves it."""
+def _brute(occ, o, d, vs, origin):
+    """Every voxel's exact slab interval along the ray (voxel units), independent of the
+    traversal: the voxels the ray passes through (a positive length inside, however short), in
+    entry order; the first occupied one and where the ray leaves it, else the last voxel."""
     p = (o - origin) / vs
-    shape = np.array(occ.shape)
-    t, last = 0.0, None
-    inside_seen = False
-    while t < 1000:
-        q = p + t * d
-        v = np.floor(q).astype(int)
-        if np.all(v >= 0) and np.all(v < shape):
-            inside_seen = True
-            last = tuple(v)
-            if occ[last]:
-                while np.array_equal(np.floor(p + t * d).astype(int), v):
-                    t += step
-                return t * vs, last, True
-        elif inside_seen:
-            return t * vs, last, False
-        t += step
-    return None, None, False
+    idx = np.indices(occ.shape).reshape(3, -1).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, b = (idx - p) / d, (idx + 1 - p) / d
+    t0 = np.nanmax(np.minimum(a, b), axis=1)
+    t1 = np.nanmin(np.maximum(a, b), axis=1)
+    crossed = t1 > np.maximum(t0, 0.0)
+    order = np.flatnonzero(crossed)[np.argsort(t0[crossed], kind="stable")]
+    for v in order:
+        if occ[tuple(idx[v])]:
+            return t1[v] * vs, tuple(idx[v]), True
+    last = order[-1]
+    return t1[last] * vs, tuple(idx[last]), False
 
 
 @settings(max_examples=12, deadline=None)
 @given(st.integers(0, 2**31 - 1))
+@example(46)  # a ray that clips a 0.2 mm sliver of an occupied voxel as it leaves the grid
 def test_first_hits_agree_with_a_brute_force_march(seed):
     rng = np.random.default_rng(seed)
     occ = rng.random((12, 10, 6)) < 0.08
@@ -90,9 +89,9 @@ def test_first_hits_agree_with_a_brute_force_march(seed):
         assert bv is not None
         ours = np.unravel_index(lin[r], occ.shape)
         assert bool(occ[ours]) == hit, r  # a hit in both or in neither
-        if hit:  # the same voxel (a miss's last voxel may differ at a corner the march clips)
+        if hit:  # the same voxel (a miss's last voxel may differ where the ray leaves through an edge)
             assert lin[r] == np.ravel_multi_index(bv, occ.shape), (r, bv)
-        assert depth[r] == pytest.approx(bd, abs=2 * 2e-3 * vs)
+        assert depth[r] == pytest.approx(bd, abs=1e-9)
 
 
 def _grid_with_wall(x_index=150, label=15):
