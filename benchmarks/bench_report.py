@@ -1,7 +1,7 @@
 """Report-stage speed: the per-frame statistics kernel on synthetic frames, and the whole report
 task on a built dataset.
 
-1. :func:`carlaocc.stages.report.statistics.frame_statistics` (voxels per class and distinct instance
+1. :func:`carlaocc.stages.quality.statistics.frame_statistics` (voxels per class and distinct instance
    pairs in one pass) on a synthetic street at 0.2 m and 0.1 m (semantic uint8 + instance uint32:
    buildings and cars are instances), one thread, best of ``REPEAT``.
 2. With ``ROOT RES`` arguments (or ``CARLAOCC_BENCH_ROOT`` / ``CARLAOCC_BENCH_RES``), the report

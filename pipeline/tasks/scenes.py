@@ -81,7 +81,7 @@ def read_town_network(spec: TownSpec):
 
 
 def sequence_skeletons(store: Store, actors, frames) -> list:
-    """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.people.pedestrians.skeleton_rows`):
+    """The ``skeletons`` rows of one sequence (see :func:`carlaocc.stages.scenes.people.skeletons.skeleton_rows`):
     pedestrian rigs built from their ADMesh geometry (the per-worker cache the frames use)."""
 
     ped = taxonomy.by_name("Pedestrian").id
