@@ -34,15 +34,10 @@ class DatasetError(ValueError):
 
 
 class FrameSamples:
-    """Frames of a built carlaocc root as samples (:mod:`carlaocc.data` lists the keys).
-
-    ``root``: a directory or fsspec URL. ``split``: ``train`` / ``val`` / ``test`` (the root's
-    ``splits/``), or None for every sequence. ``voxel_size``: a built voxel size (m).
-    ``occupancy``: ``sparse`` | ``dense`` | ``crop`` (with ``crop=((x0, y0, z0), (x1, y1, z1))``
-    metres in the LiDAR frame: the voxels whose centres lie inside) | ``none``. ``cameras``:
-    RGB images with their calibration; ``camera_maps``: which of the rendered maps to add;
-    ``lidar``, ``boxes``: include those. ``sequences``: restrict to these ids. ``voxel_size``
-    None: the finest voxel size every selected sequence was built at."""
+    """Frames of a built carlaocc root as samples, read from the store: the index of (sequence,
+    frame) pairs at one voxel size, and one frame's arrays on demand. The options and the keys are
+    those of :class:`carlaocc.data.CarlaOccDataset` (its docstring), but the boxes: ``boxes``
+    only records whether the caller wants them, and :meth:`actor_rows` gives their rows."""
 
     def __init__(self, root: str = "data", split: str | None = None, voxel_size: float | None = None,
                  occupancy: str = "sparse", crop: Sequence[Sequence[float]] | None = None, cameras: bool = True,

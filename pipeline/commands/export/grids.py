@@ -36,8 +36,7 @@ from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, one_label_table, save_sequence_splits,
-                                                    sequence_splits, voxelized_or_refuse)
+from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, save_sequence_splits, voxelized_export
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import grid_coverage
 from carlaocc.stages.export.resample import (OCC3D_NUSCENES, SEMANTICKITTI_GRID, SSCBENCH_KITTI360, SURROUNDOCC_GRID,
@@ -68,9 +67,7 @@ def write_resampled(job: ExportJob) -> tuple[int, int, int]:
     """Every frame of every voxelized sequence resampled onto the format's grid."""
     fmt, out, store = job.format, job.out, job.store
     target = TARGETS[fmt]
-    todo = voxelized_or_refuse(store, job.voxel_size, job.sequences)
-    splits = sequence_splits(store, [s for s, _, _ in todo], required=False)
-    label_table = one_label_table(store, {s: g for s, g, _ in todo})
+    todo, splits, label_table = voxelized_export(job)
     occ = OccupancyStore(store)
     n_frames = n_files = 0
     for seq, grid, frame_count in todo:

@@ -16,18 +16,15 @@ from carlaocc.catalog.formats.carlaocc_npz import LABEL_ENCODINGS
 from carlaocc.catalog.formats.carlaocc_release import instance_lookup, remap_instances
 from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
 from carlaocc.catalog.occupancy import OccupancyStore
-from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, actor_ids, one_label_table,
-                                                    save_sequence_splits, sequence_release_ids, sequence_splits,
-                                                    voxelized_or_refuse)
+from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, actor_ids, save_sequence_splits,
+                                                    sequence_release_ids, voxelized_export)
 from carlaocc.schemas import taxonomy
 
 
 def write_npz(job: ExportJob) -> tuple[int, int, int]:
     """Every frame of every voxelized sequence on our own grid, labels in ``job.options["encoding"]``."""
     store, out, encoding = job.store, job.out, job.options["encoding"]
-    todo = voxelized_or_refuse(store, job.voxel_size, job.sequences)
-    splits = sequence_splits(store, [s for s, _, _ in todo], required=False)
-    label_table = one_label_table(store, {s: g for s, g, _ in todo})
+    todo, splits, label_table = voxelized_export(job)
     occ = OccupancyStore(store)
     n_frames = n_files = 0
     for seq, grid, frame_count in todo:

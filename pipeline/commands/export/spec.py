@@ -92,6 +92,15 @@ def voxelized_sequences(store: Store, voxel_size: float,
         yield s.sequence_id, grid, occ.open(s.sequence_id, grid, "semantic").shape[0]
 
 
+def voxelized_export(job: ExportJob) -> tuple[list[tuple[str, GridSpec, int]], dict[str, str], str]:
+    """What an export of our grids reads: the voxelized sequences (:func:`voxelized_or_refuse`),
+    their splits (``{}`` for a root built before splits) and the one label table they were built
+    under."""
+    todo = voxelized_or_refuse(job.store, job.voxel_size, job.sequences)
+    splits = sequence_splits(job.store, [s for s, _, _ in todo], required=False)
+    return todo, splits, one_label_table(job.store, {s: g for s, g, _ in todo})
+
+
 def voxelized_or_refuse(store: Store, voxel_size: float, sequences) -> list[tuple[str, GridSpec, int]]:
     """:func:`voxelized_sequences` as a list; StoreError when there is none."""
     todo = list(voxelized_sequences(store, voxel_size, sequences))
