@@ -1,4 +1,4 @@
-"""End to end on the embedded default at a coarse resolution: ingest -> scenes -> voxelize ->
+"""End to end on the embedded default at a coarse voxel size: ingest -> scenes -> voxelize ->
 metrics through the CLI, then the arrays, the catalog, re-runs and scheduler independence."""
 
 from __future__ import annotations
@@ -142,8 +142,8 @@ def test_report_and_statistics_tables(built):
 
 
 def _metrics(store: Store) -> dict[str, list]:
-    tables = {"quality": "sequence_id, resolution, frame_index, metric, value, occupied, isolated, numerator, denominator",
-              "quality_classes": "sequence_id, resolution, frame_index, semantic_id, occupied, isolated",
+    tables = {"quality": "sequence_id, voxel_size, frame_index, metric, value, occupied, isolated, numerator, denominator",
+              "quality_classes": "sequence_id, voxel_size, frame_index, semantic_id, occupied, isolated",
               "statistics_classes": "*", "statistics_frames": "*"}
     return {t: sorted(query(store, f"SELECT {cols} FROM {t}")[1], key=repr) for t, cols in tables.items()}
 
@@ -573,21 +573,21 @@ def test_show_occupancy_png(built, tmp_path):
     assert r.exit_code == 2 and "frames 0.." in r.output
 
 
-def test_export_refuses_a_resolution_not_built(built, tmp_path):
+def test_export_refuses_a_voxel_size_not_built(built, tmp_path):
     r = cli.invoke(app, ["export", "occ3d", "--res", "0.8", "--root", built.url, "--out", str(tmp_path / "x")])
     assert r.exit_code == 2 and "0.8" in r.output
 
 
-def test_second_resolution_pooling_report_and_multi_resolution_figure(config_file, built, tmp_path):
+def test_second_voxel_size_pooling_report_and_multi_voxel_size_figure(config_file, built, tmp_path):
     import shutil
 
     root = tmp_path / "data"
     shutil.copytree(built.root, root)
-    r = cli.invoke(app, ["run", "--config", config_file, "--stages", "voxelize", "--res", "0.8", "--root", str(root), "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--stages", "voxelize", "--voxel-size", "0.8", "--root", str(root), "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / "pool.json"
-    r = cli.invoke(app, ["compare-resolutions", "--fine", str(RES), "--coarse", "0.8", "--root", str(root),
+    r = cli.invoke(app, ["compare-voxel-sizes", "--fine", str(RES), "--coarse", "0.8", "--root", str(root),
                          "--sequence", seq, "--json", str(out)])
     assert r.exit_code == 0, r.output
     rows = json.loads(out.read_text())

@@ -58,7 +58,7 @@ def test_effective_region_covers_region_within_one_voxel(vs, ext):
         assert eff < hi + vs + 1e-9
 
 
-def test_resolution_key():
+def test_voxel_size_key():
     assert voxel_size_key(0.05) == "0.05"
     assert voxel_size_key(0.2) == "0.2"
     assert voxel_size_key(1.0) == "1"

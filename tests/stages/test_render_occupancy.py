@@ -9,7 +9,7 @@ import pytest
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import by_name, palette
 from carlaocc.stages.render.colours import instance_colors
-from carlaocc.stages.render.figures import multi_resolution_figure, occupancy_figure
+from carlaocc.stages.render.figures import multi_voxel_size_figure, occupancy_figure
 from carlaocc.stages.render.occupancy import (FREE_RGB, bev_height_map, classes_present, perspective_view,
                                              pool_occupancy, surface_voxels, top_surface)  # fmt: skip
 
@@ -226,10 +226,10 @@ def test_occupancy_figure_has_title_panels_and_legend():
     assert not (fig == palette()[SIGN]).all(axis=2).any()
 
 
-def test_multi_resolution_figure_has_one_labelled_column_per_resolution():
+def test_multi_voxel_size_figure_has_one_labelled_column_per_voxel_size():
     frames = [(f"{vs:g} m", *_scene(vs)) for vs in (0.25, 0.5)]
-    one = multi_resolution_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
-    two = multi_resolution_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+    one = multi_voxel_size_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+    two = multi_voxel_size_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
     assert one.dtype == two.dtype == np.uint8 and one.shape[0] == two.shape[0]
     assert two.shape[1] > 2 * one.shape[1] - 1 - 16 and two.shape[1] > one.shape[1]
     col = one.shape[1]

@@ -1,4 +1,4 @@
-"""Multi-resolution pooling and resampling to other datasets' grids (stages/voxelize/pooling.py, stages/export/resample.py).
+"""Pooling across voxel sizes and resampling to other datasets' grids (stages/voxelize/pooling.py, stages/export/resample.py).
 
 Orientation tests place objects at known LiDAR-frame positions (x forward, y left, z up) and check
 the exact target voxel index, so a swapped or mirrored axis fails.
