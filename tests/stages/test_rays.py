@@ -52,9 +52,9 @@ def test_index_to_metre_and_exit_face_depth():
                       )[0][0] == pytest.approx(2.2)
 
 
-def _brute(occ, o, d, vs, origin, step=2e-3):
+def _brute(occ, o, d, voxel_size, origin, step=2e-3):
     """March in tiny steps (voxel units): the first occupied voxel and where the ray leaves it."""
-    p = (o - origin) / vs
+    p = (o - origin) / voxel_size
     shape = np.array(occ.shape)
     t, last = 0.0, None
     inside_seen = False
@@ -67,9 +67,9 @@ def _brute(occ, o, d, vs, origin, step=2e-3):
             if occ[last]:
                 while np.array_equal(np.floor(p + t * d).astype(int), v):
                     t += step
-                return t * vs, last, True
+                return t * voxel_size, last, True
         elif inside_seen:
-            return t * vs, last, False
+            return t * voxel_size, last, False
         t += step
     return None, None, False
 
@@ -80,19 +80,19 @@ def test_first_hits_agree_with_a_brute_force_march(seed):
     rng = np.random.default_rng(seed)
     occ = rng.random((12, 10, 6)) < 0.08
     origin = np.array([-1.0, 2.0, 0.5])
-    vs = 0.5
+    voxel_size = 0.5
     o = origin + rng.uniform([0.5, 0.5, 0.5], [5.5, 4.5, 2.5])
     dirs = rng.normal(size=(12, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    depth, lin = first_hits(occ, o[None], dirs, origin, vs)
+    depth, lin = first_hits(occ, o[None], dirs, origin, voxel_size)
     for r, d in enumerate(dirs):
-        bd, bv, hit = _brute(occ, o, d, vs, origin)
+        bd, bv, hit = _brute(occ, o, d, voxel_size, origin)
         assert bv is not None
         ours = np.unravel_index(lin[r], occ.shape)
         assert bool(occ[ours]) == hit, r  # a hit in both or in neither
         if hit:  # the same voxel (a miss's last voxel may differ at a corner the march clips)
             assert lin[r] == np.ravel_multi_index(bv, occ.shape), (r, bv)
-        assert depth[r] == pytest.approx(bd, abs=2 * 2e-3 * vs)
+        assert depth[r] == pytest.approx(bd, abs=2 * 2e-3 * voxel_size)
 
 
 def _grid_with_wall(x_index=150, label=15):
