@@ -82,15 +82,15 @@ def models(repeats: int) -> list[dict]:
         cls = taxonomy.by_name(cls_name)
         mesh = SceneMesh(V, F, cls.id, 1 if cls.kind == "thing" else 0, cls.kind != "thing", is_watertight(F),
                          name=rel)
-        vs = 0.05
-        lo = np.floor(V.min(axis=0) / vs) * vs - vs
-        hi = np.ceil(V.max(axis=0) / vs) * vs + vs
-        grid = GridSpec(region_min=tuple(lo), region_max=tuple(hi), voxel_size=vs)
+        voxel_size = 0.05
+        lo = np.floor(V.min(axis=0) / voxel_size) * voxel_size - voxel_size
+        hi = np.ceil(V.max(axis=0) / voxel_size) * voxel_size + voxel_size
+        grid = GridSpec(region_min=tuple(lo), region_max=tuple(hi), voxel_size=voxel_size)
         t_surf, _ = _best(lambda: voxelize_scene([mesh], grid, fill="surface"), repeats)
         t_auto, (sem, _) = _best(lambda: voxelize_scene([mesh], grid, fill="auto"), repeats)
         b = fill_breakdown([mesh], grid, "auto", solid=sem)
         # the direct way: the same tree at every voxel centre of the grid
-        P = to_voxel_units(V, grid.origin, vs)
+        P = to_voxel_units(V, grid.origin, voxel_size)
         X, Y, Z = grid.shape
         centres = np.stack(np.meshgrid(np.arange(X), np.arange(Y), np.arange(Z), indexing="ij"), -1).reshape(-1, 3) + 0.5
 

@@ -10,8 +10,8 @@ Two measurements, no thresholds:
    ``torch.utils.data.DataLoader`` (batch 1, :func:`carlaocc.data.collate`) with 1 and 4 worker
    processes: frames/s and each worker's peak resident memory (``ru_maxrss``).
 
-Usage: ``python -m benchmarks.bench_loader --root R [--res 0.2] [--frames 24] [--workers 1,4]``
-(the root must be built at ``--res``: ``carlaocc run --res 0.05 --limit-frames 4 --root R``).
+Usage: ``python -m benchmarks.bench_loader --root R [--voxel-size 0.2] [--frames 24] [--workers 1,4]``
+(the root must be built at ``--voxel-size``: ``carlaocc run --voxel-size 0.05 --limit-frames 4 --root R``).
 """
 
 from __future__ import annotations
@@ -56,12 +56,12 @@ def _peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _zarr_rows(root: str, seq: str, res_key: str, frame: int) -> dict:
+def _zarr_rows(root: str, seq: str, key: str, frame: int) -> dict:
     """The zarr-python way: the five arrays' frame, then the occupied voxels, as the loader
     returns them (the same keys and dtypes)."""
     import zarr
 
-    arrays = {n: zarr.open_array(f"{root}/occupancy.zarr/{seq}/{res_key}/{n}", mode="r")[frame]
+    arrays = {n: zarr.open_array(f"{root}/occupancy.zarr/{seq}/{key}/{n}", mode="r")[frame]
               for n in ("semantic", "instance", "flow", "mask_camera", "mask_lidar")}
     sem = arrays["semantic"]
     i, j, k = np.nonzero(sem)
@@ -72,12 +72,12 @@ def _zarr_rows(root: str, seq: str, res_key: str, frame: int) -> dict:
             "occ_mask_lidar": arrays["mask_lidar"][i, j, k].astype(bool)}
 
 
-def occupancy_only(root: str, res: float, frames: int) -> None:
+def occupancy_only(root: str, voxel_size: float, frames: int) -> None:
     from carlaocc.schemas.grid import voxel_size_key
 
-    ds = CarlaOccDataset(root, voxel_size=res, cameras=False, lidar=False, boxes=False)
+    ds = CarlaOccDataset(root, voxel_size=voxel_size, cameras=False, lidar=False, boxes=False)
     idx = list(range(min(frames, len(ds))))
-    key = voxel_size_key(res)
+    key = voxel_size_key(voxel_size)
     ds[idx[0]]  # warm the per-process tables, imports and page cache for both sides
     _zarr_rows(root, ds.samples[idx[0]][0], key, ds.samples[idx[0]][1])
     t_ours = t_zarr = 0.0
@@ -92,17 +92,17 @@ def occupancy_only(root: str, res: float, frames: int) -> None:
         del a, b  # a 0.05 m frame's rows are ~0.4 GB a side
     n = len(idx)
     voxels = int(np.prod(ds[idx[0]]["grid_shape"]))
-    print(f"occupancy alone at {res:g} m ({voxels / 1e6:.1f} M voxels a frame, {n} frames, one process):")
+    print(f"occupancy alone at {voxel_size:g} m ({voxels / 1e6:.1f} M voxels a frame, {n} frames, one process):")
     print(f"  carlaocc.data sparse  {n / t_ours:7.2f} frames/s")
     print(f"  zarr-python + nonzero {n / t_zarr:7.2f} frames/s   ratio x{t_zarr / t_ours:.2f} (same rows)")
 
 
-def whole_samples(root: str, res: float, frames: int, workers: list[int]) -> None:
+def whole_samples(root: str, voxel_size: float, frames: int, workers: list[int]) -> None:
     import torch
 
-    ds = CarlaOccDataset(root, voxel_size=res)
+    ds = CarlaOccDataset(root, voxel_size=voxel_size)
     sub = torch.utils.data.Subset(_WithMemory(ds), list(range(min(frames, len(ds)))))
-    print(f"whole samples at {res:g} m (sparse occupancy, {len(ds[0]['camera_names'])} RGB images, LiDAR, boxes):")
+    print(f"whole samples at {voxel_size:g} m (sparse occupancy, {len(ds[0]['camera_names'])} RGB images, LiDAR, boxes):")
     for w in workers:
         loader = torch.utils.data.DataLoader(sub, batch_size=1, num_workers=w, collate_fn=collate,
                                              multiprocessing_context="spawn" if w else None)
@@ -125,12 +125,12 @@ def whole_samples(root: str, res: float, frames: int, workers: list[int]) -> Non
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--root", required=True, help="a built root")
-    ap.add_argument("--res", type=float, default=0.2, help="voxel size (m) it was built at")
+    ap.add_argument("--voxel-size", "--res", dest="voxel_size", type=float, default=0.2, help="voxel size (m) it was built at (--res is the short alias)")
     ap.add_argument("--frames", type=int, default=48, help="frames to read (the first of the index)")
     ap.add_argument("--workers", default="1,4", help="DataLoader worker counts, comma-separated")
     a = ap.parse_args()
-    occupancy_only(a.root, a.res, a.frames)
-    whole_samples(a.root, a.res, a.frames, [int(w) for w in a.workers.split(",")])
+    occupancy_only(a.root, a.voxel_size, a.frames)
+    whole_samples(a.root, a.voxel_size, a.frames, [int(w) for w in a.workers.split(",")])
 
 
 if __name__ == "__main__":

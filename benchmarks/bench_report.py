@@ -4,8 +4,8 @@ task on a built dataset.
 1. :func:`carlaocc.stages.quality.statistics.frame_statistics` (voxels per class and distinct instance
    pairs in one pass) on a synthetic street at 0.2 m and 0.1 m (semantic uint8 + instance uint32:
    buildings and cars are instances), one thread, best of ``REPEAT``.
-2. With ``ROOT RES`` arguments (or ``CARLAOCC_BENCH_ROOT`` / ``CARLAOCC_BENCH_RES``), the report
-   task on that dataset (built with ``carlaocc run --res RES --root ROOT``): wall time of the
+2. With ``ROOT VOXEL_SIZE`` arguments (or ``CARLAOCC_BENCH_ROOT`` / ``CARLAOCC_BENCH_VOXEL_SIZE``, or its short alias ``CARLAOCC_BENCH_RES``), the report
+   task on that dataset (built with ``carlaocc run --voxel-size VOXEL_SIZE --root ROOT``): wall time of the
    task alone (statistics over every frame, plots, frame rendering, page), and the page's size.
 
 Usage: ``python -m benchmarks bench_report`` or ``python -m benchmarks.bench_report /tmp/ds02 0.2``.
@@ -44,19 +44,19 @@ def street(grid: GridSpec, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 def bench_kernel() -> None:
     numba.set_num_threads(1)
     frame_statistics(np.zeros((4, 4, 4), np.uint8), np.zeros((4, 4, 4), np.uint32))  # compile
-    print(f"{'res':>5} {'voxels':>12} {'instance voxels':>16} {'pairs':>6} {'s/frame':>8}")
-    for res in (0.2, 0.1):
-        grid = GridSpec(voxel_size=res)
+    print(f"{'voxel':>5} {'voxels':>12} {'instance voxels':>16} {'pairs':>6} {'s/frame':>8}")
+    for voxel_size in (0.2, 0.1):
+        grid = GridSpec(voxel_size=voxel_size)
         sem, inst = street(grid)
         best = np.inf
         for _ in range(REPEAT):
             t0 = time.perf_counter()
             _, pairs = frame_statistics(sem, inst)
             best = min(best, time.perf_counter() - t0)
-        print(f"{res:>5} {sem.size:>12,} {int((inst > 0).sum()):>16,} {len(pairs):>6} {best:>8.3f}")
+        print(f"{voxel_size:>5} {sem.size:>12,} {int((inst > 0).sum()):>16,} {len(pairs):>6} {best:>8.3f}")
 
 
-def bench_task(root: str, res: float) -> None:
+def bench_task(root: str, voxel_size: float) -> None:
     from carlaocc.catalog.store import Store
     from carlaocc.pipeline.engine.registry import STAGES
     from carlaocc.pipeline.engine.spec import Context
@@ -64,23 +64,23 @@ def bench_task(root: str, res: float) -> None:
     from carlaocc.schemas.configs import DatasetConfig
 
     store, spec, cfg = Store(root), STAGES["report"], DatasetConfig()
-    (part,) = spec.partitions(Context(store, cfg, (res,)))
+    (part,) = spec.partitions(Context(store, cfg, (voxel_size,)))
     t0 = time.perf_counter()
     outputs = report_task(store, spec.config(cfg), part)
     dt = time.perf_counter() - t0
     size = len(store.read_bytes(REPORT_HTML))
-    print(f"report task on {root} at {res:g} m: {dt:.2f} s, {len(outputs)} outputs, report.html {size / 1e6:.2f} MB")
+    print(f"report task on {root} at {voxel_size:g} m: {dt:.2f} s, {len(outputs)} outputs, report.html {size / 1e6:.2f} MB")
 
 
 def main(argv: list[str] | None = None) -> None:
     argv = [] if argv is None else argv
     bench_kernel()
     root = argv[0] if argv else os.environ.get("CARLAOCC_BENCH_ROOT")
-    res = float(argv[1]) if len(argv) > 1 else float(os.environ.get("CARLAOCC_BENCH_RES", "0.2"))
+    voxel_size = float(argv[1]) if len(argv) > 1 else float(os.environ.get("CARLAOCC_BENCH_VOXEL_SIZE") or os.environ.get("CARLAOCC_BENCH_RES", "0.2"))
     if root:
-        bench_task(root, res)
+        bench_task(root, voxel_size)
     else:
-        print("(give ROOT RES, or set CARLAOCC_BENCH_ROOT, to time the report task on a built dataset)")
+        print("(give ROOT VOXEL_SIZE, or set CARLAOCC_BENCH_ROOT, to time the report task on a built dataset)")
 
 
 if __name__ == "__main__":

@@ -6,8 +6,8 @@ memory of the largest single process: a worker); a stage's cost per frame is its
 run time from lineage (core-seconds: each worker is one single-threaded process):
 
 * ``wide``: the paper preset (8 towns x 13 sequences) with ``--frames`` frames a sequence at
-  ``--res`` (default 50 frames at 0.2 m: 5,200 frames);
-* ``long``: one sequence of ``--long-frames`` frames (default 1,000) at ``--long-res`` (0.05 m).
+  ``--voxel-size`` (default 50 frames at 0.2 m: 5,200 frames);
+* ``long``: one sequence of ``--long-frames`` frames (default 1,000) at ``--long-voxel-size`` (0.05 m).
 
 Then ``carlaocc status`` on each root (time, and that it finds everything up to date), the store
 size, and a table extrapolating every stage to the paper's 104,000 frames on 100 cores from the
@@ -19,7 +19,7 @@ stage is recorded in ``<work>/scale.json`` at once; a run that is stopped (Ctrl-
 itself skips the partitions the interrupted stage had finished (the stage's figures then add the
 attempts up, marked ``resumed``). ``--report`` prints the table of what is recorded so far.
 
-    python -m benchmarks.bench_scale --frames 50 --res 0.2 --long-frames 1000 --long-res 0.05
+    python -m benchmarks.bench_scale --frames 50 --voxel-size 0.2 --long-frames 1000 --long-voxel-size 0.05
     python -m benchmarks.bench_scale --report
 """
 
@@ -75,8 +75,8 @@ def _carlaocc() -> str:
     return str(Path(sys.executable).with_name("carlaocc"))
 
 
-def _run_stage(root: Path, config: Path, res: str, stage: str, workers: int, on_progress=None) -> dict:
-    cmd = [_carlaocc(), "run", "--root", str(root), "--config", str(config), "--res", res, "--stages", stage,
+def _run_stage(root: Path, config: Path, voxel_size: str, stage: str, workers: int, on_progress=None) -> dict:
+    cmd = [_carlaocc(), "run", "--root", str(root), "--config", str(config), "--voxel-size", voxel_size, "--stages", stage,
            "--workers", str(workers)]
     t0 = time.perf_counter()
     proc = psutil.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ, "TERM": "dumb"})
@@ -92,9 +92,9 @@ def _run_stage(root: Path, config: Path, res: str, stage: str, workers: int, on_
             "plan_s": float(planned.group(2)) if planned else None, "log": out[-2000:]}
 
 
-def _status(root: Path, config: Path, res: str) -> dict:
+def _status(root: Path, config: Path, voxel_size: str) -> dict:
     t0 = time.perf_counter()
-    out = subprocess.run([_carlaocc(), "status", "--root", str(root), "--config", str(config), "--res", res],
+    out = subprocess.run([_carlaocc(), "status", "--root", str(root), "--config", str(config), "--voxel-size", voxel_size],
                          capture_output=True, text=True)
     return {"seconds": time.perf_counter() - t0, "up_to_date": out.returncode == 0 and "stale" not in out.stdout,
             "output": out.stdout[-2000:]}
@@ -132,7 +132,11 @@ def _config(kind: str, args) -> dict:
 
 
 def _load(path: Path) -> dict:
-    return json.loads(path.read_text()) if path.exists() else {}
+    data = json.loads(path.read_text()) if path.exists() else {}
+    for b in data.values():  # files recorded before the voxel size was named so
+        if isinstance(b, dict) and "res" in b:
+            b.setdefault("voxel_size", b.pop("res"))
+    return data
 
 
 def _save(path: Path, data: dict) -> None:
@@ -160,7 +164,7 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
         if not b:
             continue
         n = _frames(b)
-        lines += [f"### {kind}: {b['description']} ({n:,} frames at {b['res']} m, {b['workers']} workers)", "",
+        lines += [f"### {kind}: {b['description']} ({n:,} frames at {b['voxel_size']} m, {b['workers']} workers)", "",
                   "| stage | tasks | wall | task s / frame | frames / core-hour | peak worker | plan | first batch |",
                   "|---|---|---|---|---|---|---|---|"]
         for stage in STAGES:
@@ -196,9 +200,9 @@ def report(results: dict, extrapolate_frames: int = PAPER_FRAMES, cores: int = 1
             hours = per * extrapolate_frames / cores / 3600
             total += hours
             why = {"scenes": "per town: frames cost grows with the sequences' length, linear",
-                   "voxelize": f"per frame at {src['res']} m, linear (one task per frame)",
+                   "voxelize": f"per frame at {src['voxel_size']} m, linear (one task per frame)",
                    "sensors": "per frame, independent of the voxel size",
-                   "quality": f"per frame at {src['res']} m (runs of frames_per_task frames)",
+                   "quality": f"per frame at {src['voxel_size']} m (runs of frames_per_task frames)",
                    "aggregate": "per sequence; reads only per-frame tables"}.get(stage, "")
             lines.append(f"| {stage} | {per:.2f} ({'long' if src is long else 'wide'}) | {hours:.2f} | {why} |")
         lines.append(f"| **all** | | **{total:.2f}** | perfect scaling over {cores} cores, no I/O bound |")
@@ -210,9 +214,9 @@ def main(argv: list[str] | None = None) -> None:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--work", type=Path, default=DEFAULT_WORK, help="roots and scale.json (kept to resume)")
     p.add_argument("--frames", type=int, default=50, help="frames a sequence of the wide build")
-    p.add_argument("--res", default="0.2", help="voxel size of the wide build, m")
+    p.add_argument("--voxel-size", "--res", dest="voxel_size", default="0.2", help="voxel size of the wide build, m (--res is the short alias)")
     p.add_argument("--long-frames", type=int, default=1000, help="frames of the long sequence (0: skip)")
-    p.add_argument("--long-res", default="0.05", help="voxel size of the long build, m")
+    p.add_argument("--long-voxel-size", "--long-res", dest="long_voxel_size", default="0.05", help="voxel size of the long build, m (--long-res is the short alias)")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     p.add_argument("--skip-wide", action="store_true", help="only the long build")
     p.add_argument("--extrapolate-frames", type=int, default=PAPER_FRAMES)
@@ -239,10 +243,10 @@ def main(argv: list[str] | None = None) -> None:
         return
     import yaml
 
-    builds = [] if args.skip_wide else [("wide", args.res)]
+    builds = [] if args.skip_wide else [("wide", args.voxel_size)]
     if args.long_frames:
-        builds.append(("long", args.long_res))
-    for kind, res in builds:
+        builds.append(("long", args.long_voxel_size))
+    for kind, voxel_size in builds:
         cfg = _config(kind, args)
         towns = cfg["scenes"]["towns"]
         n_seq = sum(sum(t["sequences_per_level"].get(lv, 0) for lv in t["traffic_levels"]) for t in towns)
@@ -250,10 +254,10 @@ def main(argv: list[str] | None = None) -> None:
         desc = (f"{len(towns)} towns x {n_seq // len(towns)} sequences x {cfg['scenes']['frame_count']} frames"
                 if kind == "wide" else f"1 sequence x {cfg['scenes']['frame_count']} frames")
         b = results.setdefault(kind, {})
-        if b.get("frames") not in (None, frames) or b.get("res") not in (None, res):
-            raise SystemExit(f"{path} records a {kind} build of {b.get('frames')} frames at {b.get('res')} m; "
-                             f"give another --work for {frames} frames at {res} m")
-        b.update({"frames": frames, "res": res, "workers": args.workers, "description": desc})
+        if b.get("frames") not in (None, frames) or b.get("voxel_size") not in (None, voxel_size):
+            raise SystemExit(f"{path} records a {kind} build of {b.get('frames')} frames at {b.get('voxel_size')} m; "
+                             f"give another --work for {frames} frames at {voxel_size} m")
+        b.update({"frames": frames, "voxel_size": voxel_size, "workers": args.workers, "description": desc})
         b.setdefault("stages", {})
         root = args.work / kind
         config = args.work / f"{kind}.yaml"
@@ -277,13 +281,13 @@ def main(argv: list[str] | None = None) -> None:
                 b["stages"][stage] = merged(partial, False)
                 _save(path, results)  # what an interruption would otherwise lose
 
-            r = merged(_run_stage(root, config, res, stage, args.workers, progress), True)
+            r = merged(_run_stage(root, config, voxel_size, stage, args.workers, progress), True)
             r["task_s"] = _task_seconds(root, stage)
             b["stages"][stage] = r
             _save(path, results)
             print(f"[{kind}] {stage}: {r['ran']} tasks, {r['wall_s']:.0f} s wall, {_per_frame(r, frames):.2f} task s a "
                   f"frame, peak worker {r['peak_worker_gib']:.2f} GiB", flush=True)
-        b["status"] = _status(root, config, res)
+        b["status"] = _status(root, config, voxel_size)
         b["store_bytes"] = _size(root)
         _save(path, results)
     print(report(results, args.extrapolate_frames, args.cores))

@@ -172,17 +172,17 @@ def _iou(a: np.ndarray, b: np.ndarray) -> tuple[float, int, int]:
     return (inter / union if union else 1.0), len(np.setdiff1d(a, b, assume_unique=True)), len(np.setdiff1d(b, a, assume_unique=True))
 
 
-def _fill_vs_open3d(building: SceneMesh, vs: float) -> dict:
+def _fill_vs_open3d(building: SceneMesh, voxel_size: float) -> dict:
     import open3d as o3d
 
-    lo = building.vertices.min(axis=0) - vs
-    hi = building.vertices.max(axis=0) + vs
-    grid = GridSpec(region_min=tuple(lo), region_max=tuple(hi), voxel_size=vs)
-    t_ours, ours = _timed(fill_interior, building.vertices, building.faces, grid.origin, vs, grid.shape, repeat=3)
+    lo = building.vertices.min(axis=0) - voxel_size
+    hi = building.vertices.max(axis=0) + voxel_size
+    grid = GridSpec(region_min=tuple(lo), region_max=tuple(hi), voxel_size=voxel_size)
+    t_ours, ours = _timed(fill_interior, building.vertices, building.faces, grid.origin, voxel_size, grid.shape, repeat=3)
     # open3d: occupancy of every voxel centre of the same grid
     nx, ny, nz = grid.shape
     I, J, K = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
-    centres = (np.stack([I, J, K], -1).reshape(-1, 3) + 0.5) * vs + np.asarray(grid.origin)
+    centres = (np.stack([I, J, K], -1).reshape(-1, 3) + 0.5) * voxel_size + np.asarray(grid.origin)
     t0 = time.perf_counter()
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
@@ -205,23 +205,23 @@ def _fill_vs_open3d(building: SceneMesh, vs: float) -> dict:
     }
 
 
-def _trimesh_surface(V: np.ndarray, F: np.ndarray, vs: float) -> dict:
-    """trimesh's ``voxelized`` (subdivide) against ours on the same mesh at ``vs``: time, and how
+def _trimesh_surface(V: np.ndarray, F: np.ndarray, voxel_size: float) -> dict:
+    """trimesh's ``voxelized`` (subdivide) against ours on the same mesh at ``voxel_size``: time, and how
     many fewer voxels trimesh returns than the exact surface (its own lattice, so by count)."""
     mesh = trimesh.Trimesh(V, F, process=False)
     t0 = time.perf_counter()
-    vg = mesh.voxelized(pitch=vs)
+    vg = mesh.voxelized(pitch=voxel_size)
     pts = vg.points  # voxel centres, metres
     t_tm = time.perf_counter() - t0
-    lo = np.floor(V.min(axis=0) / vs) * vs - vs
-    n = np.ceil((V.max(axis=0) - lo) / vs).astype(int) + 2
+    lo = np.floor(V.min(axis=0) / voxel_size) * voxel_size - voxel_size
+    n = np.ceil((V.max(axis=0) - lo) / voxel_size).astype(int) + 2
     t0 = time.perf_counter()
-    ours = surface_voxels(V, F, lo, vs, tuple(n))
+    ours = surface_voxels(V, F, lo, voxel_size, tuple(n))
     t_ours = time.perf_counter() - t0
     # trimesh's voxels sit on its own lattice, so compare counts: a surface at the same pitch
     # has about as many voxels on any lattice, and exact overlap is the superset convention
     missing = 1.0 - len(pts) / max(len(ours), 1)
-    return {"voxel_size": vs, "trimesh_s": t_tm, "ours_s": t_ours, "speedup": t_tm / t_ours,
+    return {"voxel_size": voxel_size, "trimesh_s": t_tm, "ours_s": t_ours, "speedup": t_tm / t_ours,
             "trimesh_voxels": int(len(pts)), "ours_voxels": int(len(ours)), "trimesh_missing": float(missing)}
 
 
@@ -247,25 +247,25 @@ def main(argv: list[str] | None = None) -> dict:
     print()
     print("surface voxels (same pre-culled mesh; open3d = create_from_triangle_mesh_within_bounds + get_voxels;")
     print("  'x build' / 'x total' = open3d's build / build + index extraction time over ours on 2 threads)")
-    hdr = f"{'res':>5} {'voxels':>11} {'ours 2thr':>9} {'ours 1thr':>9} {'o3d build':>9} {'o3d get':>8} {'o3d total':>9} {'x build':>7} {'x total':>7} {'IoU':>9} {'only ours':>9} {'only o3d':>8} {'o3d oob':>7}"
+    hdr = f"{'voxel':>5} {'voxels':>11} {'ours 2thr':>9} {'ours 1thr':>9} {'o3d build':>9} {'o3d get':>8} {'o3d total':>9} {'x build':>7} {'x total':>7} {'IoU':>9} {'only ours':>9} {'only o3d':>8} {'o3d oob':>7}"
     print(hdr)
-    for vs in (0.1, 0.05):
-        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=vs)
+    for voxel_size in (0.1, 0.05):
+        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=voxel_size)
         nthreads = numba.get_num_threads()
-        t2, ours = _timed(surface_voxels, V, F, grid.origin, vs, grid.shape, repeat=2)
+        t2, ours = _timed(surface_voxels, V, F, grid.origin, voxel_size, grid.shape, repeat=2)
         numba.set_num_threads(1)
-        t1, _ = _timed(surface_voxels, V, F, grid.origin, vs, grid.shape, repeat=1)
+        t1, _ = _timed(surface_voxels, V, F, grid.origin, voxel_size, grid.shape, repeat=1)
         numba.set_num_threads(nthreads)
         tb, tg, theirs, oob = _open3d_surface(V, F, grid)
         iou, only_ours, only_theirs = _iou(ours, theirs)
         row = {
-            "voxel_size": vs, "shape": list(grid.shape), "voxels": int(len(ours)),
+            "voxel_size": voxel_size, "shape": list(grid.shape), "voxels": int(len(ours)),
             "ours_s": t2, "ours_1thread_s": t1, "open3d_build_s": tb, "open3d_get_voxels_s": tg,
             "open3d_total_s": tb + tg, "speedup_vs_build": tb / t2, "speedup_vs_total": (tb + tg) / t2,
             "iou": iou, "only_ours": only_ours, "only_open3d": only_theirs, "open3d_out_of_bounds": oob,
         }
         results["surface"].append(row)
-        print(f"{vs:>5} {len(ours):>11,} {t2:>8.3f}s {t1:>8.3f}s {tb:>8.2f}s {tg:>7.2f}s {tb + tg:>8.2f}s "
+        print(f"{voxel_size:>5} {len(ours):>11,} {t2:>8.3f}s {t1:>8.3f}s {tb:>8.2f}s {tg:>7.2f}s {tb + tg:>8.2f}s "
               f"{tb / t2:>6.1f}x {(tb + tg) / t2:>6.1f}x {iou:>9.6f} {only_ours:>9,} {only_theirs:>8,} {oob:>7,}")
         del ours, theirs
 
@@ -310,10 +310,10 @@ def main(argv: list[str] | None = None) -> dict:
     rig = RigConfig()
     poses = vis.sensor_to_lidar(rig)
     results["tiles"] = []
-    for vs in (0.2, 0.05):
-        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=vs)
+    for voxel_size in (0.2, 0.05):
+        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=voxel_size)
         sem = np.zeros(grid.shape, np.uint8)
-        row = {"voxel_size": vs}
+        row = {"voxel_size": voxel_size}
         for threads in (1, numba.get_num_threads()):
             numba.set_num_threads(threads)
             for _ in range(2):  # the first pass maps the reused buffers
@@ -328,7 +328,7 @@ def main(argv: list[str] | None = None) -> dict:
                 fans = [vis.lidar_visibility_bits(packed, rig).copy(), vis.camera_visibility_bits(packed, rig).copy()]
                 t_fans.append(time.perf_counter() - t0)
             # the same rays one by one (3D DDA): the LiDAR's beams and every camera pixel
-            maxr = float(np.linalg.norm(np.asarray(grid.shape) * vs))
+            maxr = float(np.linalg.norm(np.asarray(grid.shape) * voxel_size))
             t0 = time.perf_counter()
             lid = packed.new_mask("bench_lidar")
             packed.trace(lid, np.zeros(3), vis.lidar_directions(rig.lidar), rig.lidar.range_m)
@@ -347,7 +347,7 @@ def main(argv: list[str] | None = None) -> dict:
                         f"masks_dda_{threads}thread_s": min(t_rays), "rays": n_rays,
                         "lidar_observed": agree[0][0], "lidar_differ": agree[0][1],
                         "camera_observed": agree[1][0], "camera_differ": agree[1][1]})
-            print(f"  {vs:>5} m, {threads} thread(s): composed {t_tiles:.2f} s; masks ({n_rays / 1e6:.2f} M rays) as fans "
+            print(f"  {voxel_size:>5} m, {threads} thread(s): composed {t_tiles:.2f} s; masks ({n_rays / 1e6:.2f} M rays) as fans "
                   f"{min(t_fans):.2f} s, ray by ray {min(t_rays):.2f} s ({min(t_rays) / min(t_fans):.1f}x); voxels that "
                   f"differ: LiDAR {agree[0][1]:,} of {agree[0][0]:,}, camera {agree[1][1]:,} of {agree[1][0]:,}")
         numba.set_num_threads(nthreads)
@@ -357,15 +357,15 @@ def main(argv: list[str] | None = None) -> dict:
     print()
     print("whole frame composed (voxelize_scene: stuff fusion, cull, elevation order, surfaces + fills;")
     print("  first call on fresh memory, then a repeat: the difference is first-touch page faults of the outputs)")
-    for vs in (0.2, 0.05):
-        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=vs)
+    for voxel_size in (0.2, 0.05):
+        grid = GridSpec(region_min=REGION_MIN, region_max=REGION_MAX, voxel_size=voxel_size)
         t_first, (sem, inst) = _timed(voxelize_scene, meshes, grid)
         del sem, inst
         t_again, (sem, inst) = _timed(voxelize_scene, meshes, grid)
         occ = int(np.count_nonzero(sem))
-        results["compose"].append({"voxel_size": vs, "first_s": t_first, "repeat_s": t_again, "occupied": occ,
+        results["compose"].append({"voxel_size": voxel_size, "first_s": t_first, "repeat_s": t_again, "occupied": occ,
                                    "occupied_fraction": occ / sem.size})
-        print(f"  {vs:>5} m: {t_first:.3f} s first, {t_again:.3f} s repeat; {occ:,} occupied voxels ({occ / sem.size:.2%})")
+        print(f"  {voxel_size:>5} m: {t_first:.3f} s first, {t_again:.3f} s repeat; {occ:,} occupied voxels ({occ / sem.size:.2%})")
         del sem, inst
 
     if argv:

@@ -22,17 +22,17 @@ def street(grid: GridSpec, seed: int = 0) -> np.ndarray:
     """Dense uint8 semantic grid of a synthetic street (see the module docstring)."""
     rng = np.random.default_rng(seed)
     X, Y, Z = grid.shape
-    vs, (ox, oy, oz) = grid.voxel_size, grid.origin
+    voxel_size, (ox, oy, oz) = grid.voxel_size, grid.origin
     sem = np.zeros((X, Y, Z), np.uint8)
 
     def ix(x):
-        return int(np.clip(round((x - ox) / vs), 0, X))
+        return int(np.clip(round((x - ox) / voxel_size), 0, X))
 
     def iy(y):
-        return int(np.clip(round((y - oy) / vs), 0, Y))
+        return int(np.clip(round((y - oy) / voxel_size), 0, Y))
 
     def iz(z):
-        return int(np.clip(round((z - oz) / vs), 0, Z))
+        return int(np.clip(round((z - oz) / voxel_size), 0, Z))
 
     g = iz(GROUND_Z)
     sem[:, :, g - 2:g] = ROAD
@@ -55,8 +55,8 @@ def street(grid: GridSpec, seed: int = 0) -> np.ndarray:
             sem[ix(px):ix(px + 0.2), iy(py):iy(py + 0.2), g:iz(GROUND_Z + 7.0)] = POLE
             cx, cy, cz, r = px + 4.0, py, GROUND_Z + 5.0, rng.uniform(1.5, 2.5)
             xs, ys, zs = np.ogrid[ix(cx - r):ix(cx + r), iy(cy - r):iy(cy + r), iz(cz - r):iz(cz + r)]
-            d = ((ox + (xs + 0.5) * vs - cx) ** 2 + (oy + (ys + 0.5) * vs - cy) ** 2
-                 + (oz + (zs + 0.5) * vs - cz) ** 2)
+            d = ((ox + (xs + 0.5) * voxel_size - cx) ** 2 + (oy + (ys + 0.5) * voxel_size - cy) ** 2
+                 + (oz + (zs + 0.5) * voxel_size - cz) ** 2)
             blob = (d < r * r) & (rng.random(d.shape) < 0.7)  # foliage with holes
             region = sem[ix(cx - r):ix(cx + r), iy(cy - r):iy(cy + r), iz(cz - r):iz(cz + r)]
             region[blob & (region == 0)] = VEGETATION

@@ -1,5 +1,5 @@
 """Occupancy volumes in Zarr v3:
-``occupancy.zarr/<sequence>/<res>/{semantic,instance,mask_camera,mask_lidar,flow}``.
+``occupancy.zarr/<sequence>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow}``.
 
 Each array is ``(frame, x, y, z)`` (``flow`` has a trailing axis of 3 velocity components); a
 chunk is one frame's ``chunk_edge x chunk_edge x Z`` column block, so a task that writes one whole
@@ -41,7 +41,7 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str, tuple[int, ...]]] = {
 
 
 def parse_output_key(key: str) -> tuple[str, int] | None:
-    """``occupancy.zarr/<seq>/<res>/<name>[<frame>]`` -> (array path, frame); None otherwise
+    """``occupancy.zarr/<seq>/<voxel_size>/<name>[<frame>]`` -> (array path, frame); None otherwise
     (see :func:`carlaocc.catalog.zarrio.parse_frame_key` for the frame keys of any Zarr root)."""
     parsed = parse_frame_key(key)
     if parsed is None or parsed[0] != OCCUPANCY_ZARR:
@@ -67,7 +67,7 @@ class OccupancyStore(FrameArrayStore):
 
     def create(self, sequence_id: str, grid: GridSpec, frame_count: int, chunk_edge: int,
                extra_attrs: dict | None = None, names: tuple[str, ...] | None = None) -> bool:
-        """Create (or keep, when identical) the arrays of one sequence at one resolution.
+        """Create (or keep, when identical) the arrays of one sequence at one voxel size.
 
         An existing array with the same shape, dtype, chunks and attributes is kept with its
         data; one that differs (another region, frame count, taxonomy...) is replaced, and then

@@ -5,6 +5,12 @@ no two tasks write the same file and a re-run of one partition replaces exactly 
 that cannot be read as the table's (truncated, garbage bytes, another schema) is a
 :class:`StoreError` naming it (:func:`read_parquet`), never an Arrow traceback. A file that lacks
 only columns whose fields have a default (written before they were added) loads with those defaults.
+
+Column names: in memory (:func:`arrow_schema`, :func:`to_table`, :meth:`ParquetTable.load_arrow`,
+hence the SQL views) a column is named as its field; in the stored files a field listed in
+``Record.STORED_NAMES`` keeps its stored name (``voxel_size`` is the column ``resolution``).
+:func:`stored_schema`, :func:`to_stored` and :func:`from_stored` are the only translation, applied
+by :class:`ParquetTable` when it writes and reads a file.
 """
 
 from __future__ import annotations
@@ -58,6 +64,30 @@ def arrow_schema(model: type[Record]) -> pa.Schema:
         typ, nullable = arrow_type(info.annotation)
         fields.append(pa.field(name, typ, nullable=nullable))
     return pa.schema(fields, metadata={b"carlaocc.record": model.__name__.encode()})
+
+
+def stored_name(model: type[Record], name: str) -> str:
+    """Column name of field ``name`` in the stored files (``Record.STORED_NAMES``, else itself)."""
+    return model.STORED_NAMES.get(name, name)
+
+
+def stored_schema(model: type[Record]) -> pa.Schema:
+    """:func:`arrow_schema` with the stored column names (what the Parquet files hold)."""
+    schema = arrow_schema(model)
+    return pa.schema([f.with_name(stored_name(model, f.name)) for f in schema], metadata=schema.metadata)
+
+
+def to_stored(model: type[Record], table: pa.Table) -> pa.Table:
+    """A table of the model's :func:`arrow_schema` with its columns renamed as stored."""
+    renamed = table.rename_columns([stored_name(model, n) for n in table.column_names])
+    return renamed.replace_schema_metadata(table.schema.metadata)  # rename_columns drops it
+
+
+def from_stored(model: type[Record], table: pa.Table) -> pa.Table:
+    """A table of the model's :func:`stored_schema` with its columns renamed as the fields."""
+    back = {stored_name(model, name): name for name in model.model_fields}
+    renamed = table.rename_columns([back.get(n, n) for n in table.column_names])
+    return renamed.replace_schema_metadata(table.schema.metadata)  # rename_columns drops it
 
 
 def to_table(model: type[R], records: typing.Sequence[R]) -> pa.Table:
@@ -155,20 +185,23 @@ class ParquetTable(Generic[R]):
         return self.store.exists(self.path(key))
 
     def save(self, key: str, records: typing.Sequence[R]) -> str:
-        """Atomically write a partition's records; returns the file's fingerprint."""
-        return self.store.write_bytes(self.path(key), table_bytes(to_table(self.model, records)))
+        """Atomically write a partition's records (columns named as stored); returns the file's
+        fingerprint."""
+        table = to_stored(self.model, to_table(self.model, records))
+        return self.store.write_bytes(self.path(key), table_bytes(table))
 
     def paths(self) -> list[str]:
         return self.store.glob(self.dir, ".parquet")
 
     def load_arrow(self, keys: typing.Iterable[str] | None = None) -> pa.Table:
-        """All partitions (or the given ones) as one Arrow table with the model's schema;
-        StoreError naming a file that is missing (a given key) or cannot be read."""
-        schema = arrow_schema(self.model)
+        """All partitions (or the given ones) as one Arrow table with the model's schema (columns
+        named as the fields); StoreError naming a file that is missing (a given key) or cannot be
+        read."""
+        schema = stored_schema(self.model)
         paths = self.paths() if keys is None else [self.path(k) for k in keys]
-        defaults = field_defaults(self.model)
+        defaults = {stored_name(self.model, n): v for n, v in field_defaults(self.model).items()}
         tables = [read_parquet(self.store, p, schema, defaults) for p in paths]
-        return pa.concat_tables(tables) if tables else schema.empty_table()
+        return from_stored(self.model, pa.concat_tables(tables) if tables else schema.empty_table())
 
     def load(self, keys: typing.Iterable[str] | None = None) -> list[R]:
         return from_table(self.model, self.load_arrow(keys))

@@ -99,7 +99,7 @@ class FrameSamples:
             common = set.intersection(*[z for z in sizes if z]) if any(sizes) else set()
             if not common:
                 raise DatasetError(f"no voxel size is built for every sequence{f' of the {split} split' if split else ''} "
-                                   f"of {self.root}: run `carlaocc run --root {self.root} --res 0.2`, or pass voxel_size")
+                                   f"of {self.root}: run `carlaocc run --root {self.root} --voxel-size 0.2`, or pass voxel_size")
             voxel_size = min(common)
         self.voxel_size = float(voxel_size)
         self._grids: dict[str, object] = {}
@@ -110,7 +110,7 @@ class FrameSamples:
         if not self._grids:
             where = f"the {split} split of " if split else ""
             raise DatasetError(f"no sequence of {where}{self.root} is voxelized at {self.voxel_size:g} m: run "
-                               f"`carlaocc run --root {self.root} --res {self.voxel_size:g}`")
+                               f"`carlaocc run --root {self.root} --voxel-size {self.voxel_size:g}`")
         frames = ParquetTable(store, FrameRecord).load_arrow(list(self._grids))
         pairs = sorted(zip(frames["sequence_id"].to_pylist(), frames["frame_index"].to_pylist()))
         self._samples: list[tuple[str, int]] = [(s, int(f)) for s, f in pairs]
@@ -270,10 +270,10 @@ class FrameSamples:
 def _crop_box(grid, crop) -> tuple[np.ndarray, np.ndarray]:
     """Voxel index box ``[lo, hi)`` of the voxels whose centres lie in the metre box ``crop``
     (faces included, to a nanometre: a face on a voxel centre takes that voxel on every axis)."""
-    vs, o, shape = float(grid.voxel_size), np.asarray(grid.region_min, float), np.asarray(grid.shape)
-    eps = 1e-9 / vs
-    lo = np.clip(np.ceil((crop[0] - o) / vs - 0.5 - eps), 0, shape).astype(np.int64)
-    hi = np.clip(np.floor((crop[1] - o) / vs - 0.5 + eps) + 1, 0, shape).astype(np.int64)
+    voxel_size, o, shape = float(grid.voxel_size), np.asarray(grid.region_min, float), np.asarray(grid.shape)
+    eps = 1e-9 / voxel_size
+    lo = np.clip(np.ceil((crop[0] - o) / voxel_size - 0.5 - eps), 0, shape).astype(np.int64)
+    hi = np.clip(np.floor((crop[1] - o) / voxel_size - 0.5 + eps) + 1, 0, shape).astype(np.int64)
     return lo, np.maximum(hi, lo)
 
 

@@ -217,5 +217,5 @@ class Store:
         return f"{SCENE_MESHES}/{stuff_asset_id}.glb"
 
     @staticmethod
-    def occupancy_group(sequence_id: str, res_key: str) -> str:
-        return f"{sequence_id}/{res_key}"
+    def occupancy_group(sequence_id: str, voxel_size_key: str) -> str:
+        return f"{sequence_id}/{voxel_size_key}"

@@ -191,7 +191,7 @@ def parse_metadata(raw: bytes, node_type: str | None = None) -> dict | None:
 
 def metadata_problem(store: Store, node: str, node_type: str | None = None) -> str | None:
     """What is wrong with the metadata of the Zarr node at store-relative path ``node`` (e.g.
-    ``occupancy.zarr`` or ``occupancy.zarr/<seq>/<res>/semantic``): ``"missing"`` (no
+    ``occupancy.zarr`` or ``occupancy.zarr/<seq>/<voxel_size>/semantic``): ``"missing"`` (no
     ``zarr.json``), ``"unreadable"`` (not Zarr v3 metadata of a ``node_type`` node), or None."""
     try:
         raw = store.fs.cat_file(store.path(f"{node}/zarr.json"))

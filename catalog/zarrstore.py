@@ -1,6 +1,6 @@
 """Frame-indexed Zarr v3 arrays: the base of the store's Zarr hierarchies (:class:`FrameArrayStore`).
 
-A hierarchy ``<root>.zarr/<sequence>/<group>/<name>`` (``occupancy.zarr/<seq>/<res>/...``,
+A hierarchy ``<root>.zarr/<sequence>/<group>/<name>`` (``occupancy.zarr/<seq>/<voxel_size>/...``,
 ``sensors.zarr/<seq>/<camera>/...``) holds arrays ``(frame, a, b, ...)`` chunked
 ``(1, ca, cb, <whole rest>)``: a chunk is one frame's ``ca x cb`` block of the first two axes after
 the frame (x, y of a voxel grid; v, u of an image) with every other axis whole, so a task that

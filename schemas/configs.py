@@ -154,7 +154,7 @@ class VoxelizeConfig(StageConfig):
         return 1 if v is None else v
 
     def grid(self, voxel_size: float) -> GridSpec:
-        """The grid spec of this region at one resolution (validates the resolution)."""
+        """The grid spec of this region at one voxel size (validates the voxel size)."""
         return GridSpec(region_min=self.region_min, region_max=self.region_max, voxel_size=voxel_size)
 
 
@@ -284,8 +284,8 @@ class DatasetConfig(StageConfig):
 
     @model_validator(mode="after")
     def _region_is_valid(self) -> DatasetConfig:
-        # the region must hold at least one voxel of the coarsest sensible size; per-resolution
-        # checks happen when a resolution is requested (GridSpec validation)
+        # the region must hold at least one voxel of the coarsest sensible size; per-voxel-size
+        # checks happen when a voxel size is requested (GridSpec validation)
         for lo, hi in zip(self.voxelize.region_min, self.voxelize.region_max):
             if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
                 raise ValueError(f"voxelize region must have max > min on every axis, got {lo} .. {hi}")
@@ -295,7 +295,7 @@ class DatasetConfig(StageConfig):
 def parse_voxel_size_list(text: str) -> tuple[float, ...]:
     """Parse ``"0.2"`` or ``"0.2,0.05"`` into voxel sizes (m); each must be positive and finite.
     Sizes that share a store key (``0.4`` and ``0.4000001`` are both ``"0.4"``) are one
-    resolution: the first spelling is kept."""
+    voxel size: the first spelling is kept."""
     out: dict[str, float] = {}
     for item in str(text).split(","):
         item = item.strip()
@@ -304,14 +304,14 @@ def parse_voxel_size_list(text: str) -> tuple[float, ...]:
         try:
             v = float(item)
         except ValueError:
-            raise ValueError(f"resolution {item!r} is not a number of metres") from None
+            raise ValueError(f"voxel size {item!r} is not a number of metres") from None
         if not math.isfinite(v) or v <= 0:
-            raise ValueError(f"resolution {item!r} must be a positive finite number of metres")
+            raise ValueError(f"voxel size {item!r} must be a positive finite number of metres")
         if voxel_size_key(v) == "0":
-            raise ValueError(f"resolution {item!r} is below the store's micrometre precision")
+            raise ValueError(f"voxel size {item!r} is below the store's micrometre precision")
         out.setdefault(voxel_size_key(v), v)
     if not out:
-        raise ValueError("no resolution given (e.g. --res 0.2 or --res 0.2,0.05)")
+        raise ValueError("no voxel size given (e.g. --voxel-size 0.2 or --voxel-size 0.2,0.05)")
     return tuple(out.values())
 
 

@@ -92,7 +92,7 @@ class GridSpec(BaseModel):
 
     @property
     def key(self) -> str:
-        """Store key of this resolution, e.g. ``"0.05"``."""
+        """Store key of this voxel size, e.g. ``"0.05"``."""
         return voxel_size_key(self.voxel_size)
 
     def attrs(self) -> dict:

@@ -16,10 +16,17 @@ from pydantic import AfterValidator, BaseModel, ConfigDict
 
 
 class Record(BaseModel):
-    """Base of every persisted row: frozen, no unknown fields. ``TABLE`` names its store table."""
+    """Base of every persisted row: frozen, no unknown fields. ``TABLE`` names its store table.
+
+    ``STORED_NAMES`` maps a field's name in code to its column name in the stored Parquet files
+    where the two differ: ``voxel_size`` is stored as ``resolution`` (its name when the first
+    datasets were written), so existing roots load and new files are byte-identical to theirs.
+    ``carlaocc.catalog.parquet`` applies it at the file boundary only (Arrow tables in memory and
+    the SQL views use the code names)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
     TABLE: ClassVar[str] = ""
+    STORED_NAMES: ClassVar[dict[str, str]] = {"voxel_size": "resolution"}
 
 
 def _check_pose(v: list[float]) -> list[float]:
@@ -259,7 +266,7 @@ class QualityRecord(Record):
 
     TABLE: ClassVar[str] = "quality"
     sequence_id: str
-    resolution: float
+    voxel_size: float  # metres; stored as the column 'resolution' (Record.STORED_NAMES)
     frame_index: int | None
     metric: str
     value: float
@@ -277,7 +284,7 @@ class ClassQualityRecord(Record):
 
     TABLE: ClassVar[str] = "quality_classes"
     sequence_id: str
-    resolution: float
+    voxel_size: float  # metres; stored as the column 'resolution' (Record.STORED_NAMES)
     frame_index: int
     semantic_id: int
     occupied: int
@@ -285,14 +292,14 @@ class ClassQualityRecord(Record):
 
 
 class FrameStatisticsRecord(Record):
-    """Voxels and instances of one class in one frame at one resolution (the quality stage's
+    """Voxels and instances of one class in one frame at one voxel size (the quality stage's
     per-frame statistics, summed per sequence by the aggregate stage into
     :class:`ClassStatisticsRecord`): ``instance_ids`` are the distinct nonzero instance ids among
     the class's voxels in the frame."""
 
     TABLE: ClassVar[str] = "statistics_frames"
     sequence_id: str
-    resolution: float
+    voxel_size: float  # metres; stored as the column 'resolution' (Record.STORED_NAMES)
     frame_index: int
     semantic_id: int
     voxels: int
@@ -300,13 +307,13 @@ class FrameStatisticsRecord(Record):
 
 
 class ClassStatisticsRecord(Record):
-    """Voxels and instances of one class in one sequence at one resolution (the aggregate stage's
+    """Voxels and instances of one class in one sequence at one voxel size (the aggregate stage's
     statistics: voxels summed over the sequence's frames; instances are distinct (instance id,
     class) pairs among its voxels, of which ``moving_instances`` are dynamic actors)."""
 
     TABLE: ClassVar[str] = "statistics_classes"
     sequence_id: str
-    resolution: float
+    voxel_size: float  # metres; stored as the column 'resolution' (Record.STORED_NAMES)
     semantic_id: int
     frames: int
     voxels: int

@@ -1,4 +1,4 @@
-"""End to end on the embedded default at a coarse resolution: ingest -> scenes -> voxelize ->
+"""End to end on the embedded default at a coarse voxel size: ingest -> scenes -> voxelize ->
 metrics through the CLI, then the arrays, the catalog, re-runs and scheduler independence."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec
 
-RES = 0.4
+VOXEL_SIZE = 0.4
 cli = CliRunner()
 # the embedded default with shorter sequences (3 x 6 frames instead of 3 x 20): every stage and
 # every path of the default, at a fraction of the suite's time (`make test-all` builds the full
@@ -38,7 +38,7 @@ def config_file(tmp_path_factory) -> str:
 @pytest.fixture(scope="module")
 def built(tmp_path_factory, config_file):
     root = tmp_path_factory.mktemp("e2e") / "data"
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", str(root),
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", str(root),
                          "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     return Store(str(root))
@@ -52,7 +52,7 @@ def _snapshot(store: Store) -> dict[str, tuple[int, bytes]]:
 
 
 def test_occupancy_arrays(built):
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     occ = OccupancyStore(built)
     sem_arr = occ.open(seq, grid, "semantic")
@@ -62,7 +62,7 @@ def test_occupancy_arrays(built):
     assert sem_arr.shape == inst_arr.shape == (frames, *grid.shape)
     assert sem_arr.dtype == np.uint8 and inst_arr.dtype == np.uint32
     attrs = dict(sem_arr.attrs)
-    assert attrs["origin"] == [-25.6, -25.6, -3.0] and attrs["voxel_size"] == RES
+    assert attrs["origin"] == [-25.6, -25.6, -3.0] and attrs["voxel_size"] == VOXEL_SIZE
     assert attrs["frame"] == "lidar" and attrs["taxonomy_version"] == taxonomy.TAXONOMY_VERSION
     assert attrs["effective_region"][1] == pytest.approx(list(grid.effective_max))
     sem, inst = sem_arr[0], inst_arr[0]
@@ -89,12 +89,12 @@ def test_occupancy_arrays(built):
     # the road lies under the LiDAR at about -1.73 m
     road = taxonomy.by_name("Road").id
     k = np.flatnonzero((sem == road).any(axis=(0, 1)))
-    z_road = -3.0 + (k.mean() + 0.5) * RES
+    z_road = -3.0 + (k.mean() + 0.5) * VOXEL_SIZE
     assert -2.4 < z_road < -1.2
 
 
 def test_instances_are_stable_across_frames(built):
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     occ = OccupancyStore(built)
     a, b = occ.read_frame(seq, grid, 0), occ.read_frame(seq, grid, 5)
@@ -129,7 +129,7 @@ def test_report_and_statistics_tables(built):
 
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     occ = OccupancyStore(built)
-    sem = occ.open(seq, GridSpec(voxel_size=RES), "semantic")[:]
+    sem = occ.open(seq, GridSpec(voxel_size=VOXEL_SIZE), "semantic")[:]
     _, rows = query(built, f"SELECT semantic_id, voxels, instances FROM statistics_classes WHERE sequence_id = '{seq}'")
     voxels = {r[0]: r[1] for r in rows}
     assert voxels == {int(c): int((sem == c).sum()) for c in np.unique(sem)}
@@ -142,8 +142,8 @@ def test_report_and_statistics_tables(built):
 
 
 def _metrics(store: Store) -> dict[str, list]:
-    tables = {"quality": "sequence_id, resolution, frame_index, metric, value, occupied, isolated, numerator, denominator",
-              "quality_classes": "sequence_id, resolution, frame_index, semantic_id, occupied, isolated",
+    tables = {"quality": "sequence_id, voxel_size, frame_index, metric, value, occupied, isolated, numerator, denominator",
+              "quality_classes": "sequence_id, voxel_size, frame_index, semantic_id, occupied, isolated",
               "statistics_classes": "*", "statistics_frames": "*"}
     return {t: sorted(query(store, f"SELECT {cols} FROM {t}")[1], key=repr) for t, cols in tables.items()}
 
@@ -163,7 +163,7 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     cfg = tmp_path / "k3.json"
     cfg.write_text(E2E.model_copy(update={"quality": E2E.quality.model_copy(update={"frames_per_task": 3})})
                    .model_dump_json())
-    r = cli.invoke(app, ["run", "--config", str(cfg), "--res", str(RES), "--root", copy.url, "--stages",
+    r = cli.invoke(app, ["run", "--config", str(cfg), "--res", str(VOXEL_SIZE), "--root", copy.url, "--stages",
                          "quality,aggregate", "--scheduler", "synchronous"])
     runs = -(-F // 3)  # quality tasks a sequence
     assert r.exit_code == 0 and f"quality: ran {3 * runs}," in r.output and "aggregate: ran 3," in r.output, r.output
@@ -172,7 +172,7 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     assert a == b and len(a["quality"]) == 3 * (F + F - 1 + 2) and len(a["statistics_frames"]) > 3 * F
     # back to one task a sequence: the runs of frames after the first three are retired (their files removed,
     # their lineage says so), the tables hold each row once, and verify finds nothing missing
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--stages",
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "--stages",
                          "quality,aggregate", "--scheduler", "synchronous"])
     assert r.exit_code == 0 and "quality: ran 3," in r.output, r.output
     assert len(copy.glob("metrics/statistics_frames", ".parquet")) == 3 and _metrics(copy) == a
@@ -181,7 +181,7 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     r = cli.invoke(app, ["verify", "--root", copy.url, "--stages", "quality,aggregate"])
     assert r.exit_code == 0 and "quality   3/3 partitions intact" in r.output, r.output
     # the sequence rows against one pass over the frames
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     occ = OccupancyStore(built)
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     poses = {f: np.asarray(p, float).reshape(4, 4) for f, p in
@@ -190,7 +190,7 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     sems = [f["semantic"] for f in frames]
     masks = [(f["mask_camera"] | f["mask_lidar"]).astype(bool) for f in frames]
     cont = sequence_continuity([spatial_continuity_counts(s) for s in sems])
-    temp = sequence_temporal([temporal_consistency_counts(sems[t], sems[t + 1], poses[t], poses[t + 1], RES, grid.origin,
+    temp = sequence_temporal([temporal_consistency_counts(sems[t], sems[t + 1], poses[t], poses[t + 1], VOXEL_SIZE, grid.origin,
                                                           mask_t=masks[t], mask_t1=masks[t + 1],
                                                           ranges_t=column_ranges(sems[t]))
                               for t in range(F - 1)])
@@ -244,10 +244,10 @@ def test_town_and_frame_mesh_exports(built, tmp_path):
 
 def test_rerun_with_nothing_changed_writes_nothing(config_file, built):
     before = _snapshot(built)
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", built.url, "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", built.url, "--scheduler", "synchronous"])
     assert r.exit_code == 0 and "nothing to do" in r.output
     assert _snapshot(built) == before
-    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", built.url])
+    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", built.url])
     assert r.exit_code == 0 and "stale" not in r.output
 
 
@@ -256,7 +256,7 @@ def test_local_cluster_output_is_byte_identical(config_file, built, tmp_path):
     writes the same bytes as the synchronous run of the whole default."""
     root = tmp_path / "dist"
     seq = "town00_high_seq000"
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", str(root), "--workers", "2",
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", str(root), "--workers", "2",
                          "--sequences", seq])
     assert r.exit_code == 0, r.output
     a, b = _snapshot(built), _snapshot(Store(str(root)))
@@ -280,14 +280,14 @@ def test_tampered_frame_is_detected_and_rebuilt(config_file, built, tmp_path):
 
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     chunk_dir = f"{copy.root}/occupancy.zarr/{seq}/{grid.key}/semantic/c/3"
     victim = sorted(copy.fs.find(chunk_dir))[0]
     copy.fs.rm(victim)
-    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", copy.url, "-v"])
+    r = cli.invoke(app, ["status", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "-v"])
     assert "voxelize  stale 1/" in r.output and f"{seq}/{grid.key}/0003: outputs missing or modified" in r.output
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "--scheduler", "synchronous"])
     # the rebuilt frame is byte-identical, so what metrics read is unchanged: it stays up to date
     assert r.exit_code == 0 and "voxelize: ran 1," in r.output and "quality: 3 up to date" in r.output
     np.testing.assert_array_equal(OccupancyStore(copy).read_frame(seq, grid, 3)["semantic"],
@@ -330,7 +330,7 @@ def test_status_reads_no_chunk_data_and_verify_rehashes(config_file, built, tmp_
 
     copy = Store(str(tmp_path / "copy"))
     shutil.copytree(built.root, copy.root)
-    status = lambda: cli.invoke(app, ["status", "--config", config_file, "--res", str(RES), "--root", copy.url, "-v"])
+    status = lambda: cli.invoke(app, ["status", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "-v"])
     r = cli.invoke(app, ["verify", "--root", copy.url])
     assert r.exit_code == 0, r.output
     assert f"voxelize  {3 * F}/{3 * F} partitions intact" in r.output and f"signatures recorded anew for {3 * F}" in r.output
@@ -345,7 +345,7 @@ def test_status_reads_no_chunk_data_and_verify_rehashes(config_file, built, tmp_
     r = cli.invoke(app, ["verify", "--root", copy.url, "--stages", "voxelize"])
     assert r.exit_code == 0 and "recorded anew" not in r.output, r.output
     # garbage in place, same size, same times: only verify sees it
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     seq = query(copy, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     victim = sorted(copy.fs.find(f"{copy.root}/occupancy.zarr/{seq}/{grid.key}/semantic/c/2"))[0]
     st = os.stat(victim)
@@ -357,7 +357,7 @@ def test_status_reads_no_chunk_data_and_verify_rehashes(config_file, built, tmp_
     assert r.exit_code == 1 and f"{seq}/{grid.key}/0002: outputs damaged: occupancy.zarr/{seq}/{grid.key}/semantic" in r.output
     after = status().output
     assert f"voxelize  stale 1/{3 * F}" in after and f"    {seq}/{grid.key}/0002: outputs damaged" in after
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--stages", "voxelize",
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "--stages", "voxelize",
                          "--scheduler", "synchronous"])
     assert r.exit_code == 0 and "voxelize: ran 1," in r.output, r.output
     assert cli.invoke(app, ["verify", "--root", copy.url, "--stages", "voxelize"]).exit_code == 0
@@ -374,10 +374,10 @@ def test_swap_makes_a_sequence_that_voxelizes(config_file, built, tmp_path):
     r = cli.invoke(app, ["scenes", "swap", "--class", "Car", "--seed", "5", "--sequence", seq, "--root", copy.url])
     assert r.exit_code == 0 and "Car actor(s)" in r.output, r.output
     new = query(copy, f"SELECT sequence_id FROM sequences WHERE parent_sequence_id = '{seq}'")[1][0][0]
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url, "--scheduler", "synchronous",
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url, "--scheduler", "synchronous",
                          "--stages", "voxelize", "--sequences", new])
     assert r.exit_code == 0 and f"voxelize: ran {F}," in r.output, r.output
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     a, b = OccupancyStore(copy).read_frame(seq, grid, 0), OccupancyStore(copy).read_frame(new, grid, 0)
     car = taxonomy.by_name("Car").id
     cars_a = set(np.unique(a["instance"][a["semantic"] == car]))
@@ -413,10 +413,10 @@ def test_building_swap_changes_voxels_only_where_the_swapped_buildings_stand(con
     swapped = [k for k in old_pl if old_pl[k].asset_id != new_pl[k].asset_id]
     assert swapped and all(old_pl[k].semantic_id == taxonomy.by_name("Building").id for k in swapped)
     assert all(old_pl[k].pose == new_pl[k].pose for k in swapped)  # same lots
-    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(RES), "--root", copy.url,
+    r = cli.invoke(app, ["run", "--config", config_file, "--res", str(VOXEL_SIZE), "--root", copy.url,
                          "--stages", "voxelize", "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     a = OccupancyStore(copy).read_frame(seq, grid, 0, ("semantic", "instance"))
     b = OccupancyStore(copy).read_frame(new.sequence_id, grid, 0, ("semantic", "instance"))
     differ = (a["semantic"] != b["semantic"]) | (a["instance"] != b["instance"])
@@ -424,14 +424,14 @@ def test_building_swap_changes_voxels_only_where_the_swapped_buildings_stand(con
     # every differing voxel centre lies in the LiDAR-frame box of a swapped building, old or new
     (f0,) = [f for f in ParquetTable(copy, FrameRecord).load([seq]) if f.frame_index == 0]
     to_lidar = invert_pose(np.array(f0.lidar_pose, dtype=np.float64).reshape(4, 4))
-    centres = np.asarray(grid.origin) + (np.argwhere(differ) + 0.5) * RES
+    centres = np.asarray(grid.origin) + (np.argwhere(differ) + 0.5) * VOXEL_SIZE
     inside = np.zeros(len(centres), dtype=bool)
     for k in swapped:
         for pl in (old_pl[k], new_pl[k]):
             lo, hi = np.array(pl.aabb_min), np.array(pl.aabb_max)
             corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
             c = transform_points(to_lidar, corners)
-            inside |= np.all((centres >= c.min(axis=0) - RES) & (centres <= c.max(axis=0) + RES), axis=1)
+            inside |= np.all((centres >= c.min(axis=0) - VOXEL_SIZE) & (centres <= c.max(axis=0) + VOXEL_SIZE), axis=1)
     assert inside.all(), f"{int((~inside).sum())} voxels changed outside the swapped buildings"
 
 
@@ -451,7 +451,7 @@ def test_skeletons_lie_on_their_walkers(built):
     from carlaocc.stages.scenes.people.pedestrians import JOINT_NAMES
 
     assert [r[2] for r in rows[:11]] == list(JOINT_NAMES)
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     _, frames = query(built, f"SELECT frame_index, lidar_pose FROM frames WHERE sequence_id = '{seq}'")
     lidar_pose = {f: pose_from_list(p) for f, p in frames}
     checked = 0
@@ -465,7 +465,7 @@ def test_skeletons_lie_on_their_walkers(built):
             vox = np.argwhere(occ == inst)
             if len(vox) == 0:
                 continue  # the walker is outside the grid this frame
-            ijk = np.floor((lidar - np.asarray(grid.origin)) / RES).astype(int)
+            ijk = np.floor((lidar - np.asarray(grid.origin)) / VOXEL_SIZE).astype(int)
             # Chebyshev distance (voxels) from each joint's voxel to the nearest voxel of the walker
             d = np.abs(ijk[:, None, :] - vox[None, :, :]).max(axis=2).min(axis=1)
             assert (d <= 1).all(), (t, inst, [j[2] for j, dd in zip(joints, d) if dd > 1])
@@ -474,7 +474,7 @@ def test_skeletons_lie_on_their_walkers(built):
 
 
 def _frame(built, names=("semantic", "instance", "mask_camera", "mask_lidar", "flow"), t=3):
-    grid = GridSpec(voxel_size=RES)
+    grid = GridSpec(voxel_size=VOXEL_SIZE)
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     return seq, grid, OccupancyStore(built).read_frame(seq, grid, t, names)
 
@@ -484,7 +484,7 @@ def test_visibility_masks(built):
     sem, cam, lid = d["semantic"], d["mask_camera"], d["mask_lidar"]
     assert cam.dtype == lid.dtype == np.uint8 and set(np.unique(cam)) <= {0, 1} and set(np.unique(lid)) <= {0, 1}
     # the air around the rig is observed by both; the inside of buildings (filled) by neither
-    li, lj, lk = (int((0.0 - o) / RES) for o in grid.origin)
+    li, lj, lk = (int((0.0 - o) / VOXEL_SIZE) for o in grid.origin)
     assert lid[li, lj, lk] and cam[li + 3, lj, lk]
     building = sem == taxonomy.by_name("Building").id
     from scipy import ndimage
@@ -520,7 +520,7 @@ def test_export_formats_read_back(built, tmp_path, fmt):
 
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / fmt
-    r = cli.invoke(app, ["export", fmt, "--res", str(RES), "--root", built.url, "--out", str(out),
+    r = cli.invoke(app, ["export", fmt, "--res", str(VOXEL_SIZE), "--root", built.url, "--out", str(out),
                          "--sequence", seq])
     assert r.exit_code == 0, r.output
     frames = E2E.scenes.frame_count
@@ -540,7 +540,7 @@ def test_export_formats_read_back(built, tmp_path, fmt):
         f = formats.load_carlaocc_npz(out / seq / "000003.npz")
         _, grid, d = _frame(built, ("semantic", "instance"))
         np.testing.assert_array_equal(f.semantic, d["semantic"])
-        assert f.voxel_size == RES and (f.instance > 0).sum() == (d["instance"] > 0).sum()
+        assert f.voxel_size == VOXEL_SIZE and (f.instance > 0).sum() == (d["instance"] > 0).sum()
         note = json.loads((out / seq / "instances.json").read_text())
         table = {tuple(int(v) for v in k.split(":")): v for k, v in note["instances"].items()}
         actors = {r[0] for r in query(built, f"SELECT DISTINCT instance_id FROM actors WHERE sequence_id = '{seq}'")[1]}
@@ -564,30 +564,30 @@ def test_export_formats_read_back(built, tmp_path, fmt):
 def test_show_occupancy_png(built, tmp_path):
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / "occ.png"
-    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "2", "--res", str(RES),
+    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "2", "--res", str(VOXEL_SIZE),
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 0, r.output
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "99", "--res", str(RES),
+    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "99", "--res", str(VOXEL_SIZE),
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 2 and "frames 0.." in r.output
 
 
-def test_export_refuses_a_resolution_not_built(built, tmp_path):
+def test_export_refuses_a_voxel_size_not_built(built, tmp_path):
     r = cli.invoke(app, ["export", "occ3d", "--res", "0.8", "--root", built.url, "--out", str(tmp_path / "x")])
     assert r.exit_code == 2 and "0.8" in r.output
 
 
-def test_second_resolution_pooling_report_and_multi_resolution_figure(config_file, built, tmp_path):
+def test_second_voxel_size_pooling_report_and_multi_voxel_size_figure(config_file, built, tmp_path):
     import shutil
 
     root = tmp_path / "data"
     shutil.copytree(built.root, root)
-    r = cli.invoke(app, ["run", "--config", config_file, "--stages", "voxelize", "--res", "0.8", "--root", str(root), "--scheduler", "synchronous"])
+    r = cli.invoke(app, ["run", "--config", config_file, "--stages", "voxelize", "--voxel-size", "0.8", "--root", str(root), "--scheduler", "synchronous"])
     assert r.exit_code == 0, r.output
     seq = query(built, "SELECT min(sequence_id) FROM sequences")[1][0][0]
     out = tmp_path / "pool.json"
-    r = cli.invoke(app, ["compare-resolutions", "--fine", str(RES), "--coarse", "0.8", "--root", str(root),
+    r = cli.invoke(app, ["compare-voxel-sizes", "--fine", str(VOXEL_SIZE), "--coarse", "0.8", "--root", str(root),
                          "--sequence", seq, "--json", str(out)])
     assert r.exit_code == 0, r.output
     rows = json.loads(out.read_text())
@@ -597,7 +597,7 @@ def test_second_resolution_pooling_report_and_multi_resolution_figure(config_fil
     # differ); labels differ where class priority and elevation order disagree (measured ~4 %)
     assert all(r["occupancy_iou"] > 0.99 and 0 < r["mismatch_rate"] < 0.15 for r in rows)
     png = tmp_path / "multi.png"
-    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "0", "--res", f"{RES},0.8",
+    r = cli.invoke(app, ["show", "occupancy", "--seq", seq, "--frame", "0", "--res", f"{VOXEL_SIZE},0.8",
                          "--root", str(root), "--out", str(png)])
     assert r.exit_code == 0, r.output and png.stat().st_size > 1000
 

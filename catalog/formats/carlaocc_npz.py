@@ -202,13 +202,13 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
             encoding = str(z[ENCODING_KEY])
     if encoding not in LABEL_ENCODINGS:
         raise FormatError(f"{p}: unknown label_encoding {encoding!r} (known: {', '.join(LABEL_ENCODINGS)})")
-    occ, vs, vo, shape = a["occupancy"], a["voxel_size"], a["voxel_origin"], a["volume_size"]
+    occ, voxel_size, vo, shape = a["occupancy"], a["voxel_size"], a["voxel_origin"], a["volume_size"]
     if occ.dtype != np.uint16 or occ.ndim != 2 or occ.shape[1] != 4:
         raise FormatError(f"{p}: occupancy must be (N, 4) uint16, got {occ.shape} {occ.dtype}")
     if shape.shape != (3,) or not np.issubdtype(shape.dtype, np.integer) or (shape <= 0).any():
         raise FormatError(f"{p}: volume_size must be 3 positive integers, got {shape!r}")
-    if vs.size != 1 or not np.issubdtype(vs.dtype, np.number) or not (np.isfinite(vs) & (vs > 0)).all():
-        raise FormatError(f"{p}: voxel_size must be one positive finite number, got {vs!r}")
+    if voxel_size.size != 1 or not np.issubdtype(voxel_size.dtype, np.number) or not (np.isfinite(voxel_size) & (voxel_size > 0)).all():
+        raise FormatError(f"{p}: voxel_size must be one positive finite number, got {voxel_size!r}")
     if vo.shape != (3,) or not np.issubdtype(vo.dtype, np.number) or not np.isfinite(vo).all():
         raise FormatError(f"{p}: voxel_origin must be 3 finite numbers, got {vo!r}")
     dims = tuple(int(n) for n in shape)
@@ -228,7 +228,7 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
     semantic.reshape(-1)[flat] = sem
     instance.reshape(-1)[flat] = inst
     origin = tuple(float(v) for v in vo)
-    return CarlaOccFrame(semantic, instance, float(vs.reshape(())), origin)  # type: ignore[arg-type]
+    return CarlaOccFrame(semantic, instance, float(voxel_size.reshape(())), origin)  # type: ignore[arg-type]
 
 
 def load_carlaocc_grid(path: Path) -> LabelGrid:

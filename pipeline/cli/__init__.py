@@ -6,7 +6,7 @@
 * ``query``       — ``catalog query`` (read-only SQL)
 * ``show``        — ``admesh show|sheet``, ``show occupancy|sensors`` (PNG, headless)
 * ``scene_tools`` — ``scenes town-mesh|frame-mesh|swap``
-* ``files``       — ``voxelize`` (mesh files), ``export``, ``compare-resolutions``
+* ``files``       — ``voxelize`` (mesh files), ``export``, ``compare-voxel-sizes`` (and the refusal of its old name)
 * ``evaluate``    — ``eval ssc|panoptic|depth|det``
 * ``evaluate_rays`` — ``eval rayiou|raypq``
 * ``audit``       — ``audit``: quality scores of any dataset on disk

@@ -151,7 +151,7 @@ def _write_recording_config(store, root: str, recording: str) -> None:
     text = yaml.safe_dump(cfg.model_dump(mode="json", exclude_defaults=True), sort_keys=False)
     path.write_text(text)
     maps = ", ".join(t.map for t in cfg.scenes.towns if t.style == "carla-recording")
-    typer.echo(f"wrote {path}: towns {maps} from {recording}; `carlaocc run --root {root} --res 0.1` builds them")
+    typer.echo(f"wrote {path}: towns {maps} from {recording}; `carlaocc run --root {root} --voxel-size 0.1` builds them")
 
 
 @app.command()

@@ -1,5 +1,6 @@
 """Commands on mesh and grid files outside the pipeline's stages: ``voxelize`` (any mesh files
-to a grid), ``export`` (to the layouts models train on), ``compare-resolutions``.
+to a grid), ``export`` (to the layouts models train on), ``compare-voxel-sizes`` (``compare-resolutions``, its
+earlier name, is refused with the new one).
 
 Each command imports its work when it runs (see ``carlaocc.pipeline.cli``, "Imports"); the
 export command's help lists the registered formats, read from the registry when asked."""
@@ -24,7 +25,7 @@ from carlaocc.schemas.grid import voxel_size_key
 @app.command("voxelize")
 def voxelize_files(
     meshes: Annotated[list[str], typer.Argument(help="mesh files (OBJ, PLY, STL, OFF, GLB...) or ADMesh asset ids")],
-    voxel_size: Annotated[float, typer.Option("--voxel-size", help="voxel edge, metres (0.02 to 1.0 is the tested range)")],
+    voxel_size: Annotated[float, typer.Option("--voxel-size", "--res", help="voxel size (the voxel edge), metres (0.02 to 1.0 is the tested range; --res is the short alias)")],
     out: Annotated[Path, typer.Option("--out", help="OUT.npz (semantic, instance, voxel_size, voxel_origin, shape) or OUT.zarr")],
     class_name: Annotated[Optional[list[str]], typer.Option("--class", help="class of the mesh files: once for all, or once per file in order (e.g. Car)")] = None,
     fill: Annotated[str, typer.Option("--fill", help="auto: fill volumetric classes (vehicles, people, buildings, walls, poles, props, trunks); solid: fill every mesh; surface: fill nothing. Watertight meshes are filled by column parity, open ones by winding numbers")] = "auto",
@@ -130,10 +131,10 @@ def export_cmd(
                        f"preset is 10 Hz)", err=True)
 
 
-@app.command("compare-resolutions")
-def compare_resolutions(
-    fine: Annotated[float, typer.Option("--fine", help="the finer built resolution, e.g. 0.05")],
-    coarse: Annotated[float, typer.Option("--coarse", help="a coarser built resolution, an integer multiple, e.g. 0.2")],
+@app.command("compare-voxel-sizes")
+def compare_voxel_sizes(
+    fine: Annotated[float, typer.Option("--fine", help="the finer built voxel size (m), e.g. 0.05")],
+    coarse: Annotated[float, typer.Option("--coarse", help="a coarser built voxel size (m), an integer multiple, e.g. 0.2")],
     root: RootOpt = "data",
     config: ConfigOpt = None,
     sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) (default: all)")] = None,
@@ -176,3 +177,20 @@ def compare_resolutions(
                    f"{(occ_mis + lab_mis) / max(union, 1):>14.4f}")
     if json_out:
         write_bytes(json_out, json.dumps(rows, indent=1).encode())
+
+
+# Earlier names of commands, refused with the one to use (exit 2, one line; nothing is read or
+# written), as the retired stage name ``metrics`` is (``RETIRED_STAGES`` in pipeline/engine/runner.py).
+RETIRED_COMMANDS = {"compare-resolutions": "compare-voxel-sizes"}
+
+
+def _refuse_retired(old: str) -> None:
+    new = RETIRED_COMMANDS[old]
+    fail(f"{old} was renamed {new}: use carlaocc {new} ...")
+
+
+@app.command("compare-resolutions", hidden=True, add_help_option=False,
+             context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+def compare_resolutions_retired(ctx: typer.Context) -> None:
+    """Retired name of ``compare-voxel-sizes``: refused with the new name."""
+    _refuse_retired("compare-resolutions")

@@ -87,16 +87,16 @@ def admesh_sheet(
     typer.echo(f"{len(images)} assets -> {out}")
 
 
-def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, res: float):
+def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int, voxel_size: float):
     from carlaocc.catalog.occupancy import OccupancyStore
 
     from carlaocc.schemas.grid import voxel_size_key
 
     occ = OccupancyStore(store)
-    grid = occ.stored_grid(sequence, res)  # the grid it was built on, whatever the config says now
+    grid = occ.stored_grid(sequence, voxel_size)  # the grid it was built on, whatever the config says now
     if grid is None:
-        key = voxel_size_key(res)
-        fail(f"{sequence} has no occupancy at {key} m in {store.url}: run `carlaocc run --res {key}`")
+        key = voxel_size_key(voxel_size)
+        fail(f"{sequence} has no occupancy at {key} m in {store.url}: run `carlaocc run --voxel-size {key}`")
     n = occ.open(sequence, grid, "semantic").shape[0]
     if not 0 <= frame < n:
         fail(f"{sequence} has frames 0..{n - 1}, not {frame}")
@@ -108,30 +108,30 @@ def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int
 def show_occupancy(
     seq: Annotated[str, typer.Option("--seq", help="sequence id (see: carlaocc catalog query 'select * from sequences')")],
     frame: Annotated[int, typer.Option("--frame", min=0, help="frame index")],
-    res: Annotated[str, typer.Option("--voxel-size", "--res", help="voxel size (m), or several comma-separated for the multi-resolution figure (e.g. 0.05,0.1,0.2,0.5)")],
+    voxel_size: Annotated[str, typer.Option("--voxel-size", "--res", help="voxel size (m), or several comma-separated for the multi-voxel-size figure (e.g. 0.05,0.1,0.2,0.5; --res is the short alias)")],
     out: Annotated[Path, typer.Option("--out", help="PNG file to write")] = Path("occupancy.png"),
     mode: Annotated[str, typer.Option("--mode", help="instance (things per instance, stuff in the palette) | semantic | height")] = "instance",
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Render one frame's occupancy: a bird's-eye height map and a 3D view (one resolution), or
-    the multi-resolution figure (3D views and a zoomed bird's-eye crop per resolution)."""
-    from carlaocc.stages.render.figures import multi_resolution_figure, occupancy_figure
+    """Render one frame's occupancy: a bird's-eye height map and a 3D view (one voxel size), or
+    the multi-voxel-size figure (3D views and a zoomed bird's-eye crop per voxel size)."""
+    from carlaocc.stages.render.figures import multi_voxel_size_figure, occupancy_figure
 
     if mode not in ("instance", "semantic", "height"):
         fail(f"--mode must be instance, semantic or height, got {mode!r}")
     cfg = load_config(config, root)
-    voxel_sizes = parse_voxel_sizes(res, cfg)
+    voxel_sizes = parse_voxel_sizes(voxel_size, cfg)
     store = open_store(root, writable=False)
     if len(voxel_sizes) == 1:
         sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, voxel_sizes[0])
         image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", mode=mode)
     else:
         frames = []
-        for r in voxel_sizes:
-            sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, r)
+        for size in voxel_sizes:
+            sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, size)
             frames.append((f"{grid.key} m", sem, inst, grid))
-        image = multi_resolution_figure(frames, mode=mode, title=f"{seq} frame {frame}")
+        image = multi_voxel_size_figure(frames, mode=mode, title=f"{seq} frame {frame}")
     write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 

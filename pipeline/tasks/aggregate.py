@@ -1,8 +1,8 @@
 """The aggregate stage (reduce): one task per (sequence, voxel size) sums what the quality tasks
 counted per frame -- the spatial continuity and temporal consistency numerators and
-denominators into the sequence's scores (``metrics/quality/<seq>/<res>.parquet``, rows with no
+denominators into the sequence's scores (``metrics/quality/<seq>/<voxel_size>.parquet``, rows with no
 frame index), voxels per class and the union of instance ids per class into the sequence's class
-statistics (``metrics/statistics_classes/<seq>/<res>.parquet``). It reads only those small
+statistics (``metrics/statistics_classes/<seq>/<voxel_size>.parquet``). It reads only those small
 tables (and the sequence's actors), never occupancy: a sequence's scores are bit-identical to
 scoring all its frames in one pass, because both are sums of the same integers.
 """
@@ -32,9 +32,9 @@ def aggregate_partitions(ctx: Context) -> list[Partition]:
     town = {s.sequence_id: s.town for s in sequences(ctx)}
     out = []
     for group, keys in groups.items():
-        seq_id, res_key = group.split("/")
-        params = {"sequence_id": seq_id, "voxel_size_key": res_key, "quality_keys": keys,
-                  "voxel_size": next(v for v in ctx.voxel_sizes if ctx.config.voxelize.grid(v).key == res_key)}
+        seq_id, voxel_size_key = group.split("/")
+        params = {"sequence_id": seq_id, "voxel_size_key": voxel_size_key, "quality_keys": keys,
+                  "voxel_size": next(v for v in ctx.voxel_sizes if ctx.config.voxelize.grid(v).key == voxel_size_key)}
         # the quality tasks' tables, and the scenes partition of the sequence's actors
         out.append(Partition(group, params, needs=tuple(("quality", k) for k in keys) + (("scenes", town[seq_id]),)))
     return out
@@ -67,10 +67,10 @@ def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[st
         return {} if low is None else {"worst_value": low.value, "worst_frame": low.frame_index}
 
     quality = [
-        QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=None, metric="spatial_continuity",
+        QualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=None, metric="spatial_continuity",
                       value=pooled_continuity(occupied, isolated), occupied=occupied, isolated=isolated,
                       numerator=occupied - isolated, denominator=occupied, **worst(cont)),
-        QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=None, metric="temporal_consistency",
+        QualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=None, metric="temporal_consistency",
                       value=pooled_temporal(inter, union), numerator=inter, denominator=union, **worst(temp)),
     ]
     # the per-class counts behind the continuity score must add up to the frames' totals
@@ -96,7 +96,7 @@ def aggregate_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[st
     actor_ids = (np.unique(actors.load_arrow([seq_id]).column("instance_id").to_numpy())
                  if actors.exists(seq_id) else np.zeros(0, np.int64))
     inst, moving = stats.instances(), stats.instances(actor_ids.tolist())
-    statistics = [ClassStatisticsRecord(sequence_id=seq_id, resolution=float(voxel_size), semantic_id=c,
+    statistics = [ClassStatisticsRecord(sequence_id=seq_id, voxel_size=float(voxel_size), semantic_id=c,
                                         frames=stats.frames, voxels=int(stats.voxels[c]), instances=int(inst[c]),
                                         moving_instances=int(moving[c]))
                   for c in range(len(stats.voxels)) if stats.voxels[c] or inst[c]]
@@ -111,9 +111,9 @@ SPEC = StageSpec(
     name="aggregate",
     description="the quality scores and class statistics of every sequence, summed from the per-frame tables",
     upstream=("quality", "scenes"),
-    reads=("metrics/quality/<seq>/<res>/", "metrics/quality_classes/<seq>/<res>/",
-           "metrics/statistics_frames/<seq>/<res>/", "scenes/actors/"),
-    writes=("metrics/quality/<seq>/<res>.parquet", "metrics/statistics_classes/<seq>/<res>.parquet"),
+    reads=("metrics/quality/<seq>/<voxel_size>/", "metrics/quality_classes/<seq>/<voxel_size>/",
+           "metrics/statistics_frames/<seq>/<voxel_size>/", "scenes/actors/"),
+    writes=("metrics/quality/<seq>/<voxel_size>.parquet", "metrics/statistics_classes/<seq>/<voxel_size>.parquet"),
     partitions=aggregate_partitions,
     task=aggregate_task,
     config_of=lambda config: config.quality,

@@ -1,7 +1,7 @@
 """The quality stage (map): the dataset-quality scores and class statistics of a run of
 consecutive frames of one (sequence, voxel size) per task -- spatial continuity per frame and
 class, temporal consistency per frame pair (paper 4.2), and voxels and instance ids per class --
-into ``metrics/quality/<seq>/<res>/<first>.parquet``, ``metrics/quality_classes/...`` and
+into ``metrics/quality/<seq>/<voxel_size>/<first>.parquet``, ``metrics/quality_classes/...`` and
 ``metrics/statistics_frames/...``. A task scores ``quality.frames_per_task`` frames and reads the
 next task's first frame for its last pair, so no task grows with the sequence; the aggregate
 stage sums the counts per sequence (:mod:`carlaocc.pipeline.tasks.aggregate`).
@@ -174,16 +174,16 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
         if t < stop:
             # 1. spatial continuity of the frame, per class
             occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
-            quality.append(QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
+            quality.append(QualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=t,
                                          metric="spatial_continuity", value=counts.score, occupied=occupied,
                                          isolated=isolated, numerator=occupied - isolated, denominator=occupied))
-            classes += [ClassQualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t, semantic_id=int(c),
+            classes += [ClassQualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=t, semantic_id=int(c),
                                            occupied=int(counts.occupied[c]), isolated=int(counts.isolated[c]))
                         for c in np.flatnonzero(counts.occupied)]
             # 2. voxels and instances per class
             voxels, pairs = _frame_statistics(occ, seq_id, grid, t, sem, ranges, counts.occupied, with_instances)
             ids, cls = split_pairs(pairs)
-            statistics += [FrameStatisticsRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t,
+            statistics += [FrameStatisticsRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=t,
                                                  semantic_id=int(c), voxels=int(voxels[c]),
                                                  instance_ids=ids[cls == c].astype(np.int64).tolist())
                            for c in range(len(voxels)) if voxels[c] or (cls == c).any()]
@@ -195,7 +195,7 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
         if prev is not None:
             tc = temporal_consistency_counts(prev[0], sem, poses[t - 1], poses[t], grid.voxel_size, grid.origin,
                                              mask_t=prev[1], mask_t1=cur[1], ranges_t=prev[2], ranges_t1=cur[2])
-            quality.append(QualityRecord(sequence_id=seq_id, resolution=voxel_size, frame_index=t - 1,
+            quality.append(QualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=t - 1,
                                          metric="temporal_consistency", value=tc.score,
                                          numerator=tc.total_intersection, denominator=tc.total_union))
         prev = cur
@@ -213,8 +213,8 @@ SPEC = StageSpec(
                 "instances per class per frame (runs of frames_per_task frames per task)",
     upstream=("voxelize", "scenes"),
     reads=("occupancy.zarr/", "scenes/frames/"),
-    writes=("metrics/quality/<seq>/<res>/", "metrics/quality_classes/<seq>/<res>/",
-            "metrics/statistics_frames/<seq>/<res>/"),
+    writes=("metrics/quality/<seq>/<voxel_size>/", "metrics/quality_classes/<seq>/<voxel_size>/",
+            "metrics/statistics_frames/<seq>/<voxel_size>/"),
     partitions=quality_partitions,
     task=quality_task,
     prepare=_quality_prepare,

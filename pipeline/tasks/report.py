@@ -36,7 +36,7 @@ from carlaocc.schemas.records import (AssetRecord, AssetStatisticsRecord, ClassS
 from carlaocc.stages.render.figures import occupancy_figure
 from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 from carlaocc.stages.report import plots
-from carlaocc.stages.report.statistics import asset_distribution, motion_share, resolution_totals
+from carlaocc.stages.report.statistics import asset_distribution, motion_share, voxel_size_totals
 
 TABLE_KEY = "dataset"
 FRAME_HEIGHT = 380  # pixels of the rendered occupancy frame's panels
@@ -75,7 +75,7 @@ def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
 
 
 def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:
-    """Statistics tables, plots and ``metrics/report.html`` of the requested resolutions."""
+    """Statistics tables, plots and ``metrics/report.html`` of the requested voxel sizes."""
 
     grids = [GridSpec.model_validate(g) for g in part.params["grids"]]
     seq_ids = list(part.params["sequences"])
@@ -85,7 +85,7 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
         raise StoreError(f"sequences {sorted(set(seq_ids) - {s.sequence_id for s in sequences})} are not in "
                          f"{store.url}: run the scenes stage")
     outputs: dict[str, str] = {}
-    # 1. class statistics of these sequences and resolutions (the aggregate stage's)
+    # 1. class statistics of these sequences and voxel sizes (the aggregate stage's)
     t_cls = ParquetTable(store, ClassStatisticsRecord)
     keys = [f"{s.sequence_id}/{g.key}" for g in grids for s in sequences]
     missing = [k for k in keys if not t_cls.exists(k)]
@@ -98,14 +98,14 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
     asset_rows = asset_distribution(dedupe_assets(ParquetTable(store, AssetRecord).load()))
     t_ast = ParquetTable(store, AssetStatisticsRecord)
     outputs[t_ast.path(TABLE_KEY)] = t_ast.save(TABLE_KEY, asset_rows)
-    # 3. quality scores of these sequences and resolutions
+    # 3. quality scores of these sequences and voxel sizes
     # (the sequence rows the aggregate stage wrote, with each sequence's worst frame: never the
     # frames' own rows, 100 K files at the paper's scale)
     t_q = ParquetTable(store, QualityRecord)
     quality = t_q.load([k for k in keys if t_q.exists(k)])
     # 4. plots
     png: dict[str, bytes] = {}
-    totals = resolution_totals(class_rows)
+    totals = voxel_size_totals(class_rows)
     for grid in grids:
         s = totals.get(float(grid.voxel_size))
         if s is None:
@@ -130,7 +130,7 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
     for name, data in png.items():
         rel = f"{PLOTS_DIR}/{name}.png"
         outputs[rel] = store.write_bytes(rel, data)
-    # the report owns its plot directory: pictures of resolutions no longer reported go
+    # the report owns its plot directory: pictures of voxel sizes no longer reported go
     for rel in store.glob(PLOTS_DIR, ".png"):
         if rel not in outputs:
             store.remove(rel)
@@ -152,7 +152,7 @@ def report_config(config: DatasetConfig) -> QualityConfig:
 
 
 def _report_partitions(ctx: Context) -> list[Partition]:
-    """One partition over the whole dataset at the requested resolutions: it reads every aggregate
+    """One partition over the whole dataset at the requested voxel sizes: it reads every aggregate
     partition (the sequences' statistics and scores), the scenes and ingest partitions, and the
     frame it renders: its occupancy at the finest size, and its cameras once the sensors stage has
     run."""
@@ -165,7 +165,7 @@ def _report_partitions(ctx: Context) -> list[Partition]:
     # the ADMesh plot counts the whole library: every ingested item, whichever source
     needs |= {("ingest", k) for k, r in lineage.latest("ingest").items() if r.status == "completed"}
     seqs = sequences(ctx)
-    grids = [ctx.config.voxelize.grid(res) for res in ctx.voxel_sizes]
+    grids = [ctx.config.voxelize.grid(voxel_size) for voxel_size in ctx.voxel_sizes]
     if seqs and grids:
         seq, finest = seqs[0], min(grids, key=lambda g: g.voxel_size)
         frame = seq.frame_count // 2

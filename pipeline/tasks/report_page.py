@@ -22,7 +22,7 @@ from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import AssetStatisticsRecord, QualityRecord, RunRecord, SequenceRecord
 from carlaocc.stages.report.plots import metric_label
-from carlaocc.stages.report.statistics import ResolutionStats
+from carlaocc.stages.report.statistics import VoxelSizeStats
 
 REPORT_HTML = "metrics/report.html"
 PLOTS_DIR = "metrics/plots"
@@ -151,20 +151,20 @@ SECTIONS = ("size", "sequences", "statistics", "quality", "frame", "lineage")
 
 
 def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridSpec],
-                totals: dict[float, ResolutionStats], asset_rows: list[AssetStatisticsRecord],
+                totals: dict[float, VoxelSizeStats], asset_rows: list[AssetStatisticsRecord],
                 quality: list[QualityRecord], usage: list[tuple[str, int, int]], lineage: list[StageLineage],
                 images: dict[str, bytes], label_table: str | None = None) -> str:
     """The report page: one string of HTML with every picture inlined (``images``: name -> PNG);
     ``label_table``: the dataset's (which classes are things)."""
 
     table = taxonomy.label_table(label_table)
-    res_keys = ", ".join(f"{g.key} m" for g in grids)
+    voxel_size_keys = ", ".join(f"{g.key} m" for g in grids)
     frames = sum(s.frame_count for s in sequences)
     out = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>carlaocc dataset report</title>"
            f"<style>{_CSS}</style></head><body><main>",
            "<h1>carlaocc dataset report</h1>",
            f"<p class=\"muted\">root <code>{_e(root)}</code> · {len(sequences)} sequences · {frames} frames · "
-           f"resolutions {_e(res_keys)} · taxonomy {_e(table.version)}</p>",
+           f"voxel sizes {_e(voxel_size_keys)} · taxonomy {_e(table.version)}</p>",
            "<nav>" + "".join(f'<a href="#{s}">{s}</a>' for s in SECTIONS) + "</nav>"]
     # dataset size
     total_files, total_bytes = sum(u[1] for u in usage), sum(u[2] for u in usage)
@@ -208,12 +208,12 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
         worst: dict[tuple, float] = {}
         for q in frame_q:
             if not math.isnan(q.value):
-                key = (q.sequence_id, q.resolution, q.metric)
+                key = (q.sequence_id, q.voxel_size, q.metric)
                 worst[key] = min(worst.get(key, math.inf), q.value)
         for q in seq_q:  # the aggregate stage's sequence rows carry their worst frame
             if q.worst_value is not None:
-                worst[(q.sequence_id, q.resolution, q.metric)] = q.worst_value
-        value = {(q.sequence_id, q.resolution, q.metric): q.value for q in seq_q}
+                worst[(q.sequence_id, q.voxel_size, q.metric)] = q.worst_value
+        value = {(q.sequence_id, q.voxel_size, q.metric): q.value for q in seq_q}
         rows = []
         for s in sequences:
             for g in grids:

@@ -45,7 +45,7 @@ def _voxelize_partitions(ctx: Context) -> list[Partition]:
 
 
 def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Partition]) -> set[str]:
-    """Create the Zarr arrays of every (sequence, resolution) about to be written; when an array
+    """Create the Zarr arrays of every (sequence, voxel size) about to be written; when an array
     had to be replaced, every frame of it is invalidated."""
     frames = {s.sequence_id: s.frame_count for s in sequences(ctx)}
     occ = OccupancyStore(ctx.store)
@@ -92,7 +92,7 @@ def _frame_flow(inputs: FrameInputs):
 
 
 def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[str, str]:
-    """Voxelize one frame of one sequence at one resolution into occupancy.zarr: semantic,
+    """Voxelize one frame of one sequence at one voxel size into occupancy.zarr: semantic,
     instance and flow tile by tile (x-slabs of whole chunks), then the camera and LiDAR masks,
     traced through the frame's occupancy packed tile by tile and written chunk by chunk from
     their bits (no array of the whole frame is ever held)."""
@@ -151,7 +151,7 @@ SPEC = StageSpec(
     description="panoptic voxelization of every frame's scene mesh (exact triangle-box overlap)",
     upstream=("ingest", "scenes"),
     reads=("admesh/", "scenes/"),
-    writes=("occupancy.zarr/<seq>/<res>/{semantic,instance,mask_camera,mask_lidar,flow}",),
+    writes=("occupancy.zarr/<seq>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow}",),
     partitions=_voxelize_partitions,
     task=voxelize_task,
     prepare=_voxelize_prepare,

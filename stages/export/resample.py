@@ -6,7 +6,7 @@ Frames and units
 ----------------
 Our volumes live on a :class:`~carlaocc.schemas.grid.GridSpec`: the LiDAR frame (x forward, y left, z up,
 metres, origin at the LiDAR, 1.73 m above the ground); voxel ``(i, j, k)`` covers
-``[origin + (i, j, k) * vs, origin + (i + 1, j + 1, k + 1) * vs]``, arrays are indexed
+``[origin + (i, j, k) * voxel_size, origin + (i + 1, j + 1, k + 1) * voxel_size]``, arrays are indexed
 ``[x, y, z]`` and class 0 (``None``) is free. A target voxel takes the present class of highest
 priority, the rule of our own pooling (:mod:`carlaocc.stages.voxelize.pooling`, "Class priority").
 
@@ -98,7 +98,7 @@ OCC3D_NUSCENES = TargetGrid("occ3d-nuscenes", (200, 200, 16), 0.4, (-40.0, -40.0
 nuScenes **ego** (vehicle) frame, x forward, y left, z up -- stated by the challenge organisers
 (CVPR2023-3D-Occupancy-Prediction issues #8 "It is in ego coordinate" and #36 "the Occ ground truth
 in Vehicle coors"); index order ``[x, y, z]`` per that repository's ``utils/vis.py``
-(``voxel2points``: index 0 * vs + range[0] is x, 1 is y, 2 is z). So pass the LiDAR-to-ego pose
+(``voxel2points``: index 0 * voxel_size + range[0] is x, 1 is y, 2 is z). So pass the LiDAR-to-ego pose
 (``LidarSpec.sensor_to_ego()``: up by 1.73 m, forward by the LiDAR's x offset) as ``grid_to_target``.
 """
 
@@ -135,15 +135,15 @@ def _label_lut(target: TargetGrid, table: str | LabelTable | None = None) -> np.
     return lut
 
 
-def _axis_groups(origin: float, vs: float, n: int, shift: float, tmin: float, tvs: float, tn: int):
+def _axis_groups(origin: float, voxel_size: float, n: int, shift: float, tmin: float, target_voxel_size: float, tn: int):
     """Translation-only fast path, one axis: our voxels ``0..n-1`` -> target voxels by centre.
 
     Returns ``(starts, targets, stop)``: ``reduceat`` group starts into our axis, the target index
     of each group (centres binned exactly as the general path does) and the end of the last group,
     or ``None`` when nothing lands.
     """
-    centre = origin + (np.arange(n) + 0.5) * vs  # 1. our voxel centres along this axis (m)
-    t = np.floor((centre + shift - tmin) / tvs).astype(np.int64)  # 2. target index of each
+    centre = origin + (np.arange(n) + 0.5) * voxel_size  # 1. our voxel centres along this axis (m)
+    t = np.floor((centre + shift - tmin) / target_voxel_size).astype(np.int64)  # 2. target index of each
     inside = np.flatnonzero((t >= 0) & (t < tn))  # 3. a contiguous run (t is monotone)
     if inside.size == 0:
         return None

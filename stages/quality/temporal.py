@@ -347,15 +347,15 @@ def temporal_consistency_counts(
     table = static_table() if static is None else np.asarray(static, dtype=np.bool_)
     if table.shape != (N_CLASSES,):
         raise ValueError(f"static must be a (256,) bool table, got shape {table.shape}")
-    vs1 = voxel_size if voxel_size_t1 is None else voxel_size_t1
+    voxel_size_t1 = voxel_size if voxel_size_t1 is None else voxel_size_t1
     o1 = origin if origin_t1 is None else origin_t1
-    for name, v in (("voxel_size", voxel_size), ("voxel_size_t1", vs1)):
+    for name, v in (("voxel_size", voxel_size), ("voxel_size_t1", voxel_size_t1)):
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"{name} must be a positive finite number of metres, got {v!r}")
     for name, o in (("origin", origin), ("origin_t1", o1)):
         if len(o) != 3 or not all(math.isfinite(float(x)) for x in o):
             raise ValueError(f"{name} must be 3 finite numbers, got {o!r}")
-    A, c = warp_to_voxels(relative_pose(pose_t, pose_t1), origin, float(voxel_size), o1, float(vs1))
+    A, c = warp_to_voxels(relative_pose(pose_t, pose_t1), origin, float(voxel_size), o1, float(voxel_size_t1))
     # per-column occupied z ranges bound the work to voxels where O_t or W is occupied
     lo0, hi0 = column_ranges(sem0) if ranges_t is None else ranges_t
     lo1, hi1 = column_ranges(sem1) if ranges_t1 is None else ranges_t1

@@ -10,7 +10,7 @@ the same inputs give byte-identical ``(H, W, 3)`` uint8 RGB images (``carlaocc.c
   colours of instance ids.
 * :mod:`carlaocc.stages.render.occupancy` -- occupancy grids: bird's-eye height maps and 3D voxel views
   (numba column scans, pooling, surface voxels).
-* :mod:`carlaocc.stages.render.figures` -- ``occupancy_figure`` and ``multi_resolution_figure``, composed
+* :mod:`carlaocc.stages.render.figures` -- ``occupancy_figure`` and ``multi_voxel_size_figure``, composed
   of those views.
 * :mod:`carlaocc.stages.render.sensors` -- camera maps (depth, normals, semantics, instances) and the
   rectification contact sheet ``sensor_sheet``.

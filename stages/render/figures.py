@@ -1,7 +1,7 @@
 """Figures of occupancy frames, composed of the views of :mod:`carlaocc.stages.render.occupancy`.
 
 :func:`occupancy_figure`: one frame at a glance, a title strip over the BEV, the 3D view and a
-legend of the classes present. :func:`multi_resolution_figure`: one column per resolution, the
+legend of the classes present. :func:`multi_voxel_size_figure`: one column per voxel size, the
 3D view and the BEV of the same metric window around the ego, the BEV nearest-neighbour sampled
 to a common pixel size so coarse voxels show as bigger blocks. Inputs as in
 :mod:`carlaocc.stages.render.occupancy` (``[x, y, z]`` grids, LiDAR frame, metres); outputs ``(H, W, 3)``
@@ -23,7 +23,7 @@ from carlaocc.stages.render.occupancy import (DEFAULT_MAX_VOXELS, FREE_RGB, bev_
                                              voxel_view)  # fmt: skip
 from carlaocc.stages.render.sheets import FONT_HEIGHT, FONT_WIDTH, draw_text, text_width
 
-__all__ = ["multi_resolution_figure", "occupancy_figure"]
+__all__ = ["multi_voxel_size_figure", "occupancy_figure"]
 
 _FIG_BG = (255, 255, 255)
 _STRIP_BG = (236, 236, 236)
@@ -159,10 +159,10 @@ def occupancy_figure(
     things = {int(c) for c in np.unique(sem[inst > 0])} if has else set()
     legend = _legend(present, mode, H, scale, things)
     gap = 6 * scale
-    res = f"{grid.voxel_size:g} m"
-    cap_bev = _strip(bev.shape[1], f"BEV {res}, up = forward", scale)
+    voxel_size_label = f"{grid.voxel_size:g} m"
+    cap_bev = _strip(bev.shape[1], f"BEV {voxel_size_label}, up = forward", scale)
     pooled = f", pooled x{pool} ({grid.voxel_size * pool:g} m)" if pool > 1 else ""
-    cap_3d = _strip(view.shape[1], f"3D {res}{pooled}", scale)
+    cap_3d = _strip(view.shape[1], f"3D {voxel_size_label}{pooled}", scale)
     width = bev.shape[1] + view.shape[1] + legend.shape[1] + 2 * gap
     title_strip = _strip(width, str(title), scale + 1, centre=False)
     cap_h = cap_bev.shape[0]
@@ -178,7 +178,7 @@ def occupancy_figure(
     return fig
 
 
-def multi_resolution_figure(
+def multi_voxel_size_figure(
     frames: Sequence[tuple[str, np.ndarray, np.ndarray | None, GridSpec]],
     *,
     window=((-5.0, 15.0), (-10.0, 10.0)),
@@ -189,7 +189,7 @@ def multi_resolution_figure(
     max_voxels: int = DEFAULT_MAX_VOXELS,
     title: str | None = None,
 ) -> np.ndarray:
-    """The multi-resolution figure: one column per ``(label, semantic, instance, grid)`` frame
+    """The multi-voxel-size figure: one column per ``(label, semantic, instance, grid)`` frame
     (typically the same scene at 0.05 / 0.1 / 0.2 / 0.4 m), the label on top, then the 3D view of
     the metric ``window`` ((xmin, xmax), (ymin, ymax), all heights) and the BEV of the same window
     with the ego marked, ``cell_size`` pixels per window x extent, nearest-neighbour sampled so
@@ -198,7 +198,7 @@ def multi_resolution_figure(
     ``title`` strip goes on top."""
     check_mode(mode)
     if not frames:
-        raise ValueError("multi_resolution_figure needs at least one frame")
+        raise ValueError("multi_voxel_size_figure needs at least one frame")
     (xmin, xmax), (ymin, ymax) = window
     if not (xmax > xmin and ymax > ymin):
         raise ValueError(f"empty window {window!r}")

@@ -177,7 +177,7 @@ def _seen_kernel(flat, seen):  # pragma: no cover - numba
 
 
 @njit(cache=True, nogil=True)
-def _draw_faces(idx, mask, cols, shade, origin, vs, cam, basis, persp, scale, offx, offy, edge, dark,
+def _draw_faces(idx, mask, cols, shade, origin, voxel_size, cam, basis, persp, scale, offx, offy, edge, dark,
                 zbuf, img):  # pragma: no cover - numba  # fmt: skip
     """Draw the exposed, camera-facing faces of voxels ``idx`` (N, 3) with face masks ``mask``
     (bits as in :func:`_surface_kernel`), base colours ``cols`` (N, 3) and per-direction shade
@@ -194,9 +194,9 @@ def _draw_faces(idx, mask, cols, shade, origin, vs, cam, basis, persp, scale, of
         m = mask[n]
         if m == 0:
             continue
-        bx = origin[0] + idx[n, 0] * vs
-        by = origin[1] + idx[n, 1] * vs
-        bz = origin[2] + idx[n, 2] * vs
+        bx = origin[0] + idx[n, 0] * voxel_size
+        by = origin[1] + idx[n, 1] * voxel_size
+        bz = origin[2] + idx[n, 2] * voxel_size
         for d in range(6):
             if (m >> d) & 1 == 0:
                 continue
@@ -204,7 +204,7 @@ def _draw_faces(idx, mask, cols, shade, origin, vs, cam, basis, persp, scale, of
             pos = d & 1
             sgn = 1.0 if pos else -1.0
             if persp:
-                face = (bx, by, bz)[a] + (vs if pos else 0.0)
+                face = (bx, by, bz)[a] + (voxel_size if pos else 0.0)
                 if sgn * (cam[a] - face) <= 0.0:
                     continue
             elif sgn * basis[2, a] >= 0.0:
@@ -217,9 +217,9 @@ def _draw_faces(idx, mask, cols, shade, origin, vs, cam, basis, persp, scale, of
                 p[1] = by
                 p[2] = bz
                 if pos:
-                    p[a] += vs
-                p[b_] += qs[q] * vs
-                p[c_] += qt[q] * vs
+                    p[a] += voxel_size
+                p[b_] += qs[q] * voxel_size
+                p[c_] += qt[q] * voxel_size
                 dx = p[0] - cam[0]
                 dy = p[1] - cam[1]
                 dz = p[2] - cam[2]
@@ -343,10 +343,10 @@ def classes_present(semantic) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def bev_colours(ktop, stop, itop, z0: float, vs: float, mode: str, z_range, relief: bool, free_color) -> np.ndarray:
+def bev_colours(ktop, stop, itop, z0: float, voxel_size: float, mode: str, z_range, relief: bool, free_color) -> np.ndarray:
     """Float32 (X, Y, 3) colours of top maps in grid order (not yet flipped to the image)."""
     occ = ktop >= 0
-    z = z0 + (ktop.astype(np.float64) + 0.5) * vs
+    z = z0 + (ktop.astype(np.float64) + 0.5) * voxel_size
     out = np.empty(ktop.shape + (3,), np.float32)
     out[:] = np.asarray(free_color, np.float32)
     if not occ.any():
@@ -425,10 +425,10 @@ def bev_height_map(
         while (-(-X // f)) * (-(-Y // f)) > max_pixels:
             f += 1
         ktop, stop, itop = block_top(ktop, stop, itop, f)
-    vs = grid.voxel_size
-    img = bev_image(bev_colours(ktop, stop, itop, grid.origin[2], vs, mode, z_range, relief, free_color))
+    voxel_size = grid.voxel_size
+    img = bev_image(bev_colours(ktop, stop, itop, grid.origin[2], voxel_size, mode, z_range, relief, free_color))
     if mark_ego:
-        cell = vs * f
+        cell = voxel_size * f
         Xb, Yb = ktop.shape
         draw_ego(img, grid.origin[0] + Xb * cell, grid.origin[1] + Yb * cell, cell)
     return img
@@ -439,8 +439,8 @@ def bev_height_map(
 # --------------------------------------------------------------------------------------------
 
 
-def crop_indices(origin, vs: float, shape, bounds, centres: bool = True) -> tuple[slice, slice, slice]:
-    """Voxel index slices of the voxels (grid ``origin``, ``vs``, ``shape``) whose centres lie in
+def crop_indices(origin, voxel_size: float, shape, bounds, centres: bool = True) -> tuple[slice, slice, slice]:
+    """Voxel index slices of the voxels (grid ``origin``, ``voxel_size``, ``shape``) whose centres lie in
     the metric ``bounds`` ((xmin, xmax), (ymin, ymax)[, (zmin, zmax)]), or with ``centres`` False
     that overlap them; axes without bounds are whole."""
     out = []
@@ -448,7 +448,7 @@ def crop_indices(origin, vs: float, shape, bounds, centres: bool = True) -> tupl
         if bounds is None or a >= len(bounds) or bounds[a] is None:
             out.append(slice(0, n))
             continue
-        lo, hi = ((bounds[a][0] - origin[a]) / vs, (bounds[a][1] - origin[a]) / vs)
+        lo, hi = ((bounds[a][0] - origin[a]) / voxel_size, (bounds[a][1] - origin[a]) / voxel_size)
         if centres:
             i0, i1 = math.ceil(lo - 0.5 - 1e-9), math.floor(hi - 0.5 + 1e-9) + 1
         else:
@@ -498,11 +498,11 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
     ss = max(1, int(antialias))
     bg = np.asarray(background, np.float32).reshape(3)
     blank = np.ascontiguousarray(np.broadcast_to(np.round(bg).astype(np.uint8), (H, W, 3)))
-    vs0 = float(voxel_size)
+    voxel_size = float(voxel_size)
     full_lo = np.asarray(grid_origin, float)
-    full_hi = full_lo + np.array(sem.shape) * vs0
-    sx, sy, sz = crop_indices(grid_origin, vs0, sem.shape, bounds)
-    origin = np.asarray(grid_origin, float) + np.array([sx.start, sy.start, sz.start]) * vs0
+    full_hi = full_lo + np.array(sem.shape) * voxel_size
+    sx, sy, sz = crop_indices(grid_origin, voxel_size, sem.shape, bounds)
+    origin = np.asarray(grid_origin, float) + np.array([sx.start, sy.start, sz.start]) * voxel_size
     if (sx.start, sy.start, sz.start, sx.stop, sy.stop, sz.stop) != (0, 0, 0) + sem.shape:
         sem = np.ascontiguousarray(sem[sx, sy, sz])
         inst = np.ascontiguousarray(inst[sx, sy, sz]) if has else inst
@@ -512,12 +512,12 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
     while math.prod(-(-n // f) for n in sem.shape) > max(int(max_voxels), 1):
         f *= 2
     psem, pinst = pool_occupancy(sem, inst if has else None, f)
-    vs = vs0 * f
+    pooled_voxel_size = voxel_size * f
     idx, mask = surface_voxels(psem)
     if len(idx) == 0:
         return blank, f
     i, j, k = idx[:, 0], idx[:, 1], idx[:, 2]
-    z = origin[2] + (k + 0.5) * vs
+    z = origin[2] + (k + 0.5) * pooled_voxel_size
     if bounds is not None and len(bounds) > 2 and bounds[2] is not None:
         z_range = (float(bounds[2][0]), float(bounds[2][1]))
     else:
@@ -530,7 +530,7 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
             if bounds[a] is not None:
                 lo[a], hi[a] = max(lo[a], bounds[a][0]), min(hi[a], bounds[a][1])
     else:
-        lo, hi = origin + idx.min(axis=0) * vs, origin + (idx.max(axis=0) + 1) * vs
+        lo, hi = origin + idx.min(axis=0) * pooled_voxel_size, origin + (idx.max(axis=0) + 1) * pooled_voxel_size
     Hs, Ws = H * ss, W * ss
     cam, basis, persp, scale, offx, offy, light = _frame_camera(
         lo, hi, elevation_deg, azimuth_deg, Hs, Ws, fov_deg, margin
@@ -541,7 +541,7 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
     img[:] = bg
     zbuf = np.full((Hs, Ws), np.inf)
     edge = 0.75 * ss if outline else 0.0
-    _draw_faces(idx, mask, cols, shade, origin, float(vs), cam, basis, persp, scale, offx, offy, edge, OUTLINE_DARKEN,
+    _draw_faces(idx, mask, cols, shade, origin, float(pooled_voxel_size), cam, basis, persp, scale, offx, offy, edge, OUTLINE_DARKEN,
                 zbuf, img)  # fmt: skip
     if ss > 1:
         img = img.reshape(H, ss, W, ss, 3).mean(axis=(1, 3))

@@ -211,7 +211,7 @@ def metric_label(metric: str) -> str:
 
 def quality_plot(rows: Sequence[QualityRecord], title: str = "Quality scores per sequence") -> bytes:
     """One panel per metric of the sequence-level rows (``frame_index`` None; frame rows are
-    ignored): a bar per sequence, one colour per resolution, the value on each bar; the y axis
+    ignored): a bar per sequence, one colour per voxel size, the value on each bar; the y axis
     zoomed to the values' range (scores sit close to 1)."""
     seq_rows = [r for r in rows if r.frame_index is None and math.isfinite(r.value)]
     metrics = sorted({r.metric for r in seq_rows})
@@ -226,16 +226,16 @@ def quality_plot(rows: Sequence[QualityRecord], title: str = "Quality scores per
     for ax, metric in zip(axes, metrics):
         mine = [r for r in seq_rows if r.metric == metric]
         seqs = sorted({r.sequence_id for r in mine})
-        res = sorted({r.resolution for r in mine})
-        width = 0.8 / len(res)
+        voxel_sizes = sorted({r.voxel_size for r in mine})
+        width = 0.8 / len(voxel_sizes)
         values = [r.value for r in mine]
-        for k, rv in enumerate(res):
+        for k, voxel_size in enumerate(voxel_sizes):
             xs, ys = [], []
             for r in mine:
-                if r.resolution == rv:
+                if r.voxel_size == voxel_size:
                     xs.append(seqs.index(r.sequence_id) - 0.4 + width * (k + 0.5))
                     ys.append(r.value)
-            ax.bar(xs, ys, width=width * 0.9, label=f"{rv:g} m", color=_SOURCE_COLOURS[k % len(_SOURCE_COLOURS)])
+            ax.bar(xs, ys, width=width * 0.9, label=f"{voxel_size:g} m", color=_SOURCE_COLOURS[k % len(_SOURCE_COLOURS)])
             for x, v in zip(xs, ys):
                 ax.text(x, v, f"{v:.4f}", ha="center", va="bottom", fontsize=7)
         lo, hi = min(values), max(values)

@@ -1,5 +1,5 @@
 """Dataset statistics for the report: the ADMesh asset distribution, the static/dynamic
-instance share and per-resolution totals of the sequences' class statistics (the paper's
+instance share and per-voxel-size totals of the sequences' class statistics (the paper's
 statistics figure). The per-frame counts behind them are
 :mod:`carlaocc.stages.quality.statistics`'s. Nothing here reads a file."""
 
@@ -67,7 +67,7 @@ def motion_share(voxels: np.ndarray, instances: np.ndarray, moving: np.ndarray) 
 
 
 @dataclass
-class ResolutionStats:
+class VoxelSizeStats:
     """Per-class totals of one voxel size over every sequence."""
 
     voxels: np.ndarray
@@ -76,17 +76,17 @@ class ResolutionStats:
     frames: int = 0
 
 
-def resolution_totals(rows: Sequence[ClassStatisticsRecord]) -> dict[float, ResolutionStats]:
-    """Per-resolution sums over sequences (instances of different sequences are different
+def voxel_size_totals(rows: Sequence[ClassStatisticsRecord]) -> dict[float, VoxelSizeStats]:
+    """Per-voxel-size sums over sequences (instances of different sequences are different
     tracks, so they add up)."""
-    out: dict[float, ResolutionStats] = {}
+    out: dict[float, VoxelSizeStats] = {}
     frames: dict[float, dict[str, int]] = defaultdict(dict)
     for r in rows:
-        s = out.setdefault(r.resolution, ResolutionStats(*(np.zeros(N_CLASSES, np.int64) for _ in range(3))))
+        s = out.setdefault(r.voxel_size, VoxelSizeStats(*(np.zeros(N_CLASSES, np.int64) for _ in range(3))))
         s.voxels[r.semantic_id] += r.voxels
         s.instances[r.semantic_id] += r.instances
         s.moving[r.semantic_id] += r.moving_instances
-        frames[r.resolution][r.sequence_id] = r.frames
-    for res, s in out.items():
-        s.frames = sum(frames[res].values())
+        frames[r.voxel_size][r.sequence_id] = r.frames
+    for voxel_size, s in out.items():
+        s.frames = sum(frames[voxel_size].values())
     return out

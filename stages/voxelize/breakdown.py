@@ -142,11 +142,11 @@ def reference_grid(meshes: Sequence[SceneMesh]) -> GridSpec | None:
     if len(V) == 0:
         return None
     lo, hi = V.min(axis=0), V.max(axis=0)
-    vs = reference_voxel_size(hi - lo)
-    g_lo = np.floor(lo / vs) * vs - vs
-    g_hi = np.ceil(hi / vs) * vs + vs
+    voxel_size = reference_voxel_size(hi - lo)
+    g_lo = np.floor(lo / voxel_size) * voxel_size - voxel_size
+    g_hi = np.ceil(hi / voxel_size) * voxel_size + voxel_size
     return GridSpec(region_min=tuple(float(c) for c in g_lo), region_max=tuple(float(c) for c in g_hi),
-                    voxel_size=vs)
+                    voxel_size=voxel_size)
 
 
 def asset_fill(geom: AssetGeometry) -> AssetFill:
@@ -157,7 +157,7 @@ def asset_fill(geom: AssetGeometry) -> AssetFill:
     grid = reference_grid(meshes)
     if grid is None:
         return AssetFill(method, FILL_REFERENCE_VOXEL, 0, 0, 0)
-    vs = grid.voxel_size
+    voxel_size = grid.voxel_size
     # 1. the surface voxels; with no part filled, ``auto`` writes nothing else (one tile: a
     # filled mesh's column crossings are then computed once, not once per 64-voxel slab)
     whole = int(grid.shape[0])
@@ -165,7 +165,7 @@ def asset_fill(geom: AssetGeometry) -> AssetFill:
     surf = surface > 0
     n_surface = int(np.count_nonzero(surf))
     if method == "surface":
-        return AssetFill(method, vs, n_surface, 0, 0)
+        return AssetFill(method, voxel_size, n_surface, 0, 0)
     # 2. the solid under ``auto``: every surface voxel is written there too, so the fill added the rest
     solid, _ = voxelize_scene(meshes, grid, fill="auto", tile_x=whole)
     voxels = int(np.count_nonzero(solid))
@@ -174,7 +174,7 @@ def asset_fill(geom: AssetGeometry) -> AssetFill:
         # closed part to the boundary crosses its surface inside one of the path's voxels, which
         # the (conservative) surface voxelization marks -- so no filled voxel came from a hole,
         # and the flood fill is skipped
-        return AssetFill(method, vs, voxels, voxels - n_surface, 0)
+        return AssetFill(method, voxel_size, voxels, voxels - n_surface, 0)
     # 3. some filled part open: the filled voxels a flood fill from the boundary reaches
     b = fill_breakdown(meshes, grid, "auto", solid=solid, surface=surface)
-    return AssetFill(method, vs, b.total, b.filled, b.from_holes)
+    return AssetFill(method, voxel_size, b.total, b.filled, b.from_holes)

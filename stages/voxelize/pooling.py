@@ -1,5 +1,5 @@
 """Pooling our own grids into coarser grids of ours: class-priority pooling of semantic and
-instance volumes (``carlaocc compare-resolutions``, the release export's coarse views) and the
+instance volumes (``carlaocc compare-voxel-sizes``, the release export's coarse views) and the
 disagreement between a pooled and a directly voxelized volume. The class priority and its rank
 tables are shared with the resampling onto other datasets' grids (:mod:`carlaocc.stages.export.resample`).
 
@@ -7,7 +7,7 @@ Frames and units
 ----------------
 Our volumes live on a :class:`~carlaocc.schemas.grid.GridSpec`: the LiDAR frame (x forward, y left, z up,
 metres, origin at the LiDAR, 1.73 m above the ground); voxel ``(i, j, k)`` covers
-``[origin + (i, j, k) * vs, origin + (i + 1, j + 1, k + 1) * vs]``, arrays are indexed
+``[origin + (i, j, k) * voxel_size, origin + (i + 1, j + 1, k + 1) * voxel_size]``, arrays are indexed
 ``[x, y, z]`` and class 0 (``None``) is free.
 
 Class priority

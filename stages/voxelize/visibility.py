@@ -13,10 +13,10 @@ Frames and units
 ----------------
 Everything is in the grid's frame, the LiDAR frame (x forward, y left, z up, metres): ray origins
 in metres, unit directions (any non-zero length is accepted and normalised), ranges in metres.
-Voxel ``(i, j, k)`` covers ``[origin + (i, j, k) * vs, origin + (i + 1, j + 1, k + 1) * vs]`` and
+Voxel ``(i, j, k)`` covers ``[origin + (i, j, k) * voxel_size, origin + (i + 1, j + 1, k + 1) * voxel_size]`` and
 has the C-order linear index ``(i * ny + j) * nz + k``. Camera rays are built in the OpenCV optical
 frame (x right, y down, z forward) and mapped to the grid frame by ``camera_to_grid``. The kernels
-work in *voxel units* (``(p - origin) / vs``: voxel ``(i, j, k)`` is the unit box
+work in *voxel units* (``(p - origin) / voxel_size``: voxel ``(i, j, k)`` is the unit box
 ``[i, i+1] x [j, j+1] x [k, k+1]``).
 
 Working layout: column bits
@@ -827,7 +827,7 @@ class _Volume:
         if math.isnan(t_range):
             raise ValueError(f"max_range must be a number, got {max_range!r}")
         # metres -> voxel units: origins shifted and scaled; unit directions are unchanged, so the
-        # ray parameter counts voxels and the range is max_range / vs voxels
+        # ray parameter counts voxels and the range is max_range / voxel_size voxels
         return (origins - np.asarray(self.grid.origin, dtype=np.float64)) / self.grid.voxel_size, t_range
 
     def new_mask(self, name: str = "mask_columns") -> np.ndarray:

@@ -17,7 +17,7 @@ import carlaocc
 from carlaocc.schemas.configs import DatasetConfig
 
 REPO = Path(__file__).resolve().parents[2]
-RES = "0.4"
+VOXEL_SIZE = "0.4"
 SEQ = "town00_low_seq000"
 # one small town, one sequence of two frames, camera mask rays through every 8th pixel, one camera
 CONFIG = {"scenes": {"frame_count": 2, "towns": [{"style": "downtown", "traffic_levels": ["low"], "blocks": 2}]},
@@ -45,7 +45,7 @@ def built(tmp_path_factory) -> tuple[Path, Path]:
 
     flush, runner._LINEAGE_FLUSH_SECONDS = runner._LINEAGE_FLUSH_SECONDS, float("inf")
     try:
-        outcomes = carlaocc.run(str(root), config=DatasetConfig.model_validate(CONFIG), voxel_sizes=(float(RES),),
+        outcomes = carlaocc.run(str(root), config=DatasetConfig.model_validate(CONFIG), voxel_sizes=(float(VOXEL_SIZE),),
                                 stages=STAGES.split(","), scheduler="synchronous")
     finally:
         runner._LINEAGE_FLUSH_SECONDS = flush
@@ -55,11 +55,11 @@ def built(tmp_path_factory) -> tuple[Path, Path]:
 
 
 def _status(root: Path, config: Path):
-    return invoke("status", "--root", root, "--config", config, "--voxel-size", RES)
+    return invoke("status", "--root", root, "--config", config, "--voxel-size", VOXEL_SIZE)
 
 
 def _run(root: Path, config: Path):
-    return invoke("run", "--root", root, "--config", config, "--voxel-size", RES, "--stages", STAGES,
+    return invoke("run", "--root", root, "--config", config, "--voxel-size", VOXEL_SIZE, "--stages", STAGES,
                   "--scheduler", "synchronous")
 
 
@@ -74,7 +74,7 @@ def _assert_no_traceback(result, code: int = 0) -> None:
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
 
 
-OCC = f"occupancy.zarr/{SEQ}/{RES}"
+OCC = f"occupancy.zarr/{SEQ}/{VOXEL_SIZE}"
 # (victim: a glob under the root, the stage it makes stale, the reason status gives, partitions stale)
 CASES = {
     "array metadata": (f"{OCC}/semantic/zarr.json", "voxelize", "outputs damaged: {} unreadable", "2/2"),
@@ -141,7 +141,7 @@ def test_a_run_of_a_stage_whose_upstream_table_is_damaged_names_it(built, tmp_pa
     victim = root / "scenes" / "sequences" / f"{SEQ}.parquet"
     victim.write_bytes(b"PAR1" + b"\x00" * 10)
     before = snapshot(root)
-    r = invoke("run", "--root", root, "--config", config, "--voxel-size", RES, "--stages", "voxelize",
+    r = invoke("run", "--root", root, "--config", config, "--voxel-size", VOXEL_SIZE, "--stages", "voxelize",
                "--scheduler", "synchronous")
     assert r.exit_code == 2 and "Traceback" not in r.output, r.output
     (line,) = [ln for ln in r.output.splitlines() if ln.startswith("error:")]

@@ -30,10 +30,10 @@ def test_grid_table_is_the_documented_one():
            "vs_0_4_surround_view": (0.4, (-25.6, -25.6, -2.4), ((-25.6, 25.6), (-25.6, 25.6), (-2.4, 4)), (128, 128, 16))}
     assert [g.name for g in rel.RELEASE_GRIDS] == list(doc)
     for g in rel.RELEASE_GRIDS:
-        vs, origin, ranges, volume = doc[g.name]
-        assert g.voxel_size == vs and g.voxel_origin == pytest.approx(origin) and g.volume_size == volume
+        voxel_size, origin, ranges, volume = doc[g.name]
+        assert g.voxel_size == voxel_size and g.voxel_origin == pytest.approx(origin) and g.volume_size == volume
         # volume size = extent / voxel size
-        assert tuple(round((hi - lo) / vs) for lo, hi in ranges) == volume
+        assert tuple(round((hi - lo) / voxel_size) for lo, hi in ranges) == volume
 
 
 def _decode_combined_id(v):

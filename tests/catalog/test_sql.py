@@ -73,7 +73,7 @@ def test_timestamps_and_nan_are_queryable(store):
         run_id="r", stage="x", partition="p", code_version="c", config_hash="h", cache_key="k",
         input_fingerprints="{}", output_fingerprints="{}", status="completed", started_at=t, ended_at=t, host="h")])
     ParquetTable(store, QualityRecord).save("q", [QualityRecord(
-        sequence_id="s", resolution=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
+        sequence_id="s", voxel_size=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
     _, rows = query(store, "SELECT started_at, now() IS NOT NULL FROM runs")
     assert rows[0][0] == t and rows[0][1] is True
     _, rows = query(store, "SELECT value FROM quality")

@@ -76,11 +76,11 @@ def _world(shape, labels, seed=0):
     return w
 
 
-def _poses(shifts, vs):
+def _poses(shifts, voxel_size):
     out = []
     for s in shifts:
         p = np.eye(4)
-        p[0, 3] = s * vs
+        p[0, 3] = s * voxel_size
         out.append(p)
     return np.stack(out)
 
@@ -94,19 +94,19 @@ SHIFTS = (0, 2, 3)
 
 
 def test_carlaocc_npz_sequence_s_sc_and_s_tc(tmp_path):
-    X, vs, origin = 20, 0.4, (-4.0, -2.0, -1.2)
+    X, voxel_size, origin = 20, 0.4, (-4.0, -2.0, -1.2)
     world = _world((X + max(SHIFTS), 10, 8), (1, 3, 9))
     frames = []
     for t, s in enumerate(SHIFTS):
         sem = world[s:s + X].astype(np.uint8)
         frames.append(sem)
-        save_carlaocc_npz(tmp_path / "seq" / f"{t:04d}.npz", sem, np.zeros_like(sem, np.uint32), vs, origin)
+        save_carlaocc_npz(tmp_path / "seq" / f"{t:04d}.npz", sem, np.zeros_like(sem, np.uint32), voxel_size, origin)
     # a car (dynamic) in frame 1 only: excluded from s_tc, but it counts for s_sc
     car = frames[1].copy()
     car[0, 0, 2] = 14
-    save_carlaocc_npz(tmp_path / "seq" / "0001.npz", car, np.zeros_like(car, np.uint32), vs, origin)
+    save_carlaocc_npz(tmp_path / "seq" / "0001.npz", car, np.zeros_like(car, np.uint32), voxel_size, origin)
     frames[1] = car
-    poses = _write_kitti_poses(tmp_path / "poses.txt", _poses(SHIFTS, vs))
+    poses = _write_kitti_poses(tmp_path / "poses.txt", _poses(SHIFTS, voxel_size))
     out = tmp_path / "r.json"
     r = _run("carlaocc-npz", tmp_path / "seq", "--poses", poses, "--json", out)
     assert r.exit_code == 0, r.output
@@ -118,7 +118,7 @@ def test_carlaocc_npz_sequence_s_sc_and_s_tc(tmp_path):
     assert report["union"] > 0 and "Car" not in {c["name"] for c in report["per_class"] if c.get("union")}
     assert "CarlaOcc" in r.output and "1.0000" in r.output
     # wrong poses (standing still) make the moved street inconsistent
-    still = _write_kitti_poses(tmp_path / "still.txt", _poses((0, 0, 0), vs))
+    still = _write_kitti_poses(tmp_path / "still.txt", _poses((0, 0, 0), voxel_size))
     _run("carlaocc-npz", tmp_path / "seq", "--poses", still, "--json", out)
     assert json.loads(out.read_text())["s_tc"] < 0.9
 
@@ -273,11 +273,11 @@ def test_occ3d_scenes_and_keyed_poses_give_the_time_order(tmp_path):
         world = _world((206, 200, 16), labels, seed=3)
         for token, s in frames.items():
             save_occ3d(tmp_path / "gts" / scene / token / "labels.npz", Occ3DFrame(_occ3d_frame(world, s), ones, ones))
-    vs = 0.4
+    voxel_size = 0.4
     # scene-b's c5 has no pose: left out of s_tc; scene-a's last frame is named by its relative path
     keys = ["f3", "0b", "scene-a/9c/labels.npz", "77", "1e", "not-audited"]
     shifts = [0, 2, 5, 6, 4, 0]
-    poses = _keyed_json(tmp_path / "poses.json", keys, _poses(shifts, vs))
+    poses = _keyed_json(tmp_path / "poses.json", keys, _poses(shifts, voxel_size))
     out = tmp_path / "r.json"
     r = _run("occ3d", tmp_path / "gts", "--poses", poses, "--json", out, "--per-frame")
     assert r.exit_code == 0, r.output
@@ -290,32 +290,32 @@ def test_occ3d_scenes_and_keyed_poses_give_the_time_order(tmp_path):
     assert [(p["t"], p["t1"]) for p in report["per_pair"]] == [(0, 1), (1, 2), (3, 4)]
     assert "1 frame(s) without a pose left out" in r.output
     # the time-ordered poses given to the frames in path order (as the per-listed-frame form would)
-    wrong = _keyed_json(tmp_path / "wrong.json", ["0b", "9c", "f3", "1e", "77"], _poses(shifts[:5], vs))
+    wrong = _keyed_json(tmp_path / "wrong.json", ["0b", "9c", "f3", "1e", "77"], _poses(shifts[:5], voxel_size))
     assert _run("occ3d", tmp_path / "gts", "--poses", wrong, "--json", out).exit_code == 0
     assert json.loads(out.read_text())["s_tc"] < 1.0
     # one pose per listed frame cannot order occ3d frames
-    np.save(tmp_path / "p.npy", _poses([0] * 6, vs))
+    np.save(tmp_path / "p.npy", _poses([0] * 6, voxel_size))
     r = _run("occ3d", tmp_path / "gts", "--poses", tmp_path / "p.npy")
     assert r.exit_code == 2 and "occ3d paths carry no time order" in r.output and "\"frame\"" in r.output
     # a keyed file naming nothing audited
-    r = _run("occ3d", tmp_path / "gts", "--poses", _keyed_json(tmp_path / "none.json", ["x"], _poses([0], vs)))
+    r = _run("occ3d", tmp_path / "gts", "--poses", _keyed_json(tmp_path / "none.json", ["x"], _poses([0], voxel_size)))
     assert r.exit_code == 2 and "none of its 1 frames names an audited occ3d file" in r.output
 
 
 def test_numbered_files_sort_numerically_within_each_directory(tmp_path):
     """carlaocc-npz files 0, 2, 10 (path order 0, 10, 2) in two directories: one pose per listed
     frame, listed directory by directory in frame-number order; no pair crosses directories."""
-    X, vs, origin = 20, 0.4, (-4.0, -2.0, -1.2)
+    X, voxel_size, origin = 20, 0.4, (-4.0, -2.0, -1.2)
     world = _world((X + 9, 10, 8), (1, 3, 9), seed=5)
     shifts = {"a": {0: 0, 2: 2, 10: 3}, "b": {1: 9, 3: 7}}
     listed = []
     for d, frames in shifts.items():
         for n, s in frames.items():
             sem = world[s:s + X].astype(np.uint8)
-            save_carlaocc_npz(tmp_path / d / f"{n}.npz", sem, np.zeros_like(sem, np.uint32), vs, origin)
+            save_carlaocc_npz(tmp_path / d / f"{n}.npz", sem, np.zeros_like(sem, np.uint32), voxel_size, origin)
             listed.append(s)
     out = tmp_path / "r.json"
-    poses = _write_kitti_poses(tmp_path / "poses.txt", _poses(listed, vs))
+    poses = _write_kitti_poses(tmp_path / "poses.txt", _poses(listed, voxel_size))
     r = _run("carlaocc-npz", tmp_path / "a", tmp_path / "b", "--poses", poses, "--json", out)
     assert r.exit_code == 0, r.output
     report = json.loads(out.read_text())

@@ -28,7 +28,7 @@ from carlaocc.stages.geometry import invert_pose, pose_from_list, transform_poin
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "make_carla_recording.py"
 SEQ = "Town99_Opt_Seq00"
-RES = 0.1
+VOXEL_SIZE = 0.1
 cli = CliRunner()
 
 
@@ -51,7 +51,7 @@ def _ingest_and_run(recording: Path, root: Path, stages: str | None = None) -> S
     assert r.exit_code == 0, r.output
     assert "wrote" in r.output and (root / "dataset.yaml").is_file()
     # no --config: the root's own dataset.yaml is the config; every stage by default
-    r = cli.invoke(app, ["run", "--root", str(root), "--res", str(RES), "--scheduler", "synchronous"]
+    r = cli.invoke(app, ["run", "--root", str(root), "--res", str(VOXEL_SIZE), "--scheduler", "synchronous"]
                    + (["--stages", stages] if stages else []))  # fmt: skip
     assert r.exit_code == 0, r.output
     return Store(str(root))
@@ -65,7 +65,7 @@ def built(recording, tmp_path_factory):
 
 def _frame(store: Store, seq: str, f: int):
     cfg = DatasetConfig.model_validate(yaml.safe_load((Path(store.root) / "dataset.yaml").read_text()))
-    grid = cfg.voxelize.grid(RES)
+    grid = cfg.voxelize.grid(VOXEL_SIZE)
     arrays = OccupancyStore(store).read_frame(seq, grid, f, ("semantic", "instance"))
     return grid, arrays["semantic"], arrays["instance"]
 
@@ -113,7 +113,7 @@ def test_vehicle_voxels_lie_in_their_recorded_boxes(built, recording):
             world = transform_points(lidar, _centres(grid, ijk))
             local = transform_points(invert_pose(box), world)
             # every voxel centre within the recorded box, give or take half a voxel diagonal
-            assert (np.abs(local) <= v.extent + RES * 0.87).all()
+            assert (np.abs(local) <= v.extent + VOXEL_SIZE * 0.87).all()
             # left stays left: car 246 drives on the ego's left, car 245 ahead in its lane
             centre = _centres(grid, ijk).mean(axis=0)
             assert (centre[1] > 2.5) if v.id == 246 else (abs(centre[1]) < 1.0 and centre[0] > 0)
@@ -135,7 +135,7 @@ def test_knees_on_the_walkers_voxels_and_phase_matched(built, recording):
         knees_lidar = transform_points(invert_pose(poses[f]), knees)
         vox = _centres(grid, np.argwhere(instance == inst))
         gap = np.linalg.norm(vox[None] - knees_lidar[:, None], axis=2).min(axis=1)
-        assert (gap <= RES).all(), f"frame {f}: a knee is {gap.max():.3f} m from the walker's voxels"
+        assert (gap <= VOXEL_SIZE).all(), f"frame {f}: a knee is {gap.max():.3f} m from the walker's voxels"
         true = tool.walker_phase(f / 10.0)
         errors.append(abs((phase - true + 0.5) % 1.0 - 0.5))
     # the matched walk-cycle frame (the cycle's bones are in the mesh axes and centimetres, the

@@ -126,7 +126,7 @@ def test_query_json_has_no_nan(tmp_path):
 
     store = Store(str(tmp_path / "r"))
     ParquetTable(store, QualityRecord).save("q", [QualityRecord(
-        sequence_id="s", resolution=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
+        sequence_id="s", voxel_size=0.2, frame_index=None, metric="m", value=float("nan"), occupied=0, isolated=0)])
     r = cli.invoke(app, ["catalog", "query", "SELECT value, frame_index FROM quality", "--root", store.url, "--format", "json"])
     assert r.exit_code == 0 and json.loads(r.output) == [{"value": None, "frame_index": None}]
 
@@ -152,3 +152,19 @@ def test_stage_names_and_the_retired_metrics_name(tmp_path):
     assert r.exit_code == 2 and len(lines) == 1, r.output
     assert "config section 'metrics' was renamed 'quality'" in lines[0] and "Value error" not in lines[0]
     assert not (tmp_path / "new").exists()
+
+
+def test_compare_voxel_sizes_and_the_retired_compare_resolutions_name(tmp_path):
+    # the command's earlier name is refused in one line naming the new one (options or --help
+    # alike), is left out of --help, and touches no root
+    for args in ([], ["--fine", "0.05", "--coarse", "0.2", "--root", str(tmp_path / "r")], ["--help"]):
+        r = cli.invoke(app, ["compare-resolutions", *args])
+        lines = [ln for ln in r.output.splitlines() if ln.strip()]
+        assert r.exit_code == 2 and len(lines) == 1, r.output
+        assert lines[0] == ("error: compare-resolutions was renamed compare-voxel-sizes: "
+                            "use carlaocc compare-voxel-sizes ..."), lines[0]
+    assert not (tmp_path / "r").exists()
+    top = cli.invoke(app, ["--help"]).output
+    assert "compare-voxel-sizes" in top and "compare-resolutions" not in top
+    r = cli.invoke(app, ["compare-voxel-sizes", "--help"])
+    assert r.exit_code == 0 and "--fine" in r.output and "voxel size" in r.output and "resolution" not in r.output

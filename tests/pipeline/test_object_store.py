@@ -22,7 +22,7 @@ from carlaocc.catalog.store import Store
 from carlaocc.pipeline.cli import app
 from carlaocc.schemas.configs import DatasetConfig
 
-RES = 0.4
+VOXEL_SIZE = 0.4
 SEQ = "town00_high_seq000"
 # one sequence of 2 frames, one camera, one procedural variant per sub-class: every stage
 CONFIG = DatasetConfig.model_validate({"ingest": {"variants_per_subclass": 1}, "scenes": {"frame_count": 2},
@@ -76,7 +76,7 @@ def config_file(tmp_path_factory) -> str:
 
 
 def _args(config_file: str, root: str) -> list[str]:
-    return ["--config", config_file, "--res", str(RES), "--root", root, "--sequences", SEQ]
+    return ["--config", config_file, "--res", str(VOXEL_SIZE), "--root", root, "--sequences", SEQ]
 
 
 def _run(config_file: str, root: str):
@@ -108,7 +108,7 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and proc.poll() is None:
-            if store.glob(f"occupancy.zarr/{SEQ}/{RES}/semantic/c", ""):
+            if store.glob(f"occupancy.zarr/{SEQ}/{VOXEL_SIZE}/semantic/c", ""):
                 break
             time.sleep(0.1)
         assert proc.poll() is None, "the run ended before it could be killed"
@@ -133,7 +133,7 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
     from carlaocc.catalog.signatures import frame_signature
 
     assert not store.fs.dircache.use_listings_cache
-    assert frame_signature(store, "occupancy.zarr", f"{SEQ}/{RES}/semantic", 0) is not None
+    assert frame_signature(store, "occupancy.zarr", f"{SEQ}/{VOXEL_SIZE}/semantic", 0) is not None
     # status from the object store (signatures from the ETags): everything up to date
     r = cli.invoke(app, ["status", *_args(config_file, root)])
     assert r.exit_code == 0, r.output
@@ -151,7 +151,7 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
     outs = {}
     for name, src in (("s3", root), ("dir", directory.root)):
         outs[name] = tmp_path / f"occ3d-{name}"
-        r = cli.invoke(app, ["export", "occ3d", "--res", str(RES), "--root", src, "--out", str(outs[name]),
+        r = cli.invoke(app, ["export", "occ3d", "--res", str(VOXEL_SIZE), "--root", src, "--out", str(outs[name]),
                              "--sequence", SEQ])
         assert r.exit_code == 0, r.output
     files = {name: {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
@@ -161,7 +161,7 @@ def test_a_root_on_s3_survives_a_killed_driver_and_matches_a_directory(s3, confi
     # a sample through the loader, equal to the directory's
     from carlaocc.data import CarlaOccDataset
 
-    a, b = CarlaOccDataset(root, voxel_size=RES), CarlaOccDataset(directory.root, voxel_size=RES)
+    a, b = CarlaOccDataset(root, voxel_size=VOXEL_SIZE), CarlaOccDataset(directory.root, voxel_size=VOXEL_SIZE)
     assert len(a) == len(b) == CONFIG.scenes.frame_count
     sa, sb = a[1], b[1]
     assert sa.keys() == sb.keys()

@@ -111,7 +111,7 @@ def test_report_task_writes_statistics_plots_and_page(small):
     stale = f"{PLOTS_DIR}/class_voxels_9.9.png"
     small.write_bytes(stale, b"old")
     outputs = report_task(small, QualityConfig(), _partition())
-    # outputs are fingerprinted files that exist; the stale plot of another resolution is gone
+    # outputs are fingerprinted files that exist; the stale plot of another voxel size is gone
     assert REPORT_HTML in outputs and not small.exists(stale)
     for rel, fp in outputs.items():
         assert small.fingerprint(rel) == fp, rel
@@ -128,7 +128,7 @@ def test_report_task_writes_statistics_plots_and_page(small):
     assert (rows[(a, CAR)].voxels, rows[(a, CAR)].instances, rows[(a, CAR)].moving_instances) == (12, 2, 1)
     assert (rows[(b, CAR)].voxels, rows[(b, CAR)].instances, rows[(b, CAR)].moving_instances) == (6, 1, 1)
     assert rows[(a, 0)].voxels == FRAMES * (16 * 16 * 4) - FRAMES * (256 + 12 + 4)
-    assert all(r.frames == FRAMES and r.resolution == 0.4 for r in rows.values())
+    assert all(r.frames == FRAMES and r.voxel_size == 0.4 for r in rows.values())
     # queryable through the catalog views
     cols, got = query(small, "SELECT category, sum(assets) FROM statistics_assets GROUP BY 1 ORDER BY 1")
     assert got == [("Building", 1), ("Car", 3)]

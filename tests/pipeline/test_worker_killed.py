@@ -22,7 +22,7 @@ from carlaocc.catalog.store import Store
 from carlaocc.pipeline.engine import runner
 from carlaocc.schemas.configs import DatasetConfig
 
-RES = 0.4
+VOXEL_SIZE = 0.4
 CONFIG = DatasetConfig.model_validate({"scenes": {"frame_count": 4}})
 
 
@@ -72,7 +72,7 @@ def test_a_worker_killed_mid_task_is_retried_byte_identical(cluster, tmp_path):
 
     store = Store(str(tmp_path / "data"))
     sequences = ("town00_high_seq000",)
-    runner.run(store, CONFIG, (RES,), stages=["ingest", "scenes"], scheduler=cluster)
+    runner.run(store, CONFIG, (VOXEL_SIZE,), stages=["ingest", "scenes"], scheduler=cluster)
     # the reference: the same root, its frames voxelized cleanly in this process (below)
     clean = Store(str(tmp_path / "clean"))
     shutil.copytree(store.root, clean.root)
@@ -97,13 +97,13 @@ def test_a_worker_killed_mid_task_is_retried_byte_identical(cluster, tmp_path):
 
     watcher = threading.Thread(target=kill_one)
     watcher.start()
-    out = runner.run(store, CONFIG, (RES,), stages=["voxelize"], scheduler=cluster, sequences=sequences)
+    out = runner.run(store, CONFIG, (VOXEL_SIZE,), stages=["voxelize"], scheduler=cluster, sequences=sequences)
     watcher.join()
     assert killed, "no voxelize task was seen running"
     (vox,) = out
     assert vox.ran == 4 and not vox.failed
     latest = LineageLog(store).latest("voxelize")
-    assert sorted(latest) == [f"{sequences[0]}/{RES}/{t:04d}" for t in range(4)]
+    assert sorted(latest) == [f"{sequences[0]}/{VOXEL_SIZE}/{t:04d}" for t in range(4)]
     assert all(r.status == "completed" for r in latest.values())
-    runner.run(clean, CONFIG, (RES,), stages=["voxelize"], scheduler="synchronous", sequences=sequences)
+    runner.run(clean, CONFIG, (VOXEL_SIZE,), stages=["voxelize"], scheduler="synchronous", sequences=sequences)
     assert _frames(clean) == _frames(store)

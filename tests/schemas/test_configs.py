@@ -24,12 +24,12 @@ def test_default_sequence_is_20_frames_at_20hz():
 
 @pytest.mark.parametrize("text, expected", [("0.2", (0.2,)), ("0.2,0.05", (0.2, 0.05)), (" 0.1 , 0.1", (0.1,)),
                                             ("0.4,0.4000001", (0.4,))])
-def test_parse_resolutions(text, expected):
+def test_parse_voxel_sizes(text, expected):
     assert parse_voxel_size_list(text) == expected
 
 
 @pytest.mark.parametrize("text", ["", "abc", "0", "-0.1", "inf", "nan", "0.2,x", "1e-7"])
-def test_parse_resolutions_rejects(text):
+def test_parse_voxel_sizes_rejects(text):
     with pytest.raises(ValueError):
         parse_voxel_size_list(text)
 

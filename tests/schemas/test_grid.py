@@ -9,11 +9,11 @@ from carlaocc.schemas.grid import GridSpec, voxel_size_key
 
 
 @pytest.mark.parametrize(
-    "vs, shape",
+    "voxel_size, shape",
     [(0.05, (1536, 1024, 260)), (0.1, (768, 512, 130)), (0.2, (384, 256, 65)), (0.4, (192, 128, 33))],
 )
-def test_default_region_shapes(vs, shape):
-    g = GridSpec(voxel_size=vs)
+def test_default_region_shapes(voxel_size, shape):
+    g = GridSpec(voxel_size=voxel_size)
     assert g.shape == shape
 
 
@@ -33,10 +33,10 @@ def test_whole_grid_not_grown():
     assert not GridSpec(voxel_size=0.1).grown
 
 
-@pytest.mark.parametrize("vs", [0.0, -0.1, math.inf, math.nan])
-def test_bad_voxel_size(vs):
+@pytest.mark.parametrize("voxel_size", [0.0, -0.1, math.inf, math.nan])
+def test_bad_voxel_size(voxel_size):
     with pytest.raises(ValidationError, match="voxel size"):
-        GridSpec(voxel_size=vs)
+        GridSpec(voxel_size=voxel_size)
 
 
 def test_region_smaller_than_voxel():
@@ -50,15 +50,15 @@ def test_unknown_field_refused():
 
 
 @settings(max_examples=200, deadline=None)
-@given(vs=st.floats(0.01, 2.0), ext=st.tuples(*[st.floats(2.0, 100.0)] * 3))
-def test_effective_region_covers_region_within_one_voxel(vs, ext):
-    g = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=ext, voxel_size=vs)
+@given(voxel_size=st.floats(0.01, 2.0), ext=st.tuples(*[st.floats(2.0, 100.0)] * 3))
+def test_effective_region_covers_region_within_one_voxel(voxel_size, ext):
+    g = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=ext, voxel_size=voxel_size)
     for hi, eff in zip(ext, g.effective_max):
-        assert eff >= hi - 1e-6 * vs
-        assert eff < hi + vs + 1e-9
+        assert eff >= hi - 1e-6 * voxel_size
+        assert eff < hi + voxel_size + 1e-9
 
 
-def test_resolution_key():
+def test_voxel_size_key():
     assert voxel_size_key(0.05) == "0.05"
     assert voxel_size_key(0.2) == "0.2"
     assert voxel_size_key(1.0) == "1"

@@ -24,10 +24,10 @@ def _volume() -> np.ndarray:
     return inst
 
 
-def _centres(inst, origin, vs, T=None):
+def _centres(inst, origin, voxel_size, T=None):
     T = np.eye(4) if T is None else T
     ijk = np.argwhere(inst != 0)
-    p = np.asarray(origin) + (ijk + 0.5) * vs
+    p = np.asarray(origin) + (ijk + 0.5) * voxel_size
     return ijk, p @ T[:3, :3].T + T[:3, 3]
 
 
@@ -44,11 +44,11 @@ def test_pure_translation_same_vector_and_others_zero():
 
 def test_pure_yaw_rotation_about_centre():
     inst = _volume()
-    origin, vs = (-1.0, 2.0, 0.5), 0.25
+    origin, voxel_size = (-1.0, 2.0, 0.5), 0.25
     c = np.array([0.3, 2.4, 0.0])
-    flow = instance_flow(inst, origin, vs, np.array([7], np.uint32), c[None], np.zeros((1, 3)),
+    flow = instance_flow(inst, origin, voxel_size, np.array([7], np.uint32), c[None], np.zeros((1, 3)),
                          np.array([[0.0, 0.0, 1.0]]), np.eye(4))
-    ijk, p = _centres(inst, origin, vs)
+    ijk, p = _centres(inst, origin, voxel_size)
     sel = inst[tuple(ijk.T)] == 7
     expect = np.stack([-(p[sel, 1] - c[1]), p[sel, 0] - c[0], np.zeros(sel.sum())], axis=1)
     np.testing.assert_allclose(flow[tuple(ijk[sel].T)].astype(np.float64), expect, atol=2e-3)
@@ -90,16 +90,16 @@ def test_unknown_ids_and_empty_inputs_give_zero():
 def test_tile_equals_slice_of_whole():
     rng = np.random.default_rng(3)
     inst = rng.choice(np.array([0, 0, 0, 5, 11, 12, 99], np.uint32), size=(12, 10, 6))
-    origin, vs = np.array([-3.0, -2.5, -1.0]), 0.25  # dyadic: the tile origin is exact
+    origin, voxel_size = np.array([-3.0, -2.5, -1.0]), 0.25  # dyadic: the tile origin is exact
     ids = np.array([12, 5, 11], np.uint32)  # unsorted on purpose
     C = rng.normal(size=(3, 3)) * 5
     Vl = rng.normal(size=(3, 3))
     W = rng.normal(size=(3, 3)) * 0.3
     T = _yaw(0.7, (100.0, 50.0, 2.0))
-    whole = instance_flow(inst, origin, vs, ids, C, Vl, W, T)
+    whole = instance_flow(inst, origin, voxel_size, ids, C, Vl, W, T)
     sl = (slice(4, 9), slice(3, 10), slice(2, 5))
-    tile_origin = origin + np.array([4, 3, 2]) * vs
-    tile = instance_flow(inst[sl], tile_origin, vs, ids, C, Vl, W, T)
+    tile_origin = origin + np.array([4, 3, 2]) * voxel_size
+    tile = instance_flow(inst[sl], tile_origin, voxel_size, ids, C, Vl, W, T)
     np.testing.assert_array_equal(tile, whole[sl])
     # every voxel of actor 5 carries its own rigid-body velocity
     assert np.abs(whole[inst == 5]).max() > 0 and not whole[(inst == 0) | (inst == 99)].any()

@@ -53,11 +53,11 @@ def test_index_to_metre_and_exit_face_depth():
                       )[0][0] == pytest.approx(2.2)
 
 
-def _brute(occ, o, d, vs, origin):
+def _brute(occ, o, d, voxel_size, origin):
     """Every voxel's exact slab interval along the ray (voxel units), independent of the
     traversal: the voxels the ray passes through (a positive length inside, however short), in
     entry order; the first occupied one and where the ray leaves it, else the last voxel."""
-    p = (o - origin) / vs
+    p = (o - origin) / voxel_size
     idx = np.indices(occ.shape).reshape(3, -1).T
     with np.errstate(divide="ignore", invalid="ignore"):
         a, b = (idx - p) / d, (idx + 1 - p) / d
@@ -67,9 +67,9 @@ def _brute(occ, o, d, vs, origin):
     order = np.flatnonzero(crossed)[np.argsort(t0[crossed], kind="stable")]
     for v in order:
         if occ[tuple(idx[v])]:
-            return t1[v] * vs, tuple(idx[v]), True
+            return t1[v] * voxel_size, tuple(idx[v]), True
     last = order[-1]
-    return t1[last] * vs, tuple(idx[last]), False
+    return t1[last] * voxel_size, tuple(idx[last]), False
 
 
 @settings(max_examples=12, deadline=None)
@@ -79,13 +79,13 @@ def test_first_hits_agree_with_a_brute_force_march(seed):
     rng = np.random.default_rng(seed)
     occ = rng.random((12, 10, 6)) < 0.08
     origin = np.array([-1.0, 2.0, 0.5])
-    vs = 0.5
+    voxel_size = 0.5
     o = origin + rng.uniform([0.5, 0.5, 0.5], [5.5, 4.5, 2.5])
     dirs = rng.normal(size=(12, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    depth, lin = first_hits(occ, o[None], dirs, origin, vs)
+    depth, lin = first_hits(occ, o[None], dirs, origin, voxel_size)
     for r, d in enumerate(dirs):
-        bd, bv, hit = _brute(occ, o, d, vs, origin)
+        bd, bv, hit = _brute(occ, o, d, voxel_size, origin)
         assert bv is not None
         ours = np.unravel_index(lin[r], occ.shape)
         assert bool(occ[ours]) == hit, r  # a hit in both or in neither

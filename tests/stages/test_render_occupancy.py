@@ -9,7 +9,7 @@ import pytest
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import by_name, palette
 from carlaocc.stages.render.colours import instance_colors
-from carlaocc.stages.render.figures import multi_resolution_figure, occupancy_figure
+from carlaocc.stages.render.figures import multi_voxel_size_figure, occupancy_figure
 from carlaocc.stages.render.occupancy import (FREE_RGB, bev_height_map, classes_present, perspective_view,
                                              pool_occupancy, surface_voxels, top_surface)  # fmt: skip
 
@@ -18,8 +18,8 @@ CAR_ID = 7
 WHITE = np.array([255, 255, 255], np.uint8)
 
 
-def _grid(vs=0.25, lo=(-4.0, -4.0, -2.0), hi=(8.0, 4.0, 3.0)) -> GridSpec:
-    return GridSpec(region_min=lo, region_max=hi, voxel_size=vs)
+def _grid(voxel_size=0.25, lo=(-4.0, -4.0, -2.0), hi=(8.0, 4.0, 3.0)) -> GridSpec:
+    return GridSpec(region_min=lo, region_max=hi, voxel_size=voxel_size)
 
 
 def _index(grid: GridSpec, value: float, axis: int) -> int:
@@ -33,9 +33,9 @@ def _box(sem, inst, grid, x, y, z, cls, ident=0):
     inst[sl] = ident
 
 
-def _scene(vs=0.25):
+def _scene(voxel_size=0.25):
     """Road plane (top at z = -1.5) with a hole, a car (x 3..5, y -2..-1) and a pole (x 1, y 2)."""
-    grid = _grid(vs)
+    grid = _grid(voxel_size)
     sem = np.zeros(grid.shape, np.uint8)
     inst = np.zeros(grid.shape, np.uint32)
     _box(sem, inst, grid, (-4, 8), (-4, 4), (-2, -1.5), ROAD)
@@ -226,10 +226,10 @@ def test_occupancy_figure_has_title_panels_and_legend():
     assert not (fig == palette()[SIGN]).all(axis=2).any()
 
 
-def test_multi_resolution_figure_has_one_labelled_column_per_resolution():
-    frames = [(f"{vs:g} m", *_scene(vs)) for vs in (0.25, 0.5)]
-    one = multi_resolution_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
-    two = multi_resolution_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+def test_multi_voxel_size_figure_has_one_labelled_column_per_voxel_size():
+    frames = [(f"{voxel_size:g} m", *_scene(voxel_size)) for voxel_size in (0.25, 0.5)]
+    one = multi_voxel_size_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
+    two = multi_voxel_size_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
     assert one.dtype == two.dtype == np.uint8 and one.shape[0] == two.shape[0]
     assert two.shape[1] > 2 * one.shape[1] - 1 - 16 and two.shape[1] > one.shape[1]
     col = one.shape[1]

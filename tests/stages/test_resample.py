@@ -1,4 +1,4 @@
-"""Multi-resolution pooling and resampling to other datasets' grids (stages/voxelize/pooling.py, stages/export/resample.py).
+"""Pooling across voxel sizes and resampling to other datasets' grids (stages/voxelize/pooling.py, stages/export/resample.py).
 
 Orientation tests place objects at known LiDAR-frame positions (x forward, y left, z up) and check
 the exact target voxel index, so a swapped or mirrored axis fails.
@@ -96,10 +96,10 @@ def test_rank_table_is_a_permutation_and_validates():
 @given(
     coarse=hnp.arrays(np.uint8, hnp.array_shapes(min_dims=3, max_dims=3, min_side=1, max_side=5), elements=st.integers(0, 29)),
     f=st.sampled_from([2, 3, 4]),
-    vs=st.sampled_from([0.2, 0.25, 0.5, 1.0]),
+    voxel_size=st.sampled_from([0.2, 0.25, 0.5, 1.0]),
 )
-def test_pooling_a_repeated_grid_returns_it(coarse, f, vs):
-    fine_g, coarse_g = _grids(coarse.shape, vs, f, origin=(-1.0, 0.6, -3.0))
+def test_pooling_a_repeated_grid_returns_it(coarse, f, voxel_size):
+    fine_g, coarse_g = _grids(coarse.shape, voxel_size, f, origin=(-1.0, 0.6, -3.0))
     assert fine_g.shape == tuple(n * f for n in coarse.shape)
     fine = _repeat(coarse, f)
     assert np.array_equal(pool_to_grid(fine, fine_g, coarse_g), coarse)
@@ -388,11 +388,11 @@ def test_masks_are_resampled_by_any_observed_centre():
     seed=st.integers(0, 2**31),
     shift=st.tuples(*(st.floats(-3.0, 3.0, allow_nan=False) for _ in range(3))),
     target=st.sampled_from([OCC3D_NUSCENES, SSCBENCH_KITTI360]),
-    vs=st.sampled_from([0.15, 0.3, 0.4, 0.5]),
+    voxel_size=st.sampled_from([0.15, 0.3, 0.4, 0.5]),
 )
-def test_translation_fast_path_equals_binning_the_centres(seed, shift, target, vs):
+def test_translation_fast_path_equals_binning_the_centres(seed, shift, target, voxel_size):
     rng = np.random.default_rng(seed)
-    grid = GridSpec(region_min=(-6.0, -4.0, -2.5), region_max=(9.0, 5.0, 3.0), voxel_size=vs)
+    grid = GridSpec(region_min=(-6.0, -4.0, -2.5), region_max=(9.0, 5.0, 3.0), voxel_size=voxel_size)
     vol = np.where(rng.random(grid.shape) < 0.3, rng.integers(1, 30, grid.shape), 0).astype(np.uint8)
     m = np.eye(4)
     m[:3, 3] = shift
@@ -438,9 +438,9 @@ def test_pool_window_agrees_with_brute_force(seed, f, shift):
     sem = np.where(rng.random(fine.shape) < 0.3, rng.choice([ROAD, BUILDING, CAR, POLE, VEGETATION], fine.shape), 0)
     sem = sem.astype(np.uint8)
     inst = np.where(np.isin(sem, [CAR, POLE]), rng.integers(1, 5, fine.shape), 0).astype(np.uint32)
-    vs = 0.1 * f
+    voxel_size = 0.1 * f
     lo = tuple(round(0.1 * s, 6) for s in shift)
-    coarse = GridSpec(region_min=lo, region_max=tuple(round(a + n * vs, 6) for a, n in zip(lo, (3, 2, 2))), voxel_size=vs)
+    coarse = GridSpec(region_min=lo, region_max=tuple(round(a + n * voxel_size, 6) for a, n in zip(lo, (3, 2, 2))), voxel_size=voxel_size)
     got_s, got_i = pool_window(sem, inst, fine, coarse)
     rank, _ = rank_table()
     # brute force: every coarse voxel's fine voxels by index arithmetic

@@ -183,11 +183,11 @@ def _counts():
 
 def test_plots_are_pngs_of_sensible_size():
     voxels, inst, moving = _counts()
-    quality = [QualityRecord(sequence_id=f"town00_seq{i}", resolution=r, frame_index=None, metric=m, value=v,
+    quality = [QualityRecord(sequence_id=f"town00_seq{i}", voxel_size=r, frame_index=None, metric=m, value=v,
                              occupied=10, isolated=0)
                for i in range(3) for r in (0.2, 0.4)
                for m, v in (("spatial_continuity", 0.995 - 0.001 * i), ("temporal_consistency", 0.97 + 0.01 * i))]
-    quality.append(QualityRecord(sequence_id="x", resolution=0.2, frame_index=3, metric="spatial_continuity",
+    quality.append(QualityRecord(sequence_id="x", voxel_size=0.2, frame_index=3, metric="spatial_continuity",
                                  value=0.5, occupied=1, isolated=0))  # frame rows are not drawn
     figures = {
         "voxels": plots.class_voxel_plot(voxels),

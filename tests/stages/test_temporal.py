@@ -14,16 +14,16 @@ CAR = by_name("Car").id
 ROAD, BUILDING, VEG = by_name("Road").id, by_name("Building").id, by_name("Vegetation").id
 
 
-def reference_counts(sem0, sem1, pose0, pose1, vs, origin, mask0=None, mask1=None, static=None,
+def reference_counts(sem0, sem1, pose0, pose1, voxel_size, origin, mask0=None, mask1=None, static=None,
                      vs1=None, origin1=None):
     """Brute force, straight from the documented convention: python loops over every voxel."""
     static = static_table() if static is None else static
-    vs1 = vs if vs1 is None else vs1
+    vs1 = voxel_size if vs1 is None else vs1
     origin1 = origin if origin1 is None else origin1
     T = np.linalg.inv(np.asarray(pose1, float)) @ np.asarray(pose0, float)
     inter, union = np.zeros(256, np.int64), np.zeros(256, np.int64)
     for v in itertools.product(*(range(n) for n in sem0.shape)):
-        centre = np.asarray(origin, float) + (np.asarray(v) + 0.5) * vs
+        centre = np.asarray(origin, float) + (np.asarray(v) + 0.5) * voxel_size
         p = T[:3, :3] @ centre + T[:3, 3]
         u = tuple(int(math.floor(x)) for x in (p - np.asarray(origin1, float)) / vs1)
         if any(x < 0 or x >= n for x, n in zip(u, sem1.shape)):
@@ -80,25 +80,25 @@ def world_scene(lo, hi):
     return label
 
 
-def render(label, sensor_pose, shape, origin, vs):
+def render(label, sensor_pose, shape, origin, voxel_size):
     """Grid of a sensor at ``sensor_pose`` (sensor-to-world): sample the world at voxel centres."""
     sem = np.zeros(shape, np.uint8)
     for v in itertools.product(*(range(n) for n in shape)):
-        centre = np.asarray(origin) + (np.asarray(v) + 0.5) * vs
+        centre = np.asarray(origin) + (np.asarray(v) + 0.5) * voxel_size
         w = sensor_pose[:3, :3] @ centre + sensor_pose[:3, 3]
-        sem[v] = label(*(int(math.floor(x / vs)) for x in w))
+        sem[v] = label(*(int(math.floor(x / voxel_size)) for x in w))
     return sem
 
 
 @pytest.mark.parametrize("rot, shift", [(np.eye(3), (2, -1, 0)), (rz90(1), (1, 3, 0)), (rz90(2), (0, 0, 1))])
 def test_static_scene_moved_by_whole_voxels_scores_one(rot, shift):
-    vs, shape = 0.5, (10, 9, 6)
+    voxel_size, shape = 0.5, (10, 9, 6)
     origin = (-2.5, -2.0, -1.0)  # a whole number of voxels: centres stay on the half-voxel lattice
     label = world_scene(None, None)
     p0 = pose(rz90(0), (0.5, 0.0, 0.5))
-    p1 = pose(rot, np.asarray(shift) * vs + p0[:3, 3])
-    s0, s1 = render(label, p0, shape, origin, vs), render(label, p1, shape, origin, vs)
-    c = temporal_consistency_counts(s0, s1, p0, p1, vs, origin)
+    p1 = pose(rot, np.asarray(shift) * voxel_size + p0[:3, 3])
+    s0, s1 = render(label, p0, shape, origin, voxel_size), render(label, p1, shape, origin, voxel_size)
+    c = temporal_consistency_counts(s0, s1, p0, p1, voxel_size, origin)
     assert c.total_union > 20 and c.score == 1.0
     assert (c.intersection == c.union).all()
 
@@ -205,8 +205,8 @@ def test_bad_inputs_are_named():
 def lattice_pairs(draw):
     shape0 = tuple(draw(st.integers(1, 6)) for _ in range(3))
     shape1 = tuple(draw(st.integers(1, 6)) for _ in range(3))
-    vs = draw(st.sampled_from([1.0, 0.5, 0.4, 0.2]))
-    origin = tuple(vs * draw(st.integers(-4, 1)) for _ in range(3))
+    voxel_size = draw(st.sampled_from([1.0, 0.5, 0.4, 0.2]))
+    origin = tuple(voxel_size * draw(st.integers(-4, 1)) for _ in range(3))
     seed = draw(st.integers(0, 2**32 - 1))
     rng = np.random.default_rng(seed)
     labels = np.array([0, 0, ROAD, BUILDING, VEG, CAR], np.uint8)
@@ -215,18 +215,18 @@ def lattice_pairs(draw):
     poses = []
     for _ in range(2):
         rot = ROTATIONS[draw(st.integers(0, len(ROTATIONS) - 1))]
-        t = np.asarray([draw(st.integers(-3, 3)) for _ in range(3)]) * vs
+        t = np.asarray([draw(st.integers(-3, 3)) for _ in range(3)]) * voxel_size
         poses.append(pose(rot, t))
     masks = (rng.random(shape0) < 0.8, rng.random(shape1) < 0.8) if draw(st.booleans()) else (None, None)
-    return s0, s1, poses, vs, origin, masks
+    return s0, s1, poses, voxel_size, origin, masks
 
 
 @settings(max_examples=80, deadline=None)
 @given(lattice_pairs())
 def test_agrees_with_brute_force_on_lattice_motions(case):
-    s0, s1, (p0, p1), vs, origin, (m0, m1) = case
-    c = temporal_consistency_counts(s0, s1, p0, p1, vs, origin, mask_t=m0, mask_t1=m1)
-    inter, union = reference_counts(s0, s1, p0, p1, vs, origin, m0, m1)
+    s0, s1, (p0, p1), voxel_size, origin, (m0, m1) = case
+    c = temporal_consistency_counts(s0, s1, p0, p1, voxel_size, origin, mask_t=m0, mask_t1=m1)
+    inter, union = reference_counts(s0, s1, p0, p1, voxel_size, origin, m0, m1)
     assert (c.intersection == inter).all() and (c.union == union).all()
 
 

@@ -130,17 +130,17 @@ def test_marks_stop_at_first_occupied(scene):
 @SETTINGS
 @given(_scene(), st.tuples(st.integers(-4, 4), st.integers(-4, 4), st.integers(-4, 4)),
        st.sampled_from([0.25, 0.5, 1.0]))
-def test_translation_by_whole_voxels_commutes(scene, shift, vs):
+def test_translation_by_whole_voxels_commutes(scene, shift, voxel_size):
     occ, o, d, t_end = scene
     # dyadic coordinates: metres <-> voxel units is exact, so the results must be identical
     o = np.round(o * 64) / 64
     d = np.round(d * 64) / 64
     assume(np.abs(d).sum() > 0)
-    base = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=tuple(n * vs for n in occ.shape), voxel_size=vs)
-    s = np.array(shift, float) * vs
-    moved = GridSpec(region_min=tuple(s), region_max=tuple(s + np.array(occ.shape) * vs), voxel_size=vs)
-    a = ray_mask(occ, base, o * vs, d[None], t_end * vs)
-    b = ray_mask(occ, moved, o * vs + s, d[None], t_end * vs)
+    base = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=tuple(n * voxel_size for n in occ.shape), voxel_size=voxel_size)
+    s = np.array(shift, float) * voxel_size
+    moved = GridSpec(region_min=tuple(s), region_max=tuple(s + np.array(occ.shape) * voxel_size), voxel_size=voxel_size)
+    a = ray_mask(occ, base, o * voxel_size, d[None], t_end * voxel_size)
+    b = ray_mask(occ, moved, o * voxel_size + s, d[None], t_end * voxel_size)
     np.testing.assert_array_equal(a, b)
 
 

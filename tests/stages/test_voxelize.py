@@ -82,8 +82,8 @@ def _ref_surface_one(tri: np.ndarray, shape) -> np.ndarray:
     return np.flatnonzero(~sep)
 
 
-def _ref_surface(V, F, origin, vs, shape) -> np.ndarray:
-    P = to_voxel_units(V, origin, vs)
+def _ref_surface(V, F, origin, voxel_size, shape) -> np.ndarray:
+    P = to_voxel_units(V, origin, voxel_size)
     hits = [_ref_surface_one(P[f], shape) for f in np.asarray(F)]
     return np.unique(np.concatenate(hits)) if hits else np.zeros(0, dtype=np.int64)
 
@@ -139,15 +139,15 @@ def test_surface_matches_bruteforce_sat(mesh):
 @settings(max_examples=40, deadline=None)
 @given(
     tri=st.lists(st.floats(-3.0, 6.0, allow_nan=False), min_size=9, max_size=9),
-    vs=st.floats(0.11, 0.9),
+    voxel_size=st.floats(0.11, 0.9),
     ox=st.floats(-1.0, 1.0),
 )
-def test_surface_matches_bruteforce_on_arbitrary_floats(tri, vs, ox):
+def test_surface_matches_bruteforce_on_arbitrary_floats(tri, voxel_size, ox):
     V = np.asarray(tri).reshape(3, 3)
     F = np.array([[0, 1, 2]])
     origin = (ox, -0.3 * ox, 0.1)
     shape = (9, 8, 7)
-    np.testing.assert_array_equal(surface_voxels(V, F, origin, vs, shape), _ref_surface(V, F, origin, vs, shape))
+    np.testing.assert_array_equal(surface_voxels(V, F, origin, voxel_size, shape), _ref_surface(V, F, origin, voxel_size, shape))
 
 
 @SETTINGS
@@ -270,19 +270,19 @@ def test_fill_box_equals_analytic_centre_count(a, b):
 )
 def test_fill_icosphere_close_to_volume_and_exact_away_from_surface(rot, centre):
     r = 1.5
-    vs = 0.1
+    voxel_size = 0.1
     m = trimesh.creation.icosphere(subdivisions=3, radius=r)
     q = np.asarray(rot) / np.linalg.norm(rot)
     R = trimesh.transformations.quaternion_matrix(q)[:3, :3]
     V = m.vertices @ R.T + np.asarray(centre)
     shape = (40, 40, 40)
-    got = fill_interior(V, m.faces, (0, 0, 0), vs, shape)
+    got = fill_interior(V, m.faces, (0, 0, 0), voxel_size, shape)
     # volume: the voxel count approximates the mesh's volume, and the sphere's 4/3 pi r^3
-    assert abs(len(got) * vs**3 - m.volume) / m.volume < 0.02
-    assert abs(len(got) * vs**3 - 4 / 3 * math.pi * r**3) / (4 / 3 * math.pi * r**3) < 0.03
+    assert abs(len(got) * voxel_size**3 - m.volume) / m.volume < 0.02
+    assert abs(len(got) * voxel_size**3 - 4 / 3 * math.pi * r**3) / (4 / 3 * math.pi * r**3) < 0.03
     # exact away from the surface: icosphere lies between radius r*cos(max facet angle) and r
     ijk = np.array(np.unravel_index(np.arange(np.prod(shape)), shape)).T
-    dist = np.linalg.norm((ijk + 0.5) * vs - np.asarray(centre), axis=1)
+    dist = np.linalg.norm((ijk + 0.5) * voxel_size - np.asarray(centre), axis=1)
     inside = np.zeros(np.prod(shape), dtype=bool)
     inside[got] = True
     assert inside[dist < 0.97 * r].all()
@@ -325,8 +325,8 @@ def test_fill_mesh_beyond_grid_and_outside():
 ROAD, BUILDING, FENCE, TERRAIN, CAR = 1, 3, 5, 10, 14
 
 
-def _grid(vs=0.25):
-    return GridSpec(region_min=(-4.0, -4.0, -1.0), region_max=(4.0, 4.0, 3.0), voxel_size=vs)
+def _grid(voxel_size=0.25):
+    return GridSpec(region_min=(-4.0, -4.0, -1.0), region_max=(4.0, 4.0, 3.0), voxel_size=voxel_size)
 
 
 def _plane(z, half=3.5, sub=2):
@@ -540,13 +540,13 @@ def test_voxel_size_that_does_not_divide_the_region_grows_it():
     assert (sem[:, :, k] == ROAD).all()  # the grown last column is covered too
 
 
-@pytest.mark.parametrize("vs", [0.02, 1.0])
-def test_extreme_voxel_sizes(vs):
-    grid = GridSpec(region_min=(-0.6, -0.6, -0.6), region_max=(0.6, 0.6, 0.6), voxel_size=vs)
+@pytest.mark.parametrize("voxel_size", [0.02, 1.0])
+def test_extreme_voxel_sizes(voxel_size):
+    grid = GridSpec(region_min=(-0.6, -0.6, -0.6), region_max=(0.6, 0.6, 0.6), voxel_size=voxel_size)
     sem, _ = voxelize_scene([_unit_cube(closed=True)], grid)
     n = np.count_nonzero(sem)
     # 0.02 m: the faces lie on voxel faces (voxel units 5 and 55) and mark both sides: 52 per axis
-    assert n == (52**3 if vs == 0.02 else 8)
+    assert n == (52**3 if voxel_size == 0.02 else 8)
 
 
 def test_chair_matches_binvox_loosely():

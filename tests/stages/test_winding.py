@@ -276,18 +276,18 @@ def test_cube_with_one_face_missing_fills_the_full_cube(drop):
     lo, hi = (0.13, 0.27, 0.31), (1.13, 1.27, 1.31)
     V, F_closed, F_open = open_box(lo, hi, (1, 1, 1), drop)
     assert len(F_open) == 10
-    origin, vs, shape = (0.0, 0.0, 0.0), 0.05, (30, 32, 34)
-    want = box_centres(lo, hi, origin, vs, shape)
+    origin, voxel_size, shape = (0.0, 0.0, 0.0), 0.05, (30, 32, 34)
+    want = box_centres(lo, hi, origin, voxel_size, shape)
     assert len(want) == 20 ** 3
-    got = winding_interior(V, F_open, origin, vs, shape)
+    got = winding_interior(V, F_open, origin, voxel_size, shape)
     # the box's voxel centres but the ones the five faces' surface voxels already hold
-    surf = surface_voxels(V, F_open, origin, vs, shape)
+    surf = surface_voxels(V, F_open, origin, voxel_size, shape)
     assert len(np.intersect1d(got, surf)) == 0
     assert len(np.intersect1d(want, surf)) > 0  # the layers under the faces at 1.13, 1.27, 1.31 m
     np.testing.assert_array_equal(got, np.setdiff1d(want, surf))
     # the very solid column parity gives the closed cube
-    np.testing.assert_array_equal(solid(got, V, F_closed, origin, vs, shape),
-                                  solid(fill_interior(V, F_closed, origin, vs, shape), V, F_closed, origin, vs, shape))
+    np.testing.assert_array_equal(solid(got, V, F_closed, origin, voxel_size, shape),
+                                  solid(fill_interior(V, F_closed, origin, voxel_size, shape), V, F_closed, origin, voxel_size, shape))
 
 
 def test_box_building_without_floor_is_the_full_box():
@@ -317,12 +317,12 @@ def test_box_building_without_floor_is_the_full_box():
 def test_car_shell_with_open_wheel_arches_keeps_its_volume():
     V, F_closed, F_open = car_shell()
     assert len(F_closed) - len(F_open) > 50  # four real holes
-    origin, vs, shape = (-0.313, -0.271, 0.157), 0.05, (94, 42, 36)
-    closed = fill_interior(V, F_closed, origin, vs, shape)
+    origin, voxel_size, shape = (-0.313, -0.271, 0.157), 0.05, (94, 42, 36)
+    closed = fill_interior(V, F_closed, origin, voxel_size, shape)
     # closed shell: parity agrees with the closed form of the untapered volume minus the slopes
-    assert len(closed) * vs ** 3 == pytest.approx(4.4 * 1.8 * 0.7 + 1.6 * 0.6 * 2.2 * (1 - 0.35 / 2), rel=0.02)
+    assert len(closed) * voxel_size ** 3 == pytest.approx(4.4 * 1.8 * 0.7 + 1.6 * 0.6 * 2.2 * (1 - 0.35 / 2), rel=0.02)
     # through the composer: a Car not known to be closed (winding) against the closed one (parity)
-    grid = GridSpec(region_min=origin, region_max=tuple(o + n * vs for o, n in zip(origin, shape)), voxel_size=vs)
+    grid = GridSpec(region_min=origin, region_max=tuple(o + n * voxel_size for o, n in zip(origin, shape)), voxel_size=voxel_size)
     sem_open, _ = voxelize_scene([SceneMesh(V, F_open, CAR, 1, False, closed=False)], grid)
     sem_closed, _ = voxelize_scene([SceneMesh(V, F_closed, CAR, 1, False, closed=True)], grid)
     n_open, n_closed = np.count_nonzero(sem_open), np.count_nonzero(sem_closed)
@@ -331,8 +331,8 @@ def test_car_shell_with_open_wheel_arches_keeps_its_volume():
     assert not (sem_open.astype(bool) & ~sem_closed.astype(bool)).any()
     # the kernel alone: the solid (with the open shell's surface voxels) within 3 % of the closed
     # shell's (with its own), and inside it
-    got = solid(winding_interior(V, F_open, origin, vs, shape), V, F_open, origin, vs, shape)
-    want = solid(closed, V, F_closed, origin, vs, shape)
+    got = solid(winding_interior(V, F_open, origin, voxel_size, shape), V, F_open, origin, voxel_size, shape)
+    want = solid(closed, V, F_closed, origin, voxel_size, shape)
     assert abs(len(got) - len(want)) <= 0.03 * len(want)
     assert len(np.setdiff1d(got, want)) == 0
     # and the composer writes that solid
@@ -343,23 +343,23 @@ def test_car_shell_with_open_wheel_arches_keeps_its_volume():
 def test_a_grid_or_tile_cutting_the_mesh_fills_what_it_holds(which):
     V, F_closed, F_open = car_shell()
     F = F_closed if which == "closed" else F_open
-    origin, vs, shape = np.array((-0.313, -0.271, 0.157)), 0.05, (94, 42, 36)
-    whole = winding_interior(V, F, origin, vs, shape)
+    origin, voxel_size, shape = np.array((-0.313, -0.271, 0.157)), 0.05, (94, 42, 36)
+    whole = winding_interior(V, F, origin, voxel_size, shape)
     # a grid on the same lattice holding the middle of the car only (x 1.19 - 3.19 m, y 0.13 -
     # 1.38 m, z 0.66 - 1.26 m: through the body and the cabin on every side): its interior is the
     # big grid's in it
     cut0, cut_shape = np.array([30, 8, 10]), (40, 25, 12)
-    cut = winding_interior(V, F, origin + cut0 * vs, vs, cut_shape)
+    cut = winding_interior(V, F, origin + cut0 * voxel_size, voxel_size, cut_shape)
     ijk = np.stack(np.unravel_index(whole, shape), axis=1) - cut0
     held = ((ijk >= 0) & (ijk < cut_shape)).all(axis=1)
     assert held.sum() > 0.5 * np.prod(cut_shape)
     np.testing.assert_array_equal(cut, np.sort(np.ravel_multi_index(ijk[held].T, cut_shape)))
     # the composer's x-slabs (each a grid cutting the car) write what one slab does
-    grid = GridSpec(region_min=tuple(origin), region_max=tuple(origin + np.asarray(shape) * vs), voxel_size=vs)
+    grid = GridSpec(region_min=tuple(origin), region_max=tuple(origin + np.asarray(shape) * voxel_size), voxel_size=voxel_size)
     mesh = SceneMesh(V, F, CAR, 1, False, closed=False)  # not known closed: winding either way
     slabs, one = voxelize_scene([mesh], grid, tile_x=9)[0], voxelize_scene([mesh], grid, tile_x=shape[0])[0]
     np.testing.assert_array_equal(slabs, one)
-    np.testing.assert_array_equal(np.flatnonzero(one), solid(whole, V, F, tuple(origin), vs, shape))
+    np.testing.assert_array_equal(np.flatnonzero(one), solid(whole, V, F, tuple(origin), voxel_size, shape))
 
 
 KENNEY = ["kenney-suburban/building-type-a.glb", "kenney-retro-urban/detail-bench.glb",
@@ -375,16 +375,16 @@ def test_models_match_exact_winding_numbers_at_every_voxel_centre(name):
     # the model at a voxel size where its longest side spans 32 voxels and its thinnest 4 (the
     # same as scaling a tiny model up: winding numbers do not change under a uniform scale)
     extent = V.max(axis=0) - V.min(axis=0)
-    vs = float(min(extent.max() / 32, extent.min() / 4))
-    origin, shape = grid_around(V, vs)
-    surf = surface_voxels(V, F, origin, vs, shape)
-    got = winding_interior(V, F, origin, vs, shape)
+    voxel_size = float(min(extent.max() / 32, extent.min() / 4))
+    origin, shape = grid_around(V, voxel_size)
+    surf = surface_voxels(V, F, origin, voxel_size, shape)
+    got = winding_interior(V, F, origin, voxel_size, shape)
     assert len(np.intersect1d(got, surf)) == 0  # the interior leaves the surface voxels out
-    want = reference_interior(V, F, origin, vs, shape)
+    want = reference_interior(V, F, origin, voxel_size, shape)
     assert len(want) > 100
     # the solids: the surface voxels plus the interior on both sides
     got, want = np.union1d(got, surf), np.union1d(want, surf)
-    assert iou(got, want) >= 0.95, (vs, len(got), len(want), iou(got, want))
+    assert iou(got, want) >= 0.95, (voxel_size, len(got), len(want), iou(got, want))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -414,17 +414,17 @@ def open_cup(radius=0.5, height=0.8, segments=48, rings=8):
 
 def test_open_cup_fills_up_to_its_rim_and_not_beyond_its_wall():
     V, F_open, F_closed = open_cup()
-    origin, vs = (-0.6137, -0.6071, -0.0913), 0.04
+    origin, voxel_size = (-0.6137, -0.6071, -0.0913), 0.04
     shape = (31, 31, 27)
-    got = winding_interior(V, F_open, origin, vs, shape)
-    c = centres(got, origin, vs, shape)
+    got = winding_interior(V, F_open, origin, voxel_size, shape)
+    c = centres(got, origin, voxel_size, shape)
     assert c[:, 2].max() <= 0.8  # nothing above the rim
     assert c[:, 2].min() >= 0.0  # nor below the bottom
-    assert np.hypot(c[:, 0], c[:, 1]).max() <= 0.5 + vs  # nor beyond the wall (one voxel)
+    assert np.hypot(c[:, 0], c[:, 1]).max() <= 0.5 + voxel_size  # nor beyond the wall (one voxel)
     # and the cup is full: within 3 % of the closed cup by column parity, both without the closed
     # cup's surface voxels (the open one has no lid's)
-    surf = surface_voxels(V, F_closed, origin, vs, shape)
-    closed = np.setdiff1d(fill_interior(V, F_closed, origin, vs, shape), surf)
+    surf = surface_voxels(V, F_closed, origin, voxel_size, shape)
+    closed = np.setdiff1d(fill_interior(V, F_closed, origin, voxel_size, shape), surf)
     assert len(np.intersect1d(got, closed)) >= 0.97 * len(closed)
 
 
@@ -443,21 +443,21 @@ def square_sheet(half=1.0, n=20, height=lambda x, y: 0.0 * x):
 def test_flat_plane_fills_nothing(tilt):
     V, F = square_sheet()
     V = V @ Rotation.from_rotvec([tilt, 0.4 * tilt, 0.0]).as_matrix().T + (0.0, 0.0, 0.2037)
-    origin, vs = (-1.5313, -1.5171, -1.3119), 0.05
-    assert len(winding_interior(V, F, origin, vs, (62, 62, 62))) == 0
-    assert len(winding_interior(V, F[:, ::-1], origin, vs, (62, 62, 62))) == 0  # either side up
+    origin, voxel_size = (-1.5313, -1.5171, -1.3119), 0.05
+    assert len(winding_interior(V, F, origin, voxel_size, (62, 62, 62))) == 0
+    assert len(winding_interior(V, F[:, ::-1], origin, voxel_size, (62, 62, 62))) == 0  # either side up
 
 
 def test_terrain_sheet_with_a_bump_fills_nothing_outside_its_bounding_box():
     V, F = square_sheet(2.0, 40, lambda x, y: 0.9 * np.exp(-(x ** 2 + y ** 2) / 0.35) + 0.05 * np.sin(2 * x))
-    vs = 0.05
-    origin, shape = grid_around(V, vs, margin=4)
+    voxel_size = 0.05
+    origin, shape = grid_around(V, voxel_size, margin=4)
     for faces in (F, F[:, ::-1]):  # faces up (inside below) and down
-        got = winding_interior(V, faces, origin, vs, shape)
-        c = centres(got, origin, vs, shape)
+        got = winding_interior(V, faces, origin, voxel_size, shape)
+        c = centres(got, origin, voxel_size, shape)
         assert ((c >= V.min(axis=0)) & (c <= V.max(axis=0))).all()
     # faces up: under the bump the sheet wraps the centres (w > 0.5 there), inside the box
-    assert len(winding_interior(V, F, origin, vs, shape)) > 1000
+    assert len(winding_interior(V, F, origin, voxel_size, shape)) > 1000
 
 
 # ------------------------------------------------------------------------------------------------
@@ -519,20 +519,20 @@ def test_winding_numbers_invariant_under_rigid_motion(seed, n_removed):
        shift=st.tuples(*[st.integers(-6, 6)] * 3))
 def test_winding_interior_invariant_under_integer_voxel_shifts(seed, n_removed, shift):
     V, _, F = random_hull(seed, n_removed)
-    vs, shape = 0.0625, (60, 60, 60)
+    voxel_size, shape = 0.0625, (60, 60, 60)
     origin = np.array([-0.9, -0.85, -0.8])
     t = np.asarray(shift)
-    base = winding_interior(V, F, origin, vs, shape)
+    base = winding_interior(V, F, origin, voxel_size, shape)
     # mesh and grid origin moved together: the same voxels
-    np.testing.assert_array_equal(winding_interior(V + t * vs, F, origin + t * vs, vs, shape), base)
+    np.testing.assert_array_equal(winding_interior(V + t * voxel_size, F, origin + t * voxel_size, voxel_size, shape), base)
     # the mesh alone moved: the voxels move by the shift
-    moved = winding_interior(V + t * vs, F, origin, vs, shape)
+    moved = winding_interior(V + t * voxel_size, F, origin, voxel_size, shape)
     ijk = np.stack(np.unravel_index(base, shape), axis=1) + t
     np.testing.assert_array_equal(moved, np.sort(np.ravel_multi_index(ijk.T, shape)))
-    assert len(np.intersect1d(base, surface_voxels(V, F, origin, vs, shape))) == 0
+    assert len(np.intersect1d(base, surface_voxels(V, F, origin, voxel_size, shape))) == 0
     if n_removed == 0:  # closed: the very solid of column parity
-        np.testing.assert_array_equal(solid(base, V, F, origin, vs, shape),
-                                      solid(fill_interior(V, F, origin, vs, shape), V, F, origin, vs, shape))
+        np.testing.assert_array_equal(solid(base, V, F, origin, voxel_size, shape),
+                                      solid(fill_interior(V, F, origin, voxel_size, shape), V, F, origin, voxel_size, shape))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -596,12 +596,12 @@ def test_asset_fill_methods_and_hole_voxels():
     watertight, floorless = asset_fill(asset(F_closed, True)), asset_fill(asset(F_open, False))
     assert watertight.method == "parity" and watertight.from_holes == 0
     assert floorless.method == "winding" and floorless.from_holes == floorless.filled > 0
-    vs = FILL_REFERENCE_VOXEL  # the 2 m box spans far fewer than FILL_REFERENCE_MAX_EDGE voxels
-    assert watertight.voxel_size == floorless.voxel_size == vs
+    voxel_size = FILL_REFERENCE_VOXEL  # the 2 m box spans far fewer than FILL_REFERENCE_MAX_EDGE voxels
+    assert watertight.voxel_size == floorless.voxel_size == voxel_size
     # the asset's grid is snapped to its bottom (z = 0): the floor on a lattice plane also marks
     # the layer under it, of which the open box keeps only the walls' rim (two voxels each side
     # of the wall planes, also on the lattice): (2 m / vs - 2)^2 voxels less
-    n = round(2.0 / vs) - 2
+    n = round(2.0 / voxel_size) - 2
     assert watertight.voxels - floorless.voxels == n * n
     road = AssetGeometry("road", (MeshPart("road", V, F_open, ROAD),), (False,))
     assert asset_fill(road).method == "surface" and asset_fill(road).filled == 0

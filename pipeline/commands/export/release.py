@@ -12,7 +12,7 @@ What is written under ``OUT`` (formats: :mod:`carlaocc.catalog.formats.carlaocc_
 How our dataset maps onto it:
 
 * **Grids.** The three release grids are pooled from the occupancy built at ``--voxel-size``
-  (0.1 m, the release's raw resolution, by default; any size dividing 0.1 m works) with the
+  (0.1 m, the release's raw voxel size, by default; any size dividing 0.1 m works) with the
   class-priority rule of :func:`carlaocc.stages.voxelize.pooling.pool_window`; at 0.1 m on the
   default region ``vs_0_1`` is our grid voxel for voxel.
 * **Towns and sequences.** Our towns get the release's town numbers in order (1..7, 10, then
