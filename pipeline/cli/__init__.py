@@ -27,10 +27,13 @@ from __future__ import annotations
 
 import os
 import sys
+import traceback
 
 # the command modules register their commands, in the order --help lists them
 from carlaocc.pipeline.cli import build, files, audit, query, scene_tools, show  # noqa: F401, I001
 from carlaocc.pipeline.cli.app import app
+from carlaocc.pipeline.cli.common import DEBUG_HINT, debug_enabled, one_line
+from carlaocc.pipeline.cli.exit import exit_code, leave
 from carlaocc.pipeline.cli import evaluate_rays  # noqa: F401  (registers eval rayiou / raypq)
 from carlaocc.pipeline.cli.evaluate import eval_app
 
@@ -41,21 +44,20 @@ __all__ = ["app", "main"]
 
 def main() -> None:
     """Console-script entry point: the app, and below it a last net so that even an exception
-    outside any command (or in the error path itself) is one line and exit 1."""
+    outside any command (or in the error path itself) is one line and exit 1; the process then
+    leaves with that code whatever native threads are still alive (:mod:`.exit`)."""
     os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
     try:
         app()
-    except SystemExit:
-        raise
+        code = 0
+    except SystemExit as exc:
+        code = exit_code(exc)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
-        sys.exit(130)
+        code = 130
     except BaseException as exc:  # noqa: BLE001 -- the last net: one line, never a traceback
-        from carlaocc.pipeline.cli.common import DEBUG_HINT, debug_enabled, one_line
-
         if debug_enabled() or "--debug" in sys.argv[1:]:
-            import traceback
-
             traceback.print_exception(type(exc), exc, exc.__traceback__)
         print(f"error: unexpected {type(exc).__name__}: {one_line(exc)} ({DEBUG_HINT})", file=sys.stderr)
-        sys.exit(1)
+        code = 1
+    leave(code)

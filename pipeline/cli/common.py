@@ -112,7 +112,9 @@ def report_exception(exc: BaseException) -> None:
 class ErrorGroup(TyperGroup):
     """The ``carlaocc`` group: every command runs inside the one error path -- an exception no
     command turned into its own error line becomes one (:func:`error_line`), never a traceback
-    unless ``--debug``. Typer's own exits and usage errors pass through."""
+    unless ``--debug``. Typer's own exits and usage errors pass through. Output piped into a
+    reader that stopped reading (``carlaocc stages | head -1``) ends the command quietly, exit 0,
+    as it ends other command-line tools."""
 
     def invoke(self, ctx):
         from typer.exceptions import TyperException
@@ -121,6 +123,11 @@ class ErrorGroup(TyperGroup):
             return super().invoke(ctx)
         except (TyperException, typer.Exit, typer.Abort, KeyboardInterrupt, SystemExit):
             raise
+        except BrokenPipeError:
+            # the reader is gone: nothing more can be said to it, and the final flush must not fail
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            raise typer.Exit(0) from None
         except Exception as exc:
             report_exception(exc)
 
