@@ -12,7 +12,10 @@ public sources), per evaluated sample:
    last gap until the pitch reaches 0.21 rad; azimuths every degree.
 3. **First hit** of each ray in a grid, by the exact voxel traversal of
    :mod:`carlaocc.stages.voxelize.visibility` (Amanatides-Woo, the same slab clipping and setup,
-   :mod:`carlaocc.stages.voxelize.dda`):
+   :mod:`carlaocc.stages.voxelize.dda`) with SparseOcc's rounding and tie rule (its CUDA caster
+   ``lib/dvr/dvr.cu``): float32 origins and end points (origin + direction, voxel units), the
+   direction re-normalised from them in float64, ties stepping z, then y, then x, and a float32
+   depth (:func:`first_hits`); the visibility masks keep their own rule:
    the first occupied voxel it enters; its **depth is where the ray leaves that voxel** (the exit
    face), in metres; a ray that leaves the grid without a hit takes the last voxel it crossed and
    that voxel's exit (normally free). The same origins and directions run through the ground
