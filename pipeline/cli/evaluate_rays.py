@@ -20,6 +20,13 @@ __all__ = ["origins_from_poses", "ray_origins", "ray_pairs"]
 # -- ray-based metrics (SparseOcc's RayIoU / RayPQ) --------------------------------------------------
 
 RAY_CLASSES = {"occ3d": "occ3d_nuscenes", "openocc-v2": "openocc_v2"}
+# nuScenes' LIDAR_TOP lidar2ego translation (m, ego frame): the calibrated_sensor record SparseOcc's
+# loaders/ray_metrics.py comments as (0.9858, 0.0000, 1.8402) (one of the trainval calibrations,
+# z 1.84019 / 1.84023 / 1.84292: nuscenes-devkit issue #161). Without --infos, SparseOcc's
+# protocol for a sample alone in its scene casts from there (ego_pose_dataset: the sample's own
+# LiDAR origin mapped into its ego frame is its lidar2ego translation). Occ3D-nuScenes and
+# OpenOcc v2 are both nuScenes grids.
+LIDAR2EGO = {"occ3d": (0.985793, 0.0, 1.84019), "openocc-v2": (0.985793, 0.0, 1.84019)}
 # road users with one RayPQ segment per instance (SparseOcc's thing list), by class name
 RAY_THINGS = ("car", "truck", "construction_vehicle", "bus", "trailer", "motorcycle", "bicycle", "pedestrian")
 
@@ -175,7 +182,7 @@ def _root_frame(ds, k: int, classes: str, panoptic: bool) -> dict[str, np.ndarra
     return out
 
 
-def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, relative: bool, origin: str,
+def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, relative: bool, origin: str | None,
               panoptic: bool, json_out: Path | None) -> None:
     from carlaocc.stages.evaluation.rays import RayAccumulator
 
@@ -190,13 +197,28 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         pairs = ray_pairs(pred, gt)
         origins = ray_origins(infos) if infos else {}
     fallback = None
-    if not infos:
-        try:
-            fallback = np.array([float(v) for v in origin.split(",")], float).reshape(1, 3)
-        except ValueError:
-            raise InputError(f"--origin {origin!r}: x,y,z in metres") from None
-        typer.echo(f"note: no --infos, so one ray origin at the LiDAR position {fallback[0].tolist()} m of each grid: "
-                   "NOT the standard protocol (SparseOcc casts from up to 8 ego positions of the scene's frames)", err=True)
+    if infos:
+        origin_doc = {"source": "root poses" if root_gt else "infos", "per_sample": "up to 8"}
+        why = (f"the LiDAR positions of each scene's frames ({'the root' if root_gt else '--infos'} poses), up to 8 "
+               "per sample: SparseOcc's protocol")
+    else:
+        if origin is None:
+            xyz, source = LIDAR2EGO[classes], "lidar2ego"
+            why = (f"one origin per sample at nuScenes' LIDAR_TOP lidar2ego translation {list(xyz)} m (no --infos: "
+                   "SparseOcc's origin for a sample alone in its scene; with --infos, up to 8 LiDAR positions of the "
+                   "scene's frames)")
+        else:
+            try:
+                xyz = tuple(float(v) for v in origin.split(","))
+                if len(xyz) != 3:
+                    raise ValueError
+            except ValueError:
+                raise InputError(f"--origin {origin!r}: x,y,z in metres") from None
+            source = "--origin"
+            why = f"one origin per sample at --origin {list(xyz)} m: NOT the standard protocol (pass --infos)"
+        fallback = np.array(xyz, float).reshape(1, 3)
+        origin_doc = {"source": source, "per_sample": 1, "xyz": list(xyz)}
+    typer.echo(f"origins: {why}")
     things = tuple(names.index(n) for n in RAY_THINGS)
     acc = RayAccumulator(names, thing_classes=things, relative=relative, flow_classes=things)
     grid_origin, voxel = (-40.0, -40.0, -1.0), 0.4
@@ -232,8 +254,10 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         raise InputError("no ray of the ground truth hit anything: check the origins (--infos poses, --origin) and "
                          "that the ground truth is not all free")
     iou = acc.ray_iou()
-    doc = {"samples": len(pairs), "rays": acc.rays, "classes": classes, "protocol": "sparseocc" if infos else
-           "single origin (not the standard protocol)", **iou.to_dict()}
+    protocol = ("sparseocc" if infos else "sparseocc (lone sample: lidar2ego origin)" if origin is None else
+                "single origin (not the standard protocol)")
+    doc = {"samples": len(pairs), "rays": acc.rays, "classes": classes, "protocol": protocol, "origins": origin_doc,
+           **iou.to_dict()}
     rows = [("RayIoU", iou.by_threshold, iou.ray_iou)]
     if panoptic:
         pq = acc.ray_pq()
@@ -246,7 +270,7 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
         flow_line = f"mAVE {m:.4f} m/s (TP rays at 2 m of the road users), occupancy score {acc.occupancy_score():.4f}"
         if not relative:
             flow_line += " (OccNet's challenge score also accepts 10 % relative depth errors: --relative)"
-    typer.echo(f"{len(pairs)} samples, {acc.rays:,} rays kept ({iou.variant}{'' if infos else ', single origin'})")
+    typer.echo(f"{len(pairs)} samples, {acc.rays:,} rays kept ({iou.variant}{'' if infos else ', one origin a sample'})")
     typer.echo(f"{'class':22s} {'@1':>7s} {'@2':>7s} {'@4':>7s}  gt rays")
     for i, c in enumerate(iou.classes):
         if iou.gt_rays[i] or np.isfinite(iou.iou[:, i]).any():
@@ -261,17 +285,19 @@ def _ray_eval(pred: Path, gt: Path, infos: list[Path] | None, classes: str, rela
 InfosOpt = Annotated[Optional[list[Path]], typer.Option("--infos", help="info pickle(s) with the samples' poses (carlaocc export mmdet3d-infos, or BEVDet/SparseOcc infos): ray origins at up to 8 LiDAR positions of each scene, SparseOcc's protocol")]
 ClassesOpt = Annotated[str, typer.Option("--classes", help="occ3d (18, free 17) | openocc-v2 (17, free 16)")]
 RelativeOpt = Annotated[bool, typer.Option("--relative", help="OccNet's variant: a ray within 10 %% of the ground-truth depth is also a hit")]
-OriginOpt = Annotated[str, typer.Option("--origin", help="without --infos: the one ray origin, x,y,z m in the grid's (ego) frame")]
+OriginOpt = Annotated[Optional[str], typer.Option("--origin", help="without --infos: the one ray origin of each sample, x,y,z m in the grid's (ego) frame (not the standard protocol); default: nuScenes' LIDAR_TOP lidar2ego translation 0.985793,0,1.84019, SparseOcc's origin for a sample alone in its scene")]
 
 
 @eval_app.command("rayiou")
 def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="predictions: a tree <scene>/<token>/labels.npz (semantics) or <token>.npz (pred), or a carlaocc root")],
                gt: Annotated[Path, typer.Option("--gt", help="ground truth: an Occ3D tree <scene>/<token>/labels.npz, or a carlaocc root (resampled onto the Occ3D grid, origins from its poses; predictions keyed <sequence>_<frame:06d>)")],
                infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
-               origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
+               origin: OriginOpt = None, json_out: JsonOpt = None) -> None:
     """RayIoU (SparseOcc): per-class IoU of the first hits of 14,040 query rays from up to 8
     origins per sample, a hit counting when the class agrees and the depth is within 1, 2 or 4 m;
-    RayIoU@1/@2/@4 and their mean. With a 'flow' array on both sides (OpenOcc v2), also mAVE and
+    RayIoU@1/@2/@4 and their mean. Origins: the scenes' LiDAR positions from --infos (or a root's
+    poses); without them, each sample's lidar2ego translation (nuScenes' LIDAR_TOP), as SparseOcc
+    for a sample alone in its scene. The output says which. With a 'flow' array on both sides (OpenOcc v2), also mAVE and
     the occupancy score 0.9 RayIoU + 0.1 max(1 - mAVE, 0)."""
     run_checked(lambda: _ray_eval(pred, gt, infos, classes, relative, origin, False, json_out))
 
@@ -280,7 +306,7 @@ def rayiou_cmd(pred: Annotated[Path, typer.Option("--pred", help="predictions: a
 def raypq_cmd(pred: Annotated[Path, typer.Option("--pred", help="prediction tree with semantics and instances")],
               gt: Annotated[Path, typer.Option("--gt", help="ground truth: an Occ3D tree with semantics and instances, or a carlaocc root")],
               infos: InfosOpt = None, classes: ClassesOpt = "occ3d", relative: RelativeOpt = False,
-              origin: OriginOpt = "0,0,1.73", json_out: JsonOpt = None) -> None:
+              origin: OriginOpt = None, json_out: JsonOpt = None) -> None:
     """RayPQ (SparseOcc) beside RayIoU: ray segments (one per thing instance, one per stuff class
     and sample) matched at IoU > 0.5 within each depth threshold; segments under 10 rays are never
     counted as errors."""

@@ -12,7 +12,10 @@ public sources), per evaluated sample:
    last gap until the pitch reaches 0.21 rad; azimuths every degree.
 3. **First hit** of each ray in a grid, by the exact voxel traversal of
    :mod:`carlaocc.stages.voxelize.visibility` (Amanatides-Woo, the same slab clipping and setup,
-   :mod:`carlaocc.stages.voxelize.dda`):
+   :mod:`carlaocc.stages.voxelize.dda`) with SparseOcc's rounding and tie rule (its CUDA caster
+   ``lib/dvr/dvr.cu``): float32 origins and end points (origin + direction, voxel units), the
+   direction re-normalised from them in float64, ties stepping z, then y, then x, and a float32
+   depth (:func:`first_hits`); the visibility masks keep their own rule:
    the first occupied voxel it enters; its **depth is where the ray leaves that voxel** (the exit
    face), in metres; a ray that leaves the grid without a hit takes the last voxel it crossed and
    that voxel's exit (normally free). The same origins and directions run through the ground
@@ -50,7 +53,7 @@ from numba import njit, prange
 
 from carlaocc.stages.voxelize.dda import axis_setup, clamp_floor, slab
 
-__all__ = ["RayAccumulator", "RayIoUResult", "RayPQResult", "first_hits", "query_directions", "select_origins",
+__all__ = ["RayAccumulator", "RayIoUResult", "RayPQResult", "first_hits", "query_directions", "ray_inputs", "select_origins",
            "THRESHOLDS", "MIN_SEGMENT_RAYS", "MAX_ORIGINS", "ORIGIN_LIMIT"]
 
 THRESHOLDS = (1.0, 2.0, 4.0)
@@ -66,9 +69,8 @@ def query_directions() -> np.ndarray:
     first ten ``-(pi/2 - atan(k + 1))``, then steps of the last gap until 0.21 rad is reached),
     each at the 360 whole-degree azimuths."""
     pitches = [-(math.pi / 2 - math.atan(k + 1)) for k in range(10)]
-    step = pitches[-1] - pitches[-2]
-    while pitches[-1] < 0.21:
-        pitches.append(pitches[-1] + step)
+    while pitches[-1] < 0.21:  # the gap taken afresh from the last two each time (as SparseOcc)
+        pitches.append(pitches[-1] + (pitches[-1] - pitches[-2]))
     p = np.asarray(pitches)[:, None]
     az = np.radians(np.arange(360.0))[None, :]
     d = np.stack([np.cos(p) * np.cos(az), np.cos(p) * np.sin(az), np.sin(p) * np.ones_like(az)], axis=-1)
@@ -86,9 +88,17 @@ def select_origins(positions: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _first_hit(occ, nx, ny, nz, ox, oy, oz, dx, dy, dz):
-    """(exit t in voxels, linear voxel index) of the first occupied voxel along the ray, or of
-    the last voxel it crosses in the grid; (-1, -1) when it misses the grid."""
+def _first_hit(occ, nx, ny, nz, ox, oy, oz, ex, ey, ez):
+    """(exit t in voxels, linear voxel index) of the first occupied voxel along the ray from
+    ``o`` through the end point ``e`` (voxel units, float32 values computed in float64 as
+    SparseOcc's caster does), or of the last voxel it crosses in the grid; (-1, -1) when it misses
+    the grid. Ties step z, then y, then x (x only when strictly nearest, y when strictly nearer
+    than z), SparseOcc's ``lib/dvr/dvr.cu`` rule."""
+    rx, ry, rz = ex - ox, ey - oy, ez - oz
+    norm = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if not (norm > 0.0):
+        return -1.0, -1
+    dx, dy, dz = rx / norm, ry / norm, rz / norm
     t0, t1 = slab(ox, dx, nx, 0.0, math.inf)
     t0, t1 = slab(oy, dy, ny, t0, t1)
     t0, t1 = slab(oz, dz, nz, t0, t1)
@@ -105,13 +115,13 @@ def _first_hit(occ, nx, ny, nz, ox, oy, oz, dx, dy, dz):
         lin = (i * ny + j) * nz + k
         if occ[lin]:
             return t_exit, lin
-        if tmx <= tmy and tmx <= tmz:
+        if tmx < tmy and tmx < tmz:
             if lx == 0:
                 return t_exit, lin
             lx -= 1
             tmx += tdx
             i += sx
-        elif tmy <= tmz:
+        elif tmy < tmz:
             if ly == 0:
                 return t_exit, lin
             ly -= 1
@@ -126,13 +136,30 @@ def _first_hit(occ, nx, ny, nz, ox, oy, oz, dx, dy, dz):
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _first_hits(occ, nx, ny, nz, O, D, t_out, lin_out):
-    for r in prange(D.shape[0] * O.shape[0]):
-        q = r // D.shape[0]
-        d = r % D.shape[0]
-        t, lin = _first_hit(occ, nx, ny, nz, O[q, 0], O[q, 1], O[q, 2], D[d, 0], D[d, 1], D[d, 2])
+def _first_hits(occ, nx, ny, nz, O, E, t_out, lin_out):
+    n = E.shape[0] // O.shape[0]
+    for r in prange(E.shape[0]):
+        q = r // n
+        t, lin = _first_hit(occ, nx, ny, nz, np.float64(O[q, 0]), np.float64(O[q, 1]), np.float64(O[q, 2]),
+                            np.float64(E[r, 0]), np.float64(E[r, 1]), np.float64(E[r, 2]))
         t_out[r] = t
         lin_out[r] = lin
+
+
+def ray_inputs(origins: np.ndarray, directions: np.ndarray, grid_origin, voxel_size: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The caster's inputs as SparseOcc's ``process_one_sample`` forms them: float32 origins and
+    end points in voxel units, ``float32((o - grid_origin) / voxel_size)`` and
+    ``float32((float32(d) + o - grid_origin) / voxel_size)`` (the end point one metre along the
+    float32 direction), computed in float64 from the float32 grid origin and voxel size.
+    Returns ((Q, 3), (Q * N, 3)) float32, origin-major."""
+    o = np.asarray(origins, np.float64).reshape(-1, 3)
+    off = np.asarray(grid_origin, np.float32).astype(np.float64)
+    vs = np.float64(np.float32(voxel_size))
+    d = np.asarray(directions, np.float32).reshape(-1, 3).astype(np.float64)
+    O = ((o - off) / vs).astype(np.float32)
+    E = (((d[None, :, :] + o[:, None, :]) - off) / vs).astype(np.float32).reshape(-1, 3)
+    return np.ascontiguousarray(O), np.ascontiguousarray(E)
 
 
 def first_hits(occupied: np.ndarray, origins: np.ndarray, directions: np.ndarray, grid_origin, voxel_size: float
@@ -140,15 +167,20 @@ def first_hits(occupied: np.ndarray, origins: np.ndarray, directions: np.ndarray
     """Depth (m, to the exit face of the hit voxel) and linear index of the hit voxel (C order;
     -1: the ray misses the grid) of every (origin, direction) pair, origin-major: ray
     ``q * len(directions) + d``. ``occupied``: (X, Y, Z) bool; origins (Q, 3) m in the grid's
-    frame; directions (N, 3) unit."""
+    frame; directions (N, 3) unit.
+
+    SparseOcc's rounding: float32 origins and end points (:func:`ray_inputs`), the direction
+    re-normalised from them, and the depth ``float32(float32(t) * float32(voxel_size))`` as
+    its float32 ``pred_dist * voxel_size`` (returned as float64)."""
     occ = np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1)
     nx, ny, nz = occupied.shape
-    O = (np.asarray(origins, np.float64).reshape(-1, 3) - np.asarray(grid_origin, np.float64)) / voxel_size
-    D = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
-    t = np.empty(len(O) * len(D), np.float64)
-    lin = np.empty(len(O) * len(D), np.int64)
-    _first_hits(occ, nx, ny, nz, np.ascontiguousarray(O), D, t, lin)
-    return t * voxel_size, lin
+    O, E = ray_inputs(origins, directions, grid_origin, voxel_size)
+    t = np.empty(len(E), np.float64)
+    lin = np.empty(len(E), np.int64)
+    if len(E):
+        _first_hits(occ, nx, ny, nz, O, E, t, lin)
+    depth = (t.astype(np.float32) * np.float32(voxel_size)).astype(np.float64)
+    return np.where(lin < 0, t, depth), lin
 
 
 @dataclass

@@ -31,6 +31,7 @@ def test_rayiou_of_the_ground_truth_against_itself_is_one(infos_01, tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["protocol"] == "sparseocc" and doc["samples"] == 6 and doc["rays"] > 100_000
+    assert doc["origins"]["source"] == "infos" and "origins: the LiDAR positions of each scene's frames" in r.output
     assert doc["RayIoU"] == 1.0 and doc["RayIoU@1"] == doc["RayIoU@2"] == doc["RayIoU@4"] == 1.0
     present = [c for c, v in doc["per_class"].items() if v["gt_rays"]]
     assert {"driveable_surface", "manmade", "vegetation"} <= set(present)
@@ -46,6 +47,9 @@ def test_origins_come_from_the_scene_frames(infos_01):
 
 
 def test_a_lost_class_scores_zero_and_no_infos_is_flagged(infos_01, tmp_path):
+    """Without --infos: one origin a sample at nuScenes' lidar2ego translation (SparseOcc's origin
+    for a sample alone in its scene), said in the output; --origin overrides it, flagged as not the
+    standard protocol."""
     pred = tmp_path / "pred"
     shutil.copytree(infos_01 / "gts", pred)
     for f in pred.glob("*/*/labels.npz"):
@@ -55,10 +59,20 @@ def test_a_lost_class_scores_zero_and_no_infos_is_flagged(infos_01, tmp_path):
     r = cli.invoke(app, ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", str(pred), "--json",
                          str(tmp_path / "r.json")])
     assert r.exit_code == 0, r.output
-    assert "NOT the standard protocol" in r.output
+    assert "origins: one origin per sample at nuScenes' LIDAR_TOP lidar2ego translation [0.985793, 0.0, 1.84019]" \
+        in r.output and "NOT the standard protocol" not in r.output
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["per_class"]["vegetation"]["@4"] == 0.0 and doc["per_class"]["driveable_surface"]["@1"] < 1.0 + 1e-9
-    assert doc["protocol"].startswith("single origin")
+    assert doc["protocol"].startswith("sparseocc (lone sample")
+    assert doc["origins"] == {"source": "lidar2ego", "per_sample": 1, "xyz": [0.985793, 0.0, 1.84019]}
+    r = cli.invoke(app, ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", str(pred), "--origin", "0,0,1.73",
+                         "--json", str(tmp_path / "r.json")])
+    assert r.exit_code == 0, r.output
+    assert "origins: one origin per sample at --origin [0.0, 0.0, 1.73] m: NOT the standard protocol" in r.output
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["protocol"].startswith("single origin") and doc["origins"]["source"] == "--origin"
+    r = cli.invoke(app, ["eval", "rayiou", "--gt", str(infos_01 / "gts"), "--pred", str(pred), "--origin", "0,0"])
+    assert r.exit_code == 2 and "--origin '0,0': x,y,z in metres" in r.output
 
 
 def test_raypq_on_the_openocc_export_against_itself(openocc_01, infos_01, tmp_path):
@@ -129,6 +143,7 @@ def test_a_carlaocc_root_as_ground_truth(default_01, infos_01, tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["protocol"] == "sparseocc" and doc["samples"] == 6 and doc["RayIoU"] == 1.0
+    assert doc["origins"]["source"] == "root poses" and "(the root poses)" in r.output
     # a missing prediction names the frame
     r = cli.invoke(app, ["eval", "rayiou", "--gt", default_01.root, "--pred", str(tmp_path)])
     assert r.exit_code == 2 and "no prediction for" in r.output
