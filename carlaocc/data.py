@@ -33,8 +33,10 @@ key                      value
 ``images``               (C, H, W, 3) uint8 RGB of the rig's cameras (``camera_names``, list
                          of str); ``cam_intrinsics`` (C, 3, 3) float64 (OpenCV: x right, y
                          down, z forward); ``cam_to_lidar`` and ``cam_to_ego`` (C, 4, 4)
-``depth`` ...            the camera maps named in ``camera_maps`` ((C, H, W) each: ``depth``
-                         float32 m planar, ``semantic`` uint8, ``instance`` uint32, ``normal``)
+``cam_depth`` ...        the camera maps named in ``camera_maps``, each as ``cam_<map>`` (C, H,
+                         W): ``cam_depth`` float32 m planar, ``cam_semantic`` uint8,
+                         ``cam_instance`` uint32, ``cam_normal`` (C, H, W, 3) float16 (never
+                         the bare ``semantic`` / ``instance``: those are the 3D grids)
 ``points``               (P, 3) float32 LiDAR points; ``points_semantic`` (P,) uint8,
                          ``points_instance`` (P,) uint32, ``points_channel`` (P,) uint8 (beam, 0 top)
 ``boxes``                (M, 7) float32 ``x, y, z, length, width, height, yaw`` (centre, yaw
@@ -64,7 +66,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from carlaocc.catalog.samples import CAMERA_MAPS, DENSE_LIMIT, OCCUPANCY_MODES, DatasetError, FrameSamples
-from carlaocc.stages.geometry import boxes_in_frame
+from carlaocc.stages.geometry import BOX_KEYS, boxes_in_frame
 
 __all__ = ["CarlaOccDataset", "DatasetError", "collate", "OCCUPANCY_MODES", "DENSE_LIMIT", "CAMERA_MAPS"]
 
@@ -80,7 +82,16 @@ class CarlaOccDataset(FrameSamples):
     ``lidar``, ``boxes``: include those. ``sequences``: restrict to these ids. ``voxel_size``
     None: the finest voxel size every selected sequence was built at.
 
+    No two parts of a sample share a key (:meth:`key_plan`); options under which they would are
+    refused with a :class:`DatasetError`.
+
     The store reading is :class:`carlaocc.catalog.samples.FrameSamples`; this adds the boxes."""
+
+    def key_plan(self) -> dict[str, frozenset[str]]:
+        plan = super().key_plan()
+        if self.boxes:
+            plan["boxes"] = frozenset(BOX_KEYS)
+        return plan
 
     def __getitem__(self, index: int) -> dict:
         out = super().__getitem__(index)

@@ -26,6 +26,10 @@ OCCUPANCY_MODES = ("sparse", "dense", "crop", "none")
 DENSE_LIMIT = 64 * 2**20
 """Voxels above which ``occupancy="dense"`` (or a crop) is refused (a 0.2 m default grid has 6.4 M; 0.05 m, 409 M)."""
 CAMERA_MAPS = ("depth", "semantic", "instance", "normal")
+CAMERA_MAP_PREFIX = "cam_"
+"""A camera map ``m`` is the sample key ``cam_<m>`` (``cam_semantic`` ...): the 3D grids own the bare names."""
+OCC_ARRAYS = ("semantic", "instance", "flow", "mask_camera", "mask_lidar")
+"""The stored occupancy arrays a sample carries (dense / crop under these names, sparse as ``occ`` and ``occ_<name>``)."""
 _CACHE = 256  # sequences whose frames and actors tables a worker keeps (a few hundred KB each)
 
 
@@ -69,6 +73,7 @@ class FrameSamples:
         self.root = str(root)
         self.occupancy, self.cameras, self.lidar, self.boxes = occupancy, bool(cameras), bool(lidar), bool(boxes)
         self.camera_maps = tuple(camera_maps)
+        self._check_keys()
         self.dense_limit = int(dense_limit)
         self.crop = None if crop is None else (np.asarray(crop[0], float), np.asarray(crop[1], float))
         self.split = split
@@ -126,6 +131,36 @@ class FrameSamples:
                 raise DatasetError(f"the crop holds {n:,} voxels at {self.voxel_size:g} m (over dense_limit "
                                    f"{self.dense_limit:,}): crop less, or use occupancy='sparse'")
         self._open: dict | None = None
+
+    # -- the keys a sample carries ------------------------------------------------------------------
+    def key_plan(self) -> dict[str, frozenset[str]]:
+        """The keys each enabled part of a sample may carry, from the options alone (a part: ``frame``,
+        ``occupancy``, ``cameras``, ``lidar``; :class:`carlaocc.data.CarlaOccDataset` adds ``boxes``).
+        An occupancy array the root did not store is left out of a sample, never renamed."""
+        plan = {"frame": frozenset({"sequence_id", "frame_index", "timestamp", "ego_pose", "lidar_pose", "lidar_to_ego",
+                                    "voxel_size", "grid_origin", "grid_shape"})}
+        if self.occupancy == "sparse":
+            plan["occupancy"] = frozenset({"occ"} | {f"occ_{n}" for n in OCC_ARRAYS if n != "semantic"})
+        elif self.occupancy in ("dense", "crop"):
+            plan["occupancy"] = frozenset(OCC_ARRAYS) | ({"crop_offset"} if self.occupancy == "crop" else set())
+        if self.cameras or self.camera_maps:
+            plan["cameras"] = frozenset({"camera_names", "cam_intrinsics", "cam_to_lidar", "cam_to_ego"}
+                                        | ({"images"} if self.cameras else set())
+                                        | {CAMERA_MAP_PREFIX + m for m in self.camera_maps})
+        if self.lidar:
+            plan["lidar"] = frozenset({"points", "points_semantic", "points_instance", "points_channel"})
+        return plan
+
+    def _check_keys(self) -> None:
+        """Refuse options under which two parts of a sample would give one key (one would silently replace the other)."""
+        parts = list(self.key_plan().items())
+        for a, (name_a, keys_a) in enumerate(parts):
+            for name_b, keys_b in parts[a + 1:]:
+                clash = keys_a & keys_b
+                if clash:
+                    raise DatasetError(f"sample keys {sorted(clash)} would be given by both {name_a} and {name_b} "
+                                       f"(occupancy={self.occupancy!r}, camera_maps={list(self.camera_maps)}): "
+                                       f"one would replace the other")
 
     # -- pickling: workers get the index, not the open stores or caches ----------------------------
     def __getstate__(self) -> dict:
@@ -217,7 +252,7 @@ class FrameSamples:
 
     # -- occupancy --------------------------------------------------------------------------------
     def _occupancy(self, occ, seq: str, grid, frame: int) -> dict:
-        names = [n for n in ("semantic", "instance", "flow", "mask_camera", "mask_lidar") if _has(occ, seq, grid, n)]
+        names = [n for n in OCC_ARRAYS if _has(occ, seq, grid, n)]
         shape, chunks, _ = occ.layout(seq, grid, "semantic")
         cx, cy = chunks[1], chunks[2]
         X, Y, Z = shape[1:4]
@@ -263,7 +298,7 @@ class FrameSamples:
         if self.cameras:
             out["images"] = np.stack(images)
         for m, arrays in maps.items():
-            out[m] = np.stack(arrays)
+            out[CAMERA_MAP_PREFIX + m] = np.stack(arrays)
         return out
 
 

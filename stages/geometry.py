@@ -220,6 +220,10 @@ def geometry_hash(parts: list[tuple[np.ndarray, np.ndarray]], decimals: int = 5)
     return h.hexdigest()[:24]
 
 
+BOX_KEYS = ("boxes", "box_pose", "box_velocity", "box_instance", "box_semantic")
+"""The keys :func:`boxes_in_frame` returns."""
+
+
 def boxes_in_frame(rows: list, world_to_frame: np.ndarray) -> dict[str, np.ndarray]:
     """Actor boxes (world-frame rows of the actors table: instance id, semantic id, centre (3,) m,
     size (l, w, h) m, yaw, pitch, roll rad, velocity (3,) m/s) in another frame, sorted by

@@ -111,7 +111,7 @@ def test_boxes_hold_their_instance_voxels_and_land_on_their_pixels(ds):
     # each box centre in front of camera_00 projects onto its own instance's pixels (or, where
     # another object hides it, onto something nearer)
     K, cam_to_lidar = s["cam_intrinsics"][0], s["cam_to_lidar"][0]
-    imap, depth_ok = s["instance"][0], 0
+    imap, depth_ok = s["cam_instance"][0], 0
     H, W = imap.shape
     for b, iid in zip(s["boxes"], s["box_instance"]):
         p = np.linalg.inv(cam_to_lidar) @ np.append(b[:3], 1.0)
