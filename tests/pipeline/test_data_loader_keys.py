@@ -92,7 +92,7 @@ def grid_shape(default_01):
     return CarlaOccDataset(default_01.url, occupancy="none", cameras=False, lidar=False, boxes=False)[FRAME]["grid_shape"]
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=12, deadline=None)  # a dense 0.1 m sample takes ~1.7 s
 @given(occupancy=st.sampled_from(OCCUPANCY_MODES), cameras=st.booleans(),
        camera_maps=st.lists(st.sampled_from(CAMERA_MAPS), unique=True, max_size=len(CAMERA_MAPS)),
        lidar=st.booleans(), boxes=st.booleans())
