@@ -1,7 +1,9 @@
 """Ours resampled onto other datasets' grids by class priority
 (:func:`carlaocc.stages.export.resample.resample`; export from the finest voxel size built):
 
-* ``occ3d``: ``gts/<sequence>/<frame:06d>/labels.npz`` -- Occ3D-nuScenes grid (200 x 200 x 16,
+* ``occ3d``: ``gts/<sequence>/<token>/labels.npz``, ``token`` = ``<sequence>_<frame:06d>`` (the
+  token of ``mmdet3d-infos``, ``openocc-v2`` and ``det-gt``, so their trees score against each
+  other) -- Occ3D-nuScenes grid (200 x 200 x 16,
   0.4 m, ego frame, range [-40, -40, -1, 40, 40, 5.4] m), Occ3D labels (free = 17), with
   ``mask_lidar`` and ``mask_camera`` resampled from ours (observed when any observed voxel of ours
   falls in the target voxel).
@@ -96,7 +98,7 @@ def write_resampled(job: ExportJob) -> tuple[int, int, int]:
 
 def _occ3d(store, out, seq, t, labels, m, target) -> int:
     frame = Occ3DFrame(labels, m["mask_lidar"].astype(np.uint8), m["mask_camera"].astype(np.uint8))
-    save_occ3d(out / "gts" / seq / f"{t:06d}" / "labels.npz", frame)
+    save_occ3d(out / "gts" / seq / f"{seq}_{t:06d}" / "labels.npz", frame)
     return 1
 
 
@@ -129,7 +131,7 @@ WRITERS = {"occ3d": _occ3d, "semantickitti": _semantickitti, "sscbench-kitti360"
            "surroundocc": _surroundocc}
 
 FORMATS = (
-    ExportFormat("occ3d", "gts/<seq>/<frame>/labels.npz: 200x200x16 at 0.4 m, ego frame, free 17, masks",
+    ExportFormat("occ3d", "gts/<seq>/<seq>_<frame>/labels.npz: 200x200x16 at 0.4 m, ego frame, free 17, masks",
                  write_resampled),
     ExportFormat("semantickitti", "sequences/<seq>/voxels/<frame>.bin/.label/.invalid/.occluded: 256x256x32 at "
                  "0.2 m, forward", write_resampled),
