@@ -29,8 +29,10 @@ from carlaocc.schemas.records import ActorStateRecord, SequenceRecord, TownRecor
 @dataclass(frozen=True)
 class ExportJob:
     """One ``carlaocc export``: the root, its config, the built voxel size (m) to export from,
-    where to write, the sequences (None: every voxelized one), a progress callback (frames) and
-    the format's options (its declared defaults filled in)."""
+    where to write (``out``: a staging folder moved into ``dest`` once the writer returned, so a
+    refusal writes nothing), the sequences (None: every voxelized one), a progress callback
+    (frames), the format's options (its declared defaults filled in) and ``dest``, the folder
+    the user named, where a writer reads what an earlier export left (None: ``out``)."""
 
     store: Store
     config: DatasetConfig
@@ -40,6 +42,12 @@ class ExportJob:
     sequences: tuple[str, ...] | None = None
     progress: Callable[[int], None] | None = None
     options: Mapping[str, str] = field(default_factory=dict)
+    dest: Path | None = None
+
+    @property
+    def target(self) -> Path:
+        """The folder the export ends up in (``dest``, else ``out``)."""
+        return self.dest if self.dest is not None else self.out
 
     def advance(self, frames: int = 1) -> None:
         if self.progress:
