@@ -15,7 +15,9 @@ for ``--help``, options, writer), and :data:`FORMATS` lists them in this order:
 What a format computes is pure and lives in :mod:`carlaocc.stages.export` (and
 :mod:`carlaocc.stages.export.resample`); the files it writes are encoded in
 :mod:`carlaocc.catalog.formats`. Every export writes ``grid.json`` (the grid its files index and
-``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`) and,
+``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`; an
+export onto another dataset's grid adds ``built_region`` and ``coverage``, the share of that grid
+our region covers, and marks the voxels outside it unobserved: :class:`spec.Coverage`) and,
 for a root with splits, ``splits/{train,val,test}.txt`` restricted to the exported sequences.
 Files are written atomically, one frame at a time.
 
@@ -33,6 +35,7 @@ delete, and the root's lineage only vouches for what lives under the root.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -96,7 +99,17 @@ def export(store: Store, config: DatasetConfig, fmt: str, voxel_size: float, out
         merge_into(staging, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return ExportSummary(fmt, n_seq, n_frames, n_files, out)
+    return ExportSummary(fmt, n_seq, n_frames, n_files, out, written_coverage(out))
+
+
+def written_coverage(out: Path) -> float | None:
+    """``coverage`` of ``out/grid.json`` (the share of the target grid our built region covers),
+    None for a format that writes our own grid."""
+    try:
+        value = json.loads((out / "grid.json").read_text()).get("coverage")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(value) if isinstance(value, (int, float)) else None
 
 
 def staging_folder(out: Path) -> Path:
