@@ -125,6 +125,30 @@ class ScenesConfig(StageConfig):
         description="ADMesh sources whose assets towns and traffic draw from (e.g. procedural, folder)")
 
 
+# Named occupancy regions (``voxelize.region``), boxes in the ego frame (x forward, y left, z
+# up, m): ``occ3d`` is the Occ3D-nuScenes grid, so an export onto it covers every voxel.
+NAMED_REGIONS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "occ3d": ((-40.0, -40.0, -1.0), (40.0, 40.0, 5.4)),
+}
+
+
+def named_region(name: str, lidar_to_ego) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """``(region_min, region_max)`` in the LiDAR frame of the box :data:`NAMED_REGIONS` ``[name]``
+    (ego frame): the axis-aligned bounds of its corners seen from the LiDAR mounted at
+    ``lidar_to_ego`` (4x4), rounded to micrometres (the default rig: z 1.73 m, so Occ3D's box is
+    x, y [-40, 40], z [-2.73, 3.67], whole voxels at 0.05 .. 0.4 m)."""
+    lo, hi = NAMED_REGIONS[name]
+    m = [list(map(float, row)) for row in lidar_to_ego]
+    r = [row[:3] for row in m[:3]]
+    t = [m[i][3] for i in range(3)]
+    # ego -> LiDAR: R^T (p - t)
+    corners = [(x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    local = [[sum(r[k][i] * (c[k] - t[k]) for k in range(3)) for i in range(3)] for c in corners]
+    mins = tuple(round(min(p[i] for p in local), 6) + 0.0 for i in range(3))
+    maxs = tuple(round(max(p[i] for p in local), 6) + 0.0 for i in range(3))
+    return mins, maxs  # type: ignore[return-value]
+
+
 class VoxelizeConfig(StageConfig):
     """Panoptic voxelization of every frame's scene mesh."""
 
@@ -271,6 +295,24 @@ class DatasetConfig(StageConfig):
         if isinstance(data, dict) and "metrics" in data:
             raise ValueError("config section 'metrics' was renamed 'quality': rename it in the config file")
         return data
+
+    @model_validator(mode="before")
+    @classmethod
+    def _named_region(cls, data):
+        # voxelize.region: a name resolving to region_min / region_max in the LiDAR frame of the
+        # configured rig (the name is not kept: the bounds are what the build records)
+        if not isinstance(data, dict) or not isinstance(data.get("voxelize"), dict) or "region" not in data["voxelize"]:
+            return data
+        vox = dict(data["voxelize"])
+        name = vox.pop("region")
+        if name not in NAMED_REGIONS:
+            raise ValueError(f"voxelize.region must be one of {', '.join(NAMED_REGIONS)}, got {name!r}")
+        if "region_min" in vox or "region_max" in vox:
+            raise ValueError("voxelize.region names the bounds: give it or region_min / region_max, not both")
+        scenes = data.get("scenes") or {}
+        rig = scenes.rig if isinstance(scenes, ScenesConfig) else RigConfig.model_validate(scenes.get("rig") or {})
+        vox["region_min"], vox["region_max"] = named_region(name, rig.lidar.sensor_to_ego())
+        return {**data, "voxelize": vox}
 
     @model_validator(mode="after")
     def _one_taxonomy(self) -> DatasetConfig:

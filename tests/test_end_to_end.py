@@ -526,7 +526,7 @@ def test_export_formats_read_back(built, tmp_path, fmt):
     frames = E2E.scenes.frame_count
     car = taxonomy.by_name("Car")
     if fmt == "occ3d":
-        f = formats.load_occ3d(out / "gts" / seq / "000003" / "labels.npz")
+        f = formats.load_occ3d(out / "gts" / seq / f"{seq}_000003" / "labels.npz")
         assert f.semantics.shape == (200, 200, 16) and (f.semantics == 17).mean() > 0.5
         assert (f.semantics == car.occ3d_nuscenes).any() and f.mask_camera.any() and f.mask_lidar.any()
     elif fmt == "semantickitti":

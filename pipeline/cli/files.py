@@ -123,6 +123,11 @@ def export_cmd(
         fail(f"--out {out}: cannot write: {exc.strerror or exc}")
     typer.echo(f"wrote {summary.files:,} files for {summary.frames} frames of {summary.sequences} sequence(s) "
                f"in {fmt} layout under {out}")
+    if summary.coverage is not None and summary.coverage < 1.0:
+        from carlaocc.pipeline.commands.export.spec import outside_phrase
+
+        typer.echo(f"warning: the built region covers {100 * summary.coverage:.1f} % of the {fmt} grid; voxels outside "
+                   f"it are {outside_phrase(fmt)} (see grid.json coverage)", err=True)
     if fmt == "carlaocc-release":
         rates = {v["rate_hz"] for v in json.loads((out / "carlaocc_export.json").read_text())["sequences"].values()}
         if rates - {10.0}:

@@ -2,6 +2,7 @@
 
 * :func:`points_in_boxes` — how many points each oriented box holds
 * :func:`grid_coverage`   — which voxels of another dataset's grid lie inside our grid's region
+* :func:`region_in_target` — our grid's region as a box in another dataset's frame
 """
 
 from __future__ import annotations
@@ -36,3 +37,13 @@ def grid_coverage(target, grid, grid_to_target: np.ndarray) -> np.ndarray:
     p = centres @ inv[:3, :3].T + inv[:3, 3]
     inside = np.all((p >= np.asarray(grid.origin)) & (p < np.asarray(grid.effective_max)), axis=1)
     return inside.reshape(target.shape)
+
+
+def region_in_target(grid, grid_to_target: np.ndarray) -> tuple[list[float], list[float]]:
+    """``(min, max)`` (m, rounded to micrometres): the axis-aligned box in the target frame of
+    ``grid``'s region (a ``GridSpec``, our LiDAR frame, ``origin`` .. ``effective_max``), its
+    corners mapped by ``grid_to_target`` (4, 4)."""
+    lo, hi = np.asarray(grid.origin, float), np.asarray(grid.effective_max, float)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    p = corners @ np.asarray(grid_to_target, float)[:3, :3].T + np.asarray(grid_to_target, float)[:3, 3]
+    return [round(float(v), 6) + 0.0 for v in p.min(axis=0)], [round(float(v), 6) + 0.0 for v in p.max(axis=0)]

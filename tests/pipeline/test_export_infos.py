@@ -125,3 +125,24 @@ def test_quaternions_round_trip():
     # half turns (trace -1) too
     for R in (np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1]), np.diag([-1.0, -1, 1])):
         np.testing.assert_allclose(rotation_from_quaternion(quaternion_wxyz(R)), R, atol=1e-12)
+
+
+def test_occ3d_and_infos_ground_truth_share_one_token_scheme(exported, default_01, tmp_path):
+    """`export occ3d` names frames `gts/<seq>/<seq>_<frame:06d>/labels.npz` like the infos' occ_path:
+    the two trees hold the same tokens and the same arrays, so `eval ssc` of one against the other
+    scores 1.0."""
+    out = tmp_path / "occ3d"
+    r = cli.invoke(app, ["export", "occ3d", "--res", "0.1", "--root", default_01.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    ours = {p.relative_to(out) for p in out.glob("gts/*/*/labels.npz")}
+    theirs = {p.relative_to(exported) for p in exported.glob("gts/*/*/labels.npz")}
+    assert ours == theirs and len(ours) == 6
+    assert {p.parent.name for p in ours} == {info["token"] for info in _infos(exported)}
+    for rel in ours:
+        a, b = np.load(out / rel), np.load(exported / rel)
+        assert all(np.array_equal(a[k], b[k]) for k in ("semantics", "mask_lidar", "mask_camera"))
+    js = tmp_path / "ssc.json"
+    r = cli.invoke(app, ["eval", "ssc", "--pred", str(out / "gts"), "--gt", str(exported / "gts"), "--map", "occ3d",
+                         "--mask", "camera", "--json", str(js)])
+    assert r.exit_code == 0, r.output
+    assert json.loads(js.read_text())["miou"] == pytest.approx(1.0)

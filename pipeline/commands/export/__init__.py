@@ -15,9 +15,18 @@ for ``--help``, options, writer), and :data:`FORMATS` lists them in this order:
 What a format computes is pure and lives in :mod:`carlaocc.stages.export` (and
 :mod:`carlaocc.stages.export.resample`); the files it writes are encoded in
 :mod:`carlaocc.catalog.formats`. Every export writes ``grid.json`` (the grid its files index and
-``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`) and,
+``centre = origin + (index + 0.5) * voxel_size``; :mod:`carlaocc.catalog.formats.manifest`; an
+export onto another dataset's grid adds ``built_region`` and ``coverage``, the share of that grid
+our region covers, and marks the voxels outside it unobserved: :class:`spec.Coverage`) and,
 for a root with splits, ``splits/{train,val,test}.txt`` restricted to the exported sequences.
 Files are written atomically, one frame at a time.
+
+An export that refuses writes nothing: :func:`export` has the format write into a staging folder
+beside ``OUT`` (``.<OUT name>.export-*``, same file system) and moves its files into ``OUT`` only
+when the writer returned; a refusal (StoreError / ValueError / FormatError), or any other error
+or an interrupt, removes the staging folder and leaves ``OUT`` as it was (absent, empty, or an
+earlier export's files byte-identical). A writer reads what is already in ``OUT``
+(``carlaocc-release`` adds sequences to an earlier export) from :attr:`ExportJob.dest`.
 
 Export is a command, not a registered stage: it writes outside the root, into a folder the user
 names and may move, merge into (``carlaocc-release`` adds sequences to an earlier export) or
@@ -26,6 +35,10 @@ delete, and the root's lineage only vouches for what lives under the root.
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -77,9 +90,51 @@ def export(store: Store, config: DatasetConfig, fmt: str, voxel_size: float, out
         if value not in spec.options[key]:
             raise ValueError(f"{key} must be one of {', '.join(spec.options[key])}, got {value!r}")
     chosen = {k: allowed[0] for k, allowed in spec.options.items()} | options
-    job = ExportJob(store, config, fmt, voxel_size, Path(out), tuple(sequences) if sequences else None, progress, chosen)
-    n_seq, n_frames, n_files = spec.write(job)
-    return ExportSummary(fmt, n_seq, n_frames, n_files, Path(out))
+    out = Path(out)
+    staging = staging_folder(out)
+    try:
+        job = ExportJob(store, config, fmt, voxel_size, staging, tuple(sequences) if sequences else None, progress,
+                        chosen, dest=out)
+        n_seq, n_frames, n_files = spec.write(job)
+        merge_into(staging, out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return ExportSummary(fmt, n_seq, n_frames, n_files, out, written_coverage(out))
+
+
+def written_coverage(out: Path) -> float | None:
+    """``coverage`` of ``out/grid.json`` (the share of the target grid our built region covers),
+    None for a format that writes our own grid."""
+    try:
+        value = json.loads((out / "grid.json").read_text()).get("coverage")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(value) if isinstance(value, (int, float)) else None
+
+
+def staging_folder(out: Path) -> Path:
+    """A new empty folder beside ``out`` (in its nearest existing ancestor, so no folder is
+    created on the way to ``out`` before the export succeeds) on the same file system."""
+    parent = out.absolute().parent
+    while not parent.is_dir():
+        parent = parent.parent
+    return Path(tempfile.mkdtemp(prefix=f".{out.name}.export-", dir=parent))
+
+
+def merge_into(staging: Path, out: Path) -> None:
+    """Move every file of ``staging`` to the same relative path under ``out`` (replacing a file
+    there, keeping the others: ``carlaocc-release`` adds sequences to an earlier export)."""
+    for root, _, files in os.walk(staging):
+        for name in sorted(files):
+            src = Path(root) / name
+            dst = out / src.relative_to(staging)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.replace(src, dst)
+            except OSError:  # OUT on another file system (a mount point): copy, then drop the staged file
+                shutil.copy2(src, dst)
+                src.unlink()
+    out.mkdir(parents=True, exist_ok=True)
 
 
 def frame_count(store: Store, voxel_size: float, sequences: list[str] | None) -> int:

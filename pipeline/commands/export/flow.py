@@ -32,7 +32,7 @@ from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.commands.export.grids import target_manifest
-from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, frame_samples, one_label_table,
+from carlaocc.pipeline.commands.export.spec import (Coverage, ExportFormat, ExportJob, frame_samples, one_label_table,
                                                     save_sequence_splits, split_assignment)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.flow import uniocc_flow
@@ -56,6 +56,7 @@ def write_flow(job: ExportJob) -> tuple[int, int, int]:
     cats = taxonomy.mapping("uniocc", label_table)
     n_files = 0
     scene_infos = []
+    cover = Coverage(target, fmt)
 
     def sample(k: int) -> dict:
         out_ = ds[k]
@@ -75,6 +76,9 @@ def write_flow(job: ExportJob) -> tuple[int, int, int]:
             masks = {n: data[n] for n in ("mask_lidar", "mask_camera") if n in data}
             to_ego = smp["lidar_to_ego"]
             labels, m = resample(data["semantic"], grid, target, to_ego, masks, label_table=label_table)
+            # outside our region nothing is observed (without visibility masks: inside it everything)
+            inside = cover.inside(seq, grid, to_ego)
+            m = {k: (m[k].astype(bool) & inside) if k in m else inside for k in ("mask_lidar", "mask_camera")}
             inst, flow = resample_panoptic(data["semantic"], data.get("instance", np.zeros_like(data["semantic"], np.uint32)),
                                            data.get("flow"), grid, target, to_ego, label_table=label_table)
             if flow is None:
@@ -94,7 +98,7 @@ def write_flow(job: ExportJob) -> tuple[int, int, int]:
     if fmt == "uniocc":
         save_scene_infos(out / "scene_infos.pkl", scene_infos)
         n_files += 1
-    n_files += save_grid_manifest(out, target_manifest(target, label_table, fmt, NOTES[fmt]))
+    n_files += save_grid_manifest(out, target_manifest(target, label_table, fmt, NOTES[fmt] | cover.notes()))
     n_files += save_sequence_splits(out, seqs, split_assignment(store))
     return len(seqs), len(ds.samples), n_files
 

@@ -1,7 +1,9 @@
 """Ours resampled onto other datasets' grids by class priority
 (:func:`carlaocc.stages.export.resample.resample`; export from the finest voxel size built):
 
-* ``occ3d``: ``gts/<sequence>/<frame:06d>/labels.npz`` -- Occ3D-nuScenes grid (200 x 200 x 16,
+* ``occ3d``: ``gts/<sequence>/<token>/labels.npz``, ``token`` = ``<sequence>_<frame:06d>`` (the
+  token of ``mmdet3d-infos``, ``openocc-v2`` and ``det-gt``, so their trees score against each
+  other) -- Occ3D-nuScenes grid (200 x 200 x 16,
   0.4 m, ego frame, range [-40, -40, -1, 40, 40, 5.4] m), Occ3D labels (free = 17), with
   ``mask_lidar`` and ``mask_camera`` resampled from ours (observed when any observed voxel of ours
   falls in the target voxel).
@@ -18,8 +20,13 @@
   200 x 200 x 16 grid at 0.5 m (LiDAR frame, [-50, -50, -5, 50, 50, 3] m), Occ3D/nuScenes
   class ids 0-16.
 
-Without visibility masks (``voxelize.masks: false``) every target voxel inside our region
-counts as observed, the others as not.
+Our built region rarely covers the target grid (the default region, 51.2 m forward and 25.6 m
+back and to the sides, covers about half of Occ3D's 80 x 80 m; ``voxelize.region: occ3d`` covers
+it all): ``grid.json`` states ``built_region`` (in the target frame) and ``coverage`` (the share
+of target voxels whose centre lies inside it), and the voxels outside it are marked unobserved
+in every mask the format has (Occ3D's masks 0; SemanticKITTI ``.invalid`` and ``.occluded`` set;
+SSCBench 255, its ignore label). Without visibility masks (``voxelize.masks: false``) every
+target voxel inside our region counts as observed, the others as not.
 """
 
 from __future__ import annotations
@@ -36,9 +43,9 @@ from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store
-from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, save_sequence_splits, voxelized_export
+from carlaocc.pipeline.commands.export.spec import (Coverage, ExportFormat, ExportJob, save_sequence_splits,
+                                                    voxelized_export)
 from carlaocc.schemas import taxonomy
-from carlaocc.stages.export.boxes import grid_coverage
 from carlaocc.stages.export.resample import (OCC3D_NUSCENES, SEMANTICKITTI_GRID, SSCBENCH_KITTI360, SURROUNDOCC_GRID,
                                                TargetGrid, downsample_ssc, resample)
 
@@ -69,6 +76,7 @@ def write_resampled(job: ExportJob) -> tuple[int, int, int]:
     target = TARGETS[fmt]
     todo, splits, label_table = voxelized_export(job)
     occ = OccupancyStore(store)
+    cover = Coverage(target, fmt)
     n_frames = n_files = 0
     for seq, grid, frame_count in todo:
         # the target grid's frame: Occ3D's is the ego (the LiDAR mount the sequence was recorded
@@ -78,25 +86,24 @@ def write_resampled(job: ExportJob) -> tuple[int, int, int]:
         to_target = lidar_to_ego if fmt == "occ3d" else np.eye(4)
         has_masks = occ.exists(seq, grid, "mask_lidar") and occ.exists(seq, grid, "mask_camera")
         names = ("semantic", "mask_lidar", "mask_camera") if has_masks else ("semantic",)
-        # without visibility masks, "observed" = inside our region: the same for every frame
-        coverage = None if has_masks or fmt == "surroundocc" else grid_coverage(target, grid, to_target)
+        # outside our region nothing is observed; without visibility masks, "observed" = inside it
+        inside = cover.inside(seq, grid, to_target)
         for t in range(frame_count):
             data = occ.read_frame(seq, grid, t, names)
             labels, m = resample(data["semantic"], grid, target, to_target, {k: data[k] for k in names[1:]},
                                  label_table=label_table)
-            if coverage is not None:
-                m = dict.fromkeys(("mask_lidar", "mask_camera"), coverage)
+            m = {k: (m[k].astype(bool) & inside) if has_masks else inside for k in ("mask_lidar", "mask_camera")}
             n_files += WRITERS[fmt](store, out, seq, t, labels, m, target)
             n_frames += 1
             job.advance()
-    n_files += save_grid_manifest(out, target_manifest(target, label_table, fmt))
+    n_files += save_grid_manifest(out, target_manifest(target, label_table, fmt, cover.notes()))
     n_files += save_sequence_splits(out, [s for s, _, _ in todo], splits)
     return len(todo), n_frames, n_files
 
 
 def _occ3d(store, out, seq, t, labels, m, target) -> int:
     frame = Occ3DFrame(labels, m["mask_lidar"].astype(np.uint8), m["mask_camera"].astype(np.uint8))
-    save_occ3d(out / "gts" / seq / f"{t:06d}" / "labels.npz", frame)
+    save_occ3d(out / "gts" / seq / f"{seq}_{t:06d}" / "labels.npz", frame)
     return 1
 
 
@@ -129,7 +136,7 @@ WRITERS = {"occ3d": _occ3d, "semantickitti": _semantickitti, "sscbench-kitti360"
            "surroundocc": _surroundocc}
 
 FORMATS = (
-    ExportFormat("occ3d", "gts/<seq>/<frame>/labels.npz: 200x200x16 at 0.4 m, ego frame, free 17, masks",
+    ExportFormat("occ3d", "gts/<seq>/<seq>_<frame>/labels.npz: 200x200x16 at 0.4 m, ego frame, free 17, masks",
                  write_resampled),
     ExportFormat("semantickitti", "sequences/<seq>/voxels/<frame>.bin/.label/.invalid/.occluded: 256x256x32 at "
                  "0.2 m, forward", write_resampled),

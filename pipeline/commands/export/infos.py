@@ -38,7 +38,7 @@ from carlaocc.catalog.formats import Occ3DFrame, atomic_write, save_occ3d
 from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
 from carlaocc.catalog.formats.mmdet3d import jpeg_bytes, save_infos
 from carlaocc.catalog.occupancy import OccupancyStore
-from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, frame_samples, one_label_table,
+from carlaocc.pipeline.commands.export.spec import (Coverage, ExportFormat, ExportJob, frame_samples, one_label_table,
                                                     save_sequence_splits, split_assignment)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import points_in_boxes
@@ -118,12 +118,13 @@ def frame_info(sample: dict, token: str, prev: str, nxt: str, label_table: str,
     return info, files
 
 
-def occ3d_manifest(label_table: str) -> dict:
-    """``grid.json`` of the Occ3D ground truth the infos point to."""
+def occ3d_manifest(label_table: str, notes: dict | None = None) -> dict:
+    """``grid.json`` of the Occ3D ground truth the infos point to (``notes``: the built region
+    and its coverage, :class:`carlaocc.pipeline.commands.export.spec.Coverage`)."""
     g = OCC3D_NUSCENES
     grid = {"origin": g.range_min, "voxel_size": g.voxel_size, "shape": g.shape}
     return grid_manifest("occ3d-nuscenes (gts/<scene>/<token>/labels.npz)", "ego", [grid],
-                         taxonomy.OCC3D_NUSCENES_NAMES, g.free_label, label_table)
+                         taxonomy.OCC3D_NUSCENES_NAMES, g.free_label, label_table, notes=notes)
 
 
 def write_infos(job: ExportJob) -> tuple[int, int, int]:
@@ -138,6 +139,7 @@ def write_infos(job: ExportJob) -> tuple[int, int, int]:
     by_split: dict[str, list] = {}
     n_files = 0
     camera_names: list[str] = []
+    cover = Coverage(OCC3D_NUSCENES, job.format)
     order = ds.samples
     for idx, (seq, frame) in enumerate(order):
         token = f"{seq}_{frame:06d}"
@@ -155,9 +157,11 @@ def write_infos(job: ExportJob) -> tuple[int, int, int]:
         data = occ.read_frame(seq, grid, frame, names)
         labels, m = resample(data["semantic"], grid, OCC3D_NUSCENES, sample["lidar_to_ego"],
                              {k: data[k] for k in names[1:]}, label_table=label_table)
-        ones = np.ones(OCC3D_NUSCENES.shape, np.uint8)
+        # outside our region nothing is observed (without visibility masks: inside it everything)
+        inside = cover.inside(seq, grid, sample["lidar_to_ego"])
+        mask = {k: (m[k].astype(bool) & inside) if k in m else inside for k in ("mask_lidar", "mask_camera")}
         save_occ3d(out / info["occ_path"] / "labels.npz",
-                   Occ3DFrame(labels, m.get("mask_lidar", ones).astype(np.uint8), m.get("mask_camera", ones).astype(np.uint8)))
+                   Occ3DFrame(labels, mask["mask_lidar"].astype(np.uint8), mask["mask_camera"].astype(np.uint8)))
         n_files += len(files) + 1
         by_split.setdefault(assignment.get(seq, "all") if assignment else "all", []).append(info)
         job.advance()
@@ -165,7 +169,7 @@ def write_infos(job: ExportJob) -> tuple[int, int, int]:
                 "detection_classes": list(DETECTION_CLASSES), "camera_names": camera_names}
     for split, infos in by_split.items():
         n_files += save_infos(out, f"carlaocc_infos_{split}", {"infos": infos, "metadata": metadata})
-    n_files += save_grid_manifest(out, occ3d_manifest(label_table))
+    n_files += save_grid_manifest(out, occ3d_manifest(label_table, cover.notes()))
     n_files += save_sequence_splits(out, seqs, assignment)
     return len(seqs), len(order), n_files
 

@@ -177,10 +177,10 @@ def write_release(job: ExportJob) -> tuple[int, int, int]:
     grids = [(g, release_grid_spec(g)) for g in rel.RELEASE_GRIDS]
     table_name = one_label_table(store, {s: g for s, g, _ in todo})
     # an earlier export into the same folder: same table and encoding, then its sequences stay
-    note = _previous_note(out)
+    note = _previous_note(job.target)
     for key, value in (("format", "carlaocc-release"), ("label_table", table_name), ("encoding", encoding)):
         if note and note.get(key) != value:
-            raise StoreError(f"{out / NOTE}: an export with {key} {note.get(key)!r} is there, this one is {value!r}: "
+            raise StoreError(f"{job.target / NOTE}: an export with {key} {note.get(key)!r} is there, this one is {value!r}: "
                              f"export into another folder")
     note = {"format": "carlaocc-release", "label_table": table_name, "encoding": encoding,
             "labels": rel.ENCODING_TEXT[encoding], "towns": note.get("towns", {}), "sequences": note.get("sequences", {}),

@@ -24,13 +24,16 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec, voxel_size_key
 from carlaocc.schemas.records import ActorStateRecord, SequenceRecord, TownRecord
+from carlaocc.stages.export.boxes import grid_coverage, region_in_target
 
 
 @dataclass(frozen=True)
 class ExportJob:
     """One ``carlaocc export``: the root, its config, the built voxel size (m) to export from,
-    where to write, the sequences (None: every voxelized one), a progress callback (frames) and
-    the format's options (its declared defaults filled in)."""
+    where to write (``out``: a staging folder moved into ``dest`` once the writer returned, so a
+    refusal writes nothing), the sequences (None: every voxelized one), a progress callback
+    (frames), the format's options (its declared defaults filled in) and ``dest``, the folder
+    the user named, where a writer reads what an earlier export left (None: ``out``)."""
 
     store: Store
     config: DatasetConfig
@@ -40,6 +43,12 @@ class ExportJob:
     sequences: tuple[str, ...] | None = None
     progress: Callable[[int], None] | None = None
     options: Mapping[str, str] = field(default_factory=dict)
+    dest: Path | None = None
+
+    @property
+    def target(self) -> Path:
+        """The folder the export ends up in (``dest``, else ``out``)."""
+        return self.dest if self.dest is not None else self.out
 
     def advance(self, frames: int = 1) -> None:
         if self.progress:
@@ -67,6 +76,65 @@ class ExportSummary:
     frames: int
     files: int
     out: Path
+    coverage: float | None = None  # grid.json's: the share of the target grid our built region covers
+
+
+# what each format writes where the target grid lies outside our built region
+OUTSIDE_REGION = {
+    "occ3d": "free (17) with mask_lidar and mask_camera 0",
+    "mmdet3d-infos": "free (17) with mask_lidar and mask_camera 0",
+    "semantickitti": "unlabeled (0), empty, .invalid and .occluded set",
+    "sscbench-kitti360": "255 (unobserved, the ignore label)",
+    "uniocc": "free (10) with occ_mask_camera 0",
+    "surroundocc": "no row (free): the format has no mask, so this is not told apart from free space",
+    "openocc-v2": "free (16): the format has no mask, so this is not told apart from free space",
+}
+
+
+class Coverage:
+    """Which voxels of ``target`` (a ``TargetGrid``) our built region covers, per sequence
+    (:func:`carlaocc.stages.export.boxes.grid_coverage`, computed once per grid and transform),
+    and what ``grid.json`` says of it (:meth:`notes`)."""
+
+    def __init__(self, target, fmt: str) -> None:
+        self.target, self.format = target, fmt
+        self._cache: dict = {}
+        self.seen: dict[str, dict] = {}
+
+    def inside(self, seq: str, grid: GridSpec, to_target) -> np.ndarray:
+        """bool ``target.shape``: the voxels whose centre lies inside ``seq``'s region."""
+        to_target = np.asarray(to_target, np.float64)
+        key = (grid.model_dump_json(), to_target.round(9).tobytes())
+        if key not in self._cache:
+            inside = grid_coverage(self.target, grid, to_target)
+            lo, hi = region_in_target(grid, to_target)
+            self._cache[key] = inside, {"min": lo, "max": hi, "coverage": round(float(inside.mean()), 6)}
+        inside, entry = self._cache[key]
+        self.seen[seq] = entry
+        return inside
+
+    def notes(self) -> dict:
+        """``grid.json`` keys: ``built_region`` (our region in the target frame: ``min`` / ``max``,
+        or one per sequence when they differ), ``coverage`` (0..1, the share of the target's
+        voxels whose centre lies inside it; the least over the sequences) and what the voxels
+        outside it hold."""
+        if not self.seen:
+            return {}
+        entries = list(self.seen.values())
+        region: dict = {"frame": self.target.frame}
+        if all(e == entries[0] for e in entries):
+            region |= {"min": entries[0]["min"], "max": entries[0]["max"]}
+        else:
+            region["sequences"] = dict(sorted(self.seen.items()))
+        return {"built_region": region, "coverage": min(e["coverage"] for e in entries),
+                "coverage_definition": "share of the grid's voxels whose centre lies inside built_region",
+                "outside_built_region": OUTSIDE_REGION.get(self.format, "unobserved")}
+
+
+def outside_phrase(fmt: str) -> str:
+    """How the CLI's warning says what lies outside the built region."""
+    text = OUTSIDE_REGION.get(fmt, "")
+    return "written free (the format has no mask)" if "no mask" in text else "marked unobserved"
 
 
 def voxelized_sequences(store: Store, voxel_size: float,
