@@ -155,10 +155,10 @@ def ray_inputs(origins: np.ndarray, directions: np.ndarray, grid_origin, voxel_s
     Returns ((Q, 3), (Q * N, 3)) float32, origin-major."""
     o = np.asarray(origins, np.float64).reshape(-1, 3)
     off = np.asarray(grid_origin, np.float32).astype(np.float64)
-    vs = np.float64(np.float32(voxel_size))
+    voxel_size32 = np.float64(np.float32(voxel_size))  # the voxel size as the official float32 grid holds it
     d = np.asarray(directions, np.float32).reshape(-1, 3).astype(np.float64)
-    O = ((o - off) / vs).astype(np.float32)
-    E = (((d[None, :, :] + o[:, None, :]) - off) / vs).astype(np.float32).reshape(-1, 3)
+    O = ((o - off) / voxel_size32).astype(np.float32)
+    E = (((d[None, :, :] + o[:, None, :]) - off) / voxel_size32).astype(np.float32).reshape(-1, 3)
     return np.ascontiguousarray(O), np.ascontiguousarray(E)
 
 
