@@ -67,9 +67,9 @@ def test_repeated_ingest_runs_all_exit_0(tmp_path):
     # the corpus run that once ended 134 after a success, repeated: every run's code is 0
     src = tmp_path / "src"
     src.mkdir()
-    (src / "pole.glb").write_bytes(shared_path("testdata/meshes/trimesh-models/simple_pole.glb").read_bytes())
+    (src / "pole.glb").write_bytes(shared_path("meshes/trimesh-models/simple_pole.glb").read_bytes())
     cmap = tmp_path / "map.csv"
-    cmap.write_text("glob,category,subclass\n*.glb,Pole,street_pole\n")
+    cmap.write_text("glob,category,subclass\n*.glb,Pole,utility_pole\n")
     codes = []
     for k in range(20):
         r = subprocess.run([sys.executable, "-m", "carlaocc", "ingest", "folder", str(src), "--category-map", str(cmap),
