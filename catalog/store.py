@@ -63,13 +63,21 @@ class Store:
     def __post_init__(self) -> None:
         url = self.url
         if "://" not in url:
+            # a local path is a path: '::', '#', '?' and '%' are characters of it, never URL syntax
             url = os.path.abspath(os.path.expanduser(url))
+        elif "::" in url:
+            # fsspec would chain filesystems and root the dataset in the first one (another
+            # dataset's folder): carlaocc roots are one filesystem, so such a URL is refused
+            raise ValueError(f"{url}: '::' chains filesystems in an fsspec URL, which a dataset root cannot be; give "
+                             "one path or one URL (s3://bucket/prefix, file:///abs/path)")
         object.__setattr__(self, "url", url.rstrip("/") or "/")
 
     # -- filesystem -------------------------------------------------------------------------
     # resolved once per Store object (a chunk read asks for both: url_to_fs costs ~0.1 ms)
     @functools.cached_property
     def fs(self) -> fsspec.AbstractFileSystem:
+        if "://" not in self.url:  # a plain local path: never parsed as a URL
+            return fsspec.filesystem("file")
         fs, _ = fsspec.core.url_to_fs(self.url, **self.storage_options)
         return fs
 
@@ -93,6 +101,8 @@ class Store:
 
     @functools.cached_property
     def root(self) -> str:
+        if "://" not in self.url:  # already absolute and normalised by __post_init__
+            return self.url
         _, path = fsspec.core.url_to_fs(self.url)
         return path
 

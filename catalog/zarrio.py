@@ -21,8 +21,8 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 import threading
+import uuid
 
 import numpy as np
 from numcodecs import Zstd
@@ -113,7 +113,10 @@ def put_object(store: Store, key: str, payload: bytes) -> None:
         path = store.path(key)
         directory = os.path.dirname(path)
         os.makedirs(directory, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix=".chunk-")
+        # os.open with 0o666, not tempfile.mkstemp: its 0600 would stick to the chunk, ignoring the
+        # umask, and another user of a shared root could not read it
+        tmp = os.path.join(directory, f".chunk-{uuid.uuid4().hex}")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         try:
             with os.fdopen(fd, "wb") as f:
                 f.write(payload)

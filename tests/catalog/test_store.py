@@ -117,3 +117,36 @@ def test_mesh_load_error_names_path(store):
     store.write_bytes("admesh/meshes/bad.glb", b"not a glb")
     with pytest.raises(StoreError, match="bad.glb"):
         MeshStore(store).load("admesh/meshes/bad.glb")
+
+
+@pytest.mark.parametrize("name", ["victim::x/new", "a#b", "q?x=1", "p%20c", "sp ace", "[br]"])
+def test_a_local_root_is_a_path_whatever_its_characters(tmp_path, name):
+    # '::' once made fsspec chain filesystems: the root became the folder before it, another dataset
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep.txt").write_text("x")
+    store = Store(str(tmp_path / name))
+    assert store.root == str(tmp_path / name)
+    store.write_bytes("f.txt", b"1")
+    assert (tmp_path / name / "f.txt").read_bytes() == b"1"
+    assert sorted(p.name for p in victim.iterdir()) == ["keep.txt"]
+
+
+def test_a_chained_url_is_refused():
+    with pytest.raises(ValueError, match="'::' chains filesystems"):
+        Store("file:///tmp/a::memory://b")
+
+
+def test_files_honour_the_umask(tmp_path):
+    # a shared root: chunks, tables and meshes readable by the group when the umask says so
+    from carlaocc.catalog.zarrio import put_object
+
+    store = Store(str(tmp_path / "root"))
+    old = os.umask(0o022)
+    try:
+        put_object(store, "occupancy.zarr/s/0.2/semantic/c/0/0/0/0", b"chunk")
+        store.write_bytes("scenes/t.parquet", b"table")
+    finally:
+        os.umask(old)
+    for rel in ("occupancy.zarr/s/0.2/semantic/c/0/0/0/0", "scenes/t.parquet"):
+        assert os.stat(tmp_path / "root" / rel).st_mode & 0o777 == 0o644, rel
