@@ -187,6 +187,10 @@ class Store:
                 raise StoreError(f"dataset root {self.url} is a file, not a directory")
             probe = path
             while not os.path.exists(probe):
+                if os.path.islink(probe):  # a dangling link: nothing could be created through it
+                    raise StoreError(f"dataset root {self.url} is not writable: {probe} is a symbolic link to "
+                                     f"{os.readlink(probe)}, which does not exist (create it, or point the link "
+                                     "elsewhere)")
                 probe = os.path.dirname(probe)
             if not os.path.isdir(probe):
                 raise StoreError(f"dataset root {self.url} is not writable: {probe} is a file")

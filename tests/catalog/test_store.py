@@ -150,3 +150,12 @@ def test_files_honour_the_umask(tmp_path):
         os.umask(old)
     for rel in ("occupancy.zarr/s/0.2/semantic/c/0/0/0/0", "scenes/t.parquet"):
         assert os.stat(tmp_path / "root" / rel).st_mode & 0o777 == 0o644, rel
+
+
+@pytest.mark.parametrize("below", ["", "sub"])
+def test_a_dangling_link_root_is_refused_up_front(tmp_path, below):
+    (tmp_path / "root").symlink_to(tmp_path / "nowhere")
+    store = Store(str(tmp_path / "root" / below) if below else str(tmp_path / "root"))
+    with pytest.raises(StoreError, match="symbolic link to .*nowhere, which does not exist"):
+        store.check_writable()
+    assert not (tmp_path / "nowhere").exists()
