@@ -52,11 +52,11 @@ def run(store, config=None, voxel_sizes=(0.2,), stages=None, scheduler=None, for
     skipped. Returns one outcome per stage run. ``scheduler``: None for a LocalCluster,
     ``"synchronous"``, or a Dask scheduler address."""
     from carlaocc.catalog.store import Store
-    from carlaocc.pipeline.engine.runner import run as _run
+    from carlaocc.pipeline.engine.runner import run as run_stages
     from carlaocc.schemas.configs import DatasetConfig
 
     store = store if isinstance(store, Store) else Store(str(store))
-    return _run(store, config or DatasetConfig(), tuple(float(v) for v in voxel_sizes), stages, scheduler, force)
+    return run_stages(store, config or DatasetConfig(), tuple(float(v) for v in voxel_sizes), stages, scheduler, force)
 
 
 def __getattr__(name: str):

@@ -126,7 +126,7 @@ class FrameSamples:
                 raise DatasetError(f"a dense frame at {self.voxel_size:g} m has {n:,} voxels (over dense_limit "
                                    f"{self.dense_limit:,}): use occupancy='sparse' or a crop")
         if self.occupancy == "crop":
-            n = max(int(np.prod(np.subtract(*reversed(_crop_box(g, self.crop))))) for g in self._grids.values())
+            n = max(int(np.prod(np.subtract(*reversed(crop_box(g, self.crop))))) for g in self._grids.values())
             if n > self.dense_limit:
                 raise DatasetError(f"the crop holds {n:,} voxels at {self.voxel_size:g} m (over dense_limit "
                                    f"{self.dense_limit:,}): crop less, or use occupancy='sparse'")
@@ -261,7 +261,7 @@ class FrameSamples:
         if self.occupancy == "dense":
             lo, hi = np.zeros(3, np.int64), np.array([X, Y, Z], np.int64)
         else:
-            lo, hi = _crop_box(grid, self.crop)
+            lo, hi = crop_box(grid, self.crop)
         out = _dense_box(occ, seq, grid, frame, names, cx, cy, lo, hi)
         if self.occupancy == "crop":
             out["crop_offset"] = lo
@@ -302,7 +302,7 @@ class FrameSamples:
         return out
 
 
-def _crop_box(grid, crop) -> tuple[np.ndarray, np.ndarray]:
+def crop_box(grid, crop) -> tuple[np.ndarray, np.ndarray]:
     """Voxel index box ``[lo, hi)`` of the voxels whose centres lie in the metre box ``crop``
     (faces included, to a nanometre: a face on a voxel centre takes that voxel on every axis)."""
     voxel_size, o, shape = float(grid.voxel_size), np.asarray(grid.region_min, float), np.asarray(grid.shape)

@@ -98,7 +98,7 @@ def rig_from_calib(calib, base):
     return base.model_copy(update={"cameras": tuple(cams)})
 
 
-def _check_rig(rig, calib, label: str) -> None:
+def check_rig(rig, calib, label: str) -> None:
     """The config's rig must be the recording's (the voxelize masks and the sensors use it)."""
     want = rig_from_calib(calib, rig)
     mine = {c.name: c for c in rig.cameras}
@@ -160,7 +160,7 @@ def recorded_scenes(store, cfg: ScenesConfig, spec: TownSpec, index: int, name: 
         rec = discover(spec.recording)
         town_name = _map_of(rec, spec)
         calib = read_calib(rec.calib)
-        _check_rig(cfg.rig, calib, label)
+        check_rig(cfg.rig, calib, label)
         if town_name not in rec.scene_meshes:
             raise RecordingError(f"{rec.root / 'SceneMeshes' / town_name}: missing (the town's exported meshes)")
         actors, skipped = read_actor_info(rec.scene_meshes[town_name])
@@ -246,7 +246,7 @@ def recording_config(recording: str, existing=None):
     rig = rig_from_calib(calib, base.scenes.rig)
     # one rig per dataset: a recording joins a dataset only when its calibration is the dataset's
     if existing is not None:
-        _check_rig(existing.scenes.rig, calib, f"recording {recording} (the dataset's scenes.rig)")
+        check_rig(existing.scenes.rig, calib, f"recording {recording} (the dataset's scenes.rig)")
     root = str(Path(recording).resolve())
     maps = sorted({s.town for s in rec.sequences})
     new = {m: TownSpec(style="carla-recording", recording=root, map=m) for m in maps}

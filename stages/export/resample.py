@@ -211,7 +211,7 @@ def _bin_points(
     return keep, lin[keep]
 
 
-def _bin_reduce(
+def bin_reduce(
     vol: np.ndarray, values, grid: GridSpec, m: np.ndarray, target: TargetGrid, ufunc, dtype, points: bool
 ) -> np.ndarray:
     """Reduce ``values(vol)`` of the non-zero voxels of ``vol`` per target voxel with ``ufunc``
@@ -281,13 +281,13 @@ def resample(
     points = not np.array_equal(m[:3, :3], np.eye(3))  # a pure translation takes the fast path
 
     # 1. per target voxel, the max rank of the classes whose centres land in it (0 = nothing)
-    best = _bin_reduce(semantic, lambda a: rank[a], grid, m, target, np.maximum, np.uint8, points)
+    best = bin_reduce(semantic, lambda a: rank[a], grid, m, target, np.maximum, np.uint8, points)
     # 2. rank -> our class -> target id; nothing received -> free
     labels = lut[label[best]]
     labels[best == 0] = target.free_label
     # 3. masks: a target voxel is observed when any observed voxel centre of ours falls in it
     out_masks = {
-        name: _bin_reduce(np.asarray(mk), lambda a: a != 0, grid, m, target, np.logical_or, bool, points)
+        name: bin_reduce(np.asarray(mk), lambda a: a != 0, grid, m, target, np.logical_or, bool, points)
         for name, mk in mask_items.items()
     }
     return labels, out_masks
@@ -323,7 +323,7 @@ def resample_panoptic(
     points = not np.array_equal(m[:3, :3], np.eye(3))
     # 1. per target voxel, max of (class rank << 32 | instance): the winning class's largest id
     key = (rank[semantic].astype(np.uint64) << np.uint64(32)) | np.asarray(instance, dtype=np.uint64)
-    best = _bin_reduce(key, lambda a: a, grid, m, target, np.maximum, np.uint64, points)
+    best = bin_reduce(key, lambda a: a, grid, m, target, np.maximum, np.uint64, points)
     instances = (best & np.uint64(0xFFFFFFFF)).astype(np.uint32)
     if flow is None:
         return instances, None
@@ -332,11 +332,11 @@ def resample_panoptic(
         raise ValueError(f"flow has shape {flow.shape}, expected {(*grid.shape, 3)}")
     # 2. the mean of the non-zero flows per target voxel, component by component
     moving = np.any(flow != 0, axis=-1)
-    count = _bin_reduce(moving.astype(np.uint32), lambda a: a, grid, m, target, np.add, np.uint32, points)
+    count = bin_reduce(moving.astype(np.uint32), lambda a: a, grid, m, target, np.add, np.uint32, points)
     out = np.zeros((*target.shape, 3), np.float32)
     for c in range(3):
         comp = np.where(moving, flow[..., c].astype(np.float32), np.float32(0))
-        out[..., c] = _bin_reduce(comp, lambda a: a, grid, m, target, np.add, np.float64, points)
+        out[..., c] = bin_reduce(comp, lambda a: a, grid, m, target, np.add, np.float64, points)
     with np.errstate(invalid="ignore", divide="ignore"):
         out /= np.maximum(count, 1)[..., None]
     # 3. velocities are directions: the frame change rotates them, it does not move them

@@ -245,7 +245,7 @@ def test_show_sensors_puts_the_recorded_rgb_first(built, tmp_path):
 
 def test_rig_from_calib_and_the_rear_cameras():
     from carlaocc.catalog.store import StoreError
-    from carlaocc.pipeline.tasks.recording import _check_rig, rig_from_calib
+    from carlaocc.pipeline.tasks.recording import check_rig, rig_from_calib
     from carlaocc.schemas.rig import RigConfig
 
     rig = RigConfig()
@@ -261,10 +261,10 @@ def test_rig_from_calib_and_the_rear_cameras():
     rebuilt = rig_from_calib(calib, rig)
     for a, b in zip(rebuilt.cameras, rig.cameras):
         assert a.name == b.name and (a.x, a.y, a.z) == pytest.approx((b.x, b.y, b.z)) and a.yaw_deg == pytest.approx(b.yaw_deg)
-    _check_rig(rig, calib, "test")  # the default rig is the calibration's
+    check_rig(rig, calib, "test")  # the default rig is the calibration's
     turned = dict(cams, cam_00=cams["cam_00"] @ np.asarray(rig.cameras[0].model_copy(update={"yaw_deg": 5.0, "x": 0, "y": 0, "z": 0}).sensor_to_ego()))
     with pytest.raises(StoreError, match="camera_00 differs"):
-        _check_rig(rig, cr.Calib(1408, 376, 103.744808, np.eye(3), turned), "test")
+        check_rig(rig, cr.Calib(1408, 376, 103.744808, np.eye(3), turned), "test")
 
 
 def test_dataset_config_merge_keeps_town_positions(recording, tmp_path):

@@ -65,12 +65,12 @@ def test_sparse_occupancy_is_the_stored_frame_read_from_its_own_chunks(default_0
 
 
 def test_crop_faces_on_voxel_centres_take_those_voxels_on_every_axis(default_01):
-    from carlaocc.catalog.samples import _crop_box
+    from carlaocc.catalog.samples import crop_box
 
     g = GridSpec(voxel_size=0.2)
     o = np.asarray(g.region_min)
     # faces exactly on centres (index 3 and 6 on each axis)
-    lo, hi = _crop_box(g, (o + 3.5 * 0.2, o + 6.5 * 0.2))
+    lo, hi = crop_box(g, (o + 3.5 * 0.2, o + 6.5 * 0.2))
     assert lo.tolist() == [3, 3, 3] and hi.tolist() == [7, 7, 7]
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.stages.geometry import concatenate, is_watertight
-from carlaocc.stages.ingest.procedural.catalogue import _records  # tests may reach into the builders
+from carlaocc.stages.ingest.procedural.catalogue import asset_records
 from carlaocc.stages.ingest.procedural.people import pedestrian
 from carlaocc.stages.scenes.people import pedestrians as P
 from carlaocc.stages.scenes.people.gait.cycles import canonical_cycle
@@ -57,7 +57,7 @@ def _errors(pred, ph):
 
 def _pedestrian_geometry(subclass: str, seed: int) -> AssetGeometry:
     parts = pedestrian(subclass)(np.random.default_rng(seed))
-    return _records("Pedestrian", subclass, seed, parts)[2]
+    return asset_records("Pedestrian", subclass, seed, parts)[2]
 
 
 # --------------------------------------------------------------------------- cycle and model

@@ -25,7 +25,7 @@ from carlaocc.schemas.taxonomy import (
     mapping,
     thing_ids,
 )
-from carlaocc.stages.export.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, _bin_reduce, resample
+from carlaocc.stages.export.resample import OCC3D_NUSCENES, SSCBENCH_KITTI360, TargetGrid, bin_reduce, resample
 from carlaocc.stages.voxelize.pooling import (
     DEFAULT_POOLING_PRIORITY,
     pool_instances,
@@ -398,8 +398,8 @@ def test_translation_fast_path_equals_binning_the_centres(seed, shift, target, v
     m[:3, 3] = shift
     rank, _ = rank_table()
     for values, ufunc, dtype in ((lambda a: rank[a], np.maximum, np.uint8), (lambda a: a != 0, np.logical_or, bool)):
-        fast = _bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=False)
-        slow = _bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=True)
+        fast = bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=False)
+        slow = bin_reduce(vol, values, grid, m, target, ufunc, dtype, points=True)
         assert np.array_equal(fast, slow)
 
 

@@ -179,7 +179,7 @@ def _variant_rng(seed: int, category: str, subclass: str, variant: int) -> np.ra
     return np.random.default_rng(np.random.SeedSequence([seed & 0xFFFFFFFFFFFFFFFF, key, variant]))
 
 
-def _records(
+def asset_records(
     category: str, subclass: str, variant: int, parts: list[MeshPart]
 ) -> tuple[AssetRecord, list[PartRecord], AssetGeometry]:
     """Standardize one asset's parts and describe them as records."""
@@ -224,7 +224,7 @@ def ingest_procedural(config: IngestConfig) -> IngestResult:
         for variant in range(config.variants_per_subclass):
             # draw this variant's sizes, build its parts, standardize and describe them
             rng = _variant_rng(config.seed, category, subclass, variant)
-            asset, part_records, geom = _records(category, subclass, variant, build(rng))
+            asset, part_records, geom = asset_records(category, subclass, variant, build(rng))
             if asset.asset_id in geometry:  # identical draws cannot happen with continuous ranges
                 raise ValueError(f"procedural asset {category}/{subclass}/{variant} duplicates {asset.asset_id}")
             assets.append(asset)
