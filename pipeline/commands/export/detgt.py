@@ -26,10 +26,11 @@ import math
 import numpy as np
 
 from carlaocc.catalog.formats import atomic_write
-from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, frame_samples, split_assignment
+from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, frame_samples, sample_with_boxes,
+                                                    split_assignment)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import points_in_boxes
-from carlaocc.stages.geometry import boxes_in_frame, quaternion_wxyz
+from carlaocc.stages.geometry import quaternion_wxyz
 
 DET_NAMES = {"Car": "car", "Truck": "truck", "Bus": "bus", "Pedestrian": "pedestrian", "Motorcycle": "motorcycle",
              "Bicycle": "bicycle"}
@@ -78,8 +79,7 @@ def write_det_gt(job: ExportJob) -> tuple[int, int, int]:
     egos: dict[str, list] = {}
     for k, (seq, frame) in enumerate(ds.samples):
         token = f"{seq}_{frame:06d}"
-        sample = ds[k]
-        sample |= boxes_in_frame(ds.actor_rows(k), np.linalg.inv(sample["lidar_pose"]))
+        sample = sample_with_boxes(ds, k)
         results[token] = sample_boxes(sample, token)
         egos[token] = sample["ego_pose"][:3, 3].tolist()
         job.advance()

@@ -33,10 +33,9 @@ from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.commands.export.grids import target_manifest
 from carlaocc.pipeline.commands.export.spec import (Coverage, ExportFormat, ExportJob, frame_samples, one_label_table,
-                                                    save_sequence_splits, split_assignment)
+                                                    sample_with_boxes, save_sequence_splits, split_assignment)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.flow import uniocc_flow
-from carlaocc.stages.geometry import boxes_in_frame
 from carlaocc.stages.export.resample import OPENOCC_V2, UNIOCC, resample, resample_panoptic
 
 GRIDS = {"openocc-v2": OPENOCC_V2, "uniocc": UNIOCC}
@@ -58,18 +57,14 @@ def write_flow(job: ExportJob) -> tuple[int, int, int]:
     scene_infos = []
     cover = Coverage(target, fmt)
 
-    def sample(k: int) -> dict:
-        out_ = ds[k]
-        return out_ | boxes_in_frame(ds.actor_rows(k), np.linalg.inv(out_["lidar_pose"]))
-
     for seq in seqs:
         grid = ds.grid(seq)
         idx = [k for k, (s, _) in enumerate(ds.samples) if s == seq]
         names = tuple(n for n in ("semantic", "instance", "flow", "mask_lidar", "mask_camera") if occ.exists(seq, grid, n))
         paths = []
-        samples = {k: sample(k) for k in idx} if fmt == "uniocc" else {}
+        samples = {k: sample_with_boxes(ds, k) for k in idx} if fmt == "uniocc" else {}
         for pos, k in enumerate(idx):
-            smp = samples.get(k) or sample(k)
+            smp = samples.get(k) or sample_with_boxes(ds, k)
             frame = smp["frame_index"]
             token = f"{seq}_{frame:06d}"
             data = occ.read_frame(seq, grid, frame, names)

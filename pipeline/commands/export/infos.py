@@ -39,10 +39,10 @@ from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest
 from carlaocc.catalog.formats.mmdet3d import jpeg_bytes, save_infos
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.pipeline.commands.export.spec import (Coverage, ExportFormat, ExportJob, frame_samples, one_label_table,
-                                                    save_sequence_splits, split_assignment)
+                                                    sample_with_boxes, save_sequence_splits, split_assignment)
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.export.boxes import points_in_boxes
-from carlaocc.stages.geometry import boxes_in_frame, quaternion_wxyz
+from carlaocc.stages.geometry import quaternion_wxyz
 from carlaocc.stages.export.resample import OCC3D_NUSCENES, resample
 
 DETECTION_CLASSES = ("car", "truck", "construction_vehicle", "bus", "trailer", "barrier", "motorcycle", "bicycle",
@@ -145,8 +145,7 @@ def write_infos(job: ExportJob) -> tuple[int, int, int]:
         token = f"{seq}_{frame:06d}"
         prev = f"{seq}_{order[idx - 1][1]:06d}" if idx and order[idx - 1][0] == seq else ""
         nxt = f"{seq}_{order[idx + 1][1]:06d}" if idx + 1 < len(order) and order[idx + 1][0] == seq else ""
-        sample = ds[idx]
-        sample |= boxes_in_frame(ds.actor_rows(idx), np.linalg.inv(sample["lidar_pose"]))
+        sample = sample_with_boxes(ds, idx)
         info, files = frame_info(sample, token, prev, nxt, label_table, seqs.index(seq))
         camera_names = sample["camera_names"]
         for rel, data in files.items():

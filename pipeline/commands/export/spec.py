@@ -25,6 +25,7 @@ from carlaocc.schemas.configs import DatasetConfig
 from carlaocc.schemas.grid import GridSpec, voxel_size_key
 from carlaocc.schemas.records import ActorStateRecord, SequenceRecord, TownRecord
 from carlaocc.stages.export.boxes import grid_coverage, region_in_target
+from carlaocc.stages.geometry import boxes_in_frame
 
 
 @dataclass(frozen=True)
@@ -262,6 +263,13 @@ def one_label_table(store: Store, grids: Mapping[str, GridSpec]) -> str:
         raise StoreError(f"the sequences to export were built under different label tables "
                          f"({', '.join(sorted(tables))}): export them apart, or rebuild them under one taxonomy")
     return next(iter(tables))
+
+
+def sample_with_boxes(ds: FrameSamples, index: int) -> dict:
+    """Sample ``index`` of ``ds`` with its actors' boxes in the LiDAR frame (the loader's keys:
+    ``boxes``, ``box_pose``, ``box_velocity``, ``box_instance``, ``box_semantic``)."""
+    sample = ds[index]
+    return sample | boxes_in_frame(ds.actor_rows(index), np.linalg.inv(sample["lidar_pose"]))
 
 
 def frame_samples(store: Store, voxel_size: float | None, sequences, **options) -> FrameSamples:
