@@ -16,13 +16,20 @@ stage's new records.
 
 from __future__ import annotations
 
+import posixpath
+import re
 import typing
+import uuid
+from datetime import datetime
 
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.schemas.records import RunRecord
 
 DAMAGED_SUFFIX = ".damaged"
+# a run id: r<sequence>-<UTC time>-<random>; ids of roots built before sequences were UTC times
+_RUN_SEQUENCE = re.compile(r"(?:^|[-~])r(\d{8,})-")
+_RUN_TIME = re.compile(r"(?:^|[-~r])(\d{8}T\d{6})")
 COMPACT_FILES = 64  # a stage with more lineage files than this has them merged into one
 
 
@@ -126,9 +133,33 @@ class LineageLog:
             return False
         return self._merge(stage, files, None) is not None
 
+    def new_run_id(self, now: datetime) -> tuple[str, str | None]:
+        """The id of a new run, ``r<sequence>-<UTC time>-<random>``, and a note when ``now`` is
+        earlier than the newest run recorded (a clock set back, hosts that disagree on time).
+
+        The sequence is one past the highest in the root's lineage file names (a listing, no
+        file read), so run ids sort in the order runs were made whatever the clocks say: lineage's
+        "latest" is the last written. Taken under the root lock
+        (:func:`carlaocc.catalog.lock.root_lock`), two runs never get one number. Ids of roots
+        built before sequences (UTC times, digits first) sort before every ``r`` id."""
+        sequence, newest = 0, ""
+        for path in self.table.paths():
+            name = posixpath.basename(path)
+            for m in _RUN_SEQUENCE.finditer(name):
+                sequence = max(sequence, int(m.group(1)))
+            for m in _RUN_TIME.finditer(name):
+                newest = max(newest, m.group(1))
+        stamp = now.strftime("%Y%m%dT%H%M%S%fZ")
+        note = None
+        if newest and stamp[:15] < newest:
+            when = datetime.strptime(newest, "%Y%m%dT%H%M%S").strftime("%Y-%m-%d %H:%M:%S")
+            note = (f"this host's clock ({now:%Y-%m-%d %H:%M:%S} UTC) is behind the newest run recorded in the "
+                    f"root ({when} UTC): runs are ordered by their sequence number, never by clocks")
+        return f"r{sequence + 1:08d}-{stamp}-{uuid.uuid4().hex[:6]}", note
+
     def latest(self, stage: str) -> dict[str, RunRecord]:
         """The most recent record of every partition of a stage (completed or failed), ordered by
-        run id (the driver's clock), never by the workers' timestamps."""
+        run id (the run's sequence number, :meth:`new_run_id`), never by any clock."""
         out: dict[str, RunRecord] = {}
         for rec in sorted(self.load(stage), key=lambda r: r.run_id):
             out[rec.partition] = rec

@@ -4,14 +4,19 @@ A task's outputs are recorded in lineage with their content fingerprints (sha256
 :func:`carlaocc.catalog.zarrio.frame_fingerprint` for a Zarr frame), computed when they are written.
 Re-hashing them to decide whether a partition is up to date would read the whole dataset (about
 a terabyte at the paper's scale), so the driver also records each output's *signature*: for a
-file, its size, modification time and inode on a local disk, or the object store's ETag where it
+file, its size, modification time, inode and status-change time (ctime) on a local disk, or the object store's ETag where it
 has one; for a Zarr frame (``<root>.zarr/<array>[<frame>]``), the same for its array's
 ``zarr.json`` and every chunk the frame can have (one ``stat`` each; a listing on object stores). ``status`` and
 ``run`` trust a recorded fingerprint while the signature is unchanged and only re-hash outputs
 whose signature moved; ``carlaocc verify`` re-hashes everything.
 
-An output edited in place within one tick of the kernel's clock, keeping its size and inode,
-keeps its signature: that is what ``verify`` is for.
+The ctime is what no user-level tool can set: an output edited in place and given its old
+modification time back (``touch -r``, a sync tool preserving times) has a new ctime, so its
+signature moves and it is re-hashed. What moves the ctime without touching the bytes (``chmod``,
+``chown``, a hard-linked snapshot ``cp -al``, which adds a link to every inode) is re-hashed too,
+found intact and reported clean, never rebuilt; ``carlaocc verify`` then records the new
+signatures so ``status`` is cheap again. Only an edit within one tick of the kernel's clock (a few
+ms) that keeps size, inode and both times escapes the signature: that is what ``verify`` is for.
 """
 
 from __future__ import annotations
@@ -47,8 +52,9 @@ def info_signature(info: dict) -> str | None:
 
 
 def _local_signature(st: os.stat_result) -> str:
-    # size, modification time in ns and inode: a chunk rewritten by rename is a new inode
-    return f"{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+    # size, modification time in ns and inode (a chunk rewritten by rename is a new inode), and
+    # the status-change time, which an in-place edit moves whatever times it restores
+    return f"{st.st_size}:{st.st_mtime_ns}:{st.st_ino}:{st.st_ctime_ns}"
 
 
 def file_signature(store: Store, rel: str) -> str | None:

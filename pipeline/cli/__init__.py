@@ -26,6 +26,7 @@ line starting with ``error:``; ``carlaocc --debug`` (or ``CARLAOCC_DEBUG=1``) pr
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import traceback
 
@@ -39,7 +40,27 @@ from carlaocc.pipeline.cli.evaluate import eval_app
 
 app.add_typer(eval_app, name="eval")
 
-__all__ = ["app", "main"]
+__all__ = ["Stopped", "app", "main"]
+
+# the signals that stop a command: each becomes an exception in the main thread, so the work in
+# flight is wound down (a LocalCluster's workers closed, their semaphores released, lineage of the
+# finished tasks flushed) and the command ends with one line
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(BaseException):
+    """A stop signal arrived (SIGINT, SIGTERM, SIGHUP): not an error of the command's own."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _on_stop_signal(signum, frame) -> None:
+    # once: a second signal while winding down ends the process as it would by default
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+    raise Stopped(signum)
 
 
 def main() -> None:
@@ -47,14 +68,18 @@ def main() -> None:
     outside any command (or in the error path itself) is one line and exit 1; the process then
     leaves with that code whatever native threads are still alive (:mod:`.exit`)."""
     os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, _on_stop_signal)
     try:
         app()
         code = 0
     except SystemExit as exc:
         code = exit_code(exc)
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        code = 130
+    except (Stopped, KeyboardInterrupt) as exc:
+        signum = exc.signum if isinstance(exc, Stopped) else signal.SIGINT
+        print(f"error: stopped by {signal.Signals(signum).name}: what finished is recorded; the same command "
+              "resumes from there", file=sys.stderr)
+        code = 128 + signum
     except BaseException as exc:  # noqa: BLE001 -- the last net: one line, never a traceback
         if debug_enabled() or "--debug" in sys.argv[1:]:
             traceback.print_exception(type(exc), exc, exc.__traceback__)

@@ -33,6 +33,7 @@ def run(
     limit_frames: LimitFramesOpt = None,
     sequences: SequencesOpt = None,
     taxonomy: TaxonomyOpt = None,
+    no_wait: Annotated[bool, typer.Option("--no-wait", help="refuse (exit 2) when another command is writing the root, instead of waiting for it to finish")] = False,
 ) -> None:
     """Build the dataset (or the selected stages) on the embedded default, a --config file or a
     --preset plan (--maps, --limit-frames and --sequences pick the towns and a slice of it)."""
@@ -52,7 +53,8 @@ def run(
     t0 = time.perf_counter()
     try:
         outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
-                                log=lambda s: typer.echo(s, err=True), sequences=sequence_patterns(sequences))
+                                log=lambda s: typer.echo(s, err=True), sequences=sequence_patterns(sequences),
+                                wait=not no_wait)
     except PlanError as exc:  # refused before any task ran
         progress.close()
         fail(str(exc))
@@ -88,6 +90,7 @@ def ingest(
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", help="Dask scheduler address, or 'synchronous'")] = None,
     workers: Annotated[Optional[int], typer.Option("--workers", min=1, help="LocalCluster workers (default: one per core)")] = None,
     force: Annotated[bool, typer.Option("--force", help="re-ingest items even when unchanged")] = False,
+    no_wait: Annotated[bool, typer.Option("--no-wait", help="refuse (exit 2) when another command is writing the root, instead of waiting for it to finish")] = False,
 ) -> None:
     """Ingest a mesh source into the ADMesh library: one task per source item; unchanged items
     are skipped, bad items quarantined with a reason (see the quarantine table), never fatal."""
@@ -110,7 +113,8 @@ def ingest(
     store = open_store(root, writable=True)
     progress = RichProgress()
     try:
-        s = ingest_source(store, cfg, scheduler, force, progress, workers, log=lambda m: typer.echo(m, err=True))
+        s = ingest_source(store, cfg, scheduler, force, progress, workers, log=lambda m: typer.echo(m, err=True),
+                          wait=not no_wait)
     except (IngestError, PlanError) as exc:
         progress.close()
         fail(str(exc))

@@ -8,6 +8,7 @@ export command's help lists the registered formats, read from the registry when 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -120,7 +121,12 @@ def export_cmd(
     except (StoreError, FormatError, ValueError) as exc:
         fail(exc)
     except OSError as exc:
-        fail(f"--out {out}: cannot write: {exc.strerror or exc}")
+        # name the file that failed: one of the root's (read) or one under --out (write)
+        name = exc.filename
+        if name and store.is_local and os.path.abspath(name).startswith(store.root.rstrip("/") + "/"):
+            fail(f"cannot read {name}: {exc.strerror or exc} (a file of the dataset root {store.url}; it must be "
+                 f"readable by you)", code=1)
+        fail(f"--out {out}: cannot write{f' {name}' if name else ''}: {exc.strerror or exc}")
     typer.echo(f"wrote {summary.files:,} files for {summary.frames} frames of {summary.sequences} sequence(s) "
                f"in {fmt} layout under {out}")
     if summary.coverage is not None and summary.coverage < 1.0:

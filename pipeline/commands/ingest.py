@@ -7,9 +7,10 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from carlaocc.catalog.lock import RootBusy, root_lock
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import ADMESH_MESHES, ADMESH_TEXTURES, Store
-from carlaocc.pipeline.engine.runner import Progress, StageOutcome, run
+from carlaocc.pipeline.engine.runner import PlanError, Progress, StageOutcome, run
 from carlaocc.pipeline.tasks.ingest import (STAGE, IngestError, dataset_roots_inside, root_digest, source_spec,
                                             source_table_key)
 from carlaocc.schemas.configs import DatasetConfig, SourceIngestConfig
@@ -58,9 +59,20 @@ def prune_orphan_meshes(store: Store) -> int:
 
 
 def ingest_source(store: Store, cfg: SourceIngestConfig, scheduler: str | None = None, force: bool = False,
-                  progress: Progress | None = None, workers: int | None = None, log=lambda s: None) -> IngestSummary:
-    """Ingest one source into the store's ADMesh library."""
+                  progress: Progress | None = None, workers: int | None = None, log=lambda s: None,
+                  wait: bool = True) -> IngestSummary:
+    """Ingest one source into the store's ADMesh library, holding the root's writer lock from
+    the listing of the source to the last clean-up (:mod:`carlaocc.catalog.lock`: another
+    command's meshes are never taken for orphans); ``wait=False`` refuses (PlanError) when
+    another command holds it."""
+    try:
+        with root_lock(store, wait=wait, on_wait=log):
+            return _ingest_locked(store, cfg, scheduler, force, progress, workers, log)
+    except RootBusy as exc:
+        raise PlanError(str(exc)) from None
 
+
+def _ingest_locked(store, cfg, scheduler, force, progress, workers, log) -> IngestSummary:
     excluded = dataset_roots_inside(store, cfg)
     spec = source_spec(cfg, excluded)
     parts = spec.partitions(None)

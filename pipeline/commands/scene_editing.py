@@ -16,6 +16,7 @@ import numpy as np
 
 from carlaocc.catalog.admesh import dedupe_assets
 from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.lock import root_lock
 from carlaocc.catalog.panoptic import panoptic_glb_bytes
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
@@ -128,6 +129,14 @@ def swap_id(sequence_id: str, category: str, seed: int) -> str:
 
 def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] | None = None,
                asset_sources: Sequence[str] | None = None) -> list[SwapResult]:  # fmt: skip
+    """:func:`swap_class_locked` holding the root's writer lock (:mod:`carlaocc.catalog.lock`: it
+    waits for a command writing the root)."""
+    with root_lock(store):
+        return swap_class_locked(store, category, seed, sequences, asset_sources)
+
+
+def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequence[str] | None = None,
+                      asset_sources: Sequence[str] | None = None) -> list[SwapResult]:  # fmt: skip
     """For every original sequence (or the given ones), write a new sequence in which every
     actor and every static placement (buildings, props, poles...) of ``category`` uses another
     asset of a compatible footprint, drawn per instance / placement from ``seed``; trajectories,
@@ -182,7 +191,7 @@ def swap_class(store: Store, category: str, seed: int, sequences: Sequence[str] 
             f"{', '.join(t.sequence_id for t in targets)} has another {cls.name} asset of a compatible footprint "
             f"(length within {LENGTH_TOLERANCE:.0%}, width {WIDTH_TOLERANCE:.0%}, height {HEIGHT_TOLERANCE:.0%}); "
             f"nothing written")
-    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    run_id, _ = LineageLog(store).new_run_id(datetime.now(timezone.utc))
     results, runs = [], []
     for parent, new_id, actors, choice, kept, placements, statics, kept_static in plans:
         started = datetime.now(timezone.utc)

@@ -94,8 +94,10 @@ class DaskExecutor(Executor):
     (processes for local stores; threads for ``memory://`` stores, which live in this process)."""
 
     def __init__(self, address: str | None, processes: bool, workers: int | None = None,
-                 max_in_flight: int | None = None, memory_limit: int | None = None):
+                 max_in_flight: int | None = None, memory_limit: int | None = None,
+                 log: Callable[[str], None] = lambda s: None):
         self.address, self.processes, self.workers = address, processes, workers
+        self.log = log
         self.max_in_flight, self.memory_limit = max_in_flight, memory_limit
         self.submit_seconds = 0.0  # the last map's first batch
         self._client = None
@@ -107,6 +109,12 @@ class DaskExecutor(Executor):
     HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
     PROBE_SECONDS = 3.0  # the TCP connect probe: a refused or silent port fails in seconds
     CONNECT_SECONDS = "10s"  # the Client's handshake once the port answers
+    # a worker that sends no heartbeat for this long (a frozen process, a lost node) is restarted
+    # by the scheduler and its tasks run on the others (distributed's `scheduler.worker-ttl`,
+    # 5 minutes by default, which our LocalCluster shortens; an existing scheduler keeps its own).
+    # A task's kernels release the GIL or return within seconds, so a live worker always beats.
+    # $DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL (e.g. "30s") overrides it.
+    WORKER_TTL = "120s"
     # distributed's loggers silenced while our own LocalCluster shuts down (its workers' heartbeats
     # race the closing connection pool and log CommClosedError tracebacks otherwise)
     QUIET_LOGGERS = ("distributed", "distributed.worker", "distributed.core", "distributed.nanny",
@@ -184,7 +192,9 @@ class DaskExecutor(Executor):
                 # task 2.4x slower, mostly system time). Our workers keep glibc's default.
                 environ = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
                            if k != "MALLOC_TRIM_THRESHOLD_"}
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                ttl = os.environ.get("DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL") or self.WORKER_TTL
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
+                                      "distributed.scheduler.worker-ttl": ttl}):
                     self._cluster = LocalCluster(
                         n_workers=n, threads_per_worker=1, processes=self.processes,
                         # each worker's share of the machine, sized so the nanny (which kills a
@@ -197,7 +207,17 @@ class DaskExecutor(Executor):
                         silence_logs=logging.ERROR,
                     )
                 self._client = Client(self._cluster)
+            # the scheduler's own events: a worker restarted for missing heartbeats is reported
+            self._client.subscribe_topic("scheduler", self._scheduler_event)
         return self._client
+
+    def _scheduler_event(self, event) -> None:
+        """Report what the scheduler did about a stuck worker (runs on the client's thread)."""
+        _, msg = event
+        if isinstance(msg, dict) and msg.get("action") == "worker-ttl-timed-out":
+            for worker in msg.get("workers", []):
+                self.log(f"worker {worker} stopped answering (no heartbeat for {float(msg.get('ttl', 0)):.0f} s): "
+                         "the scheduler restarts it and its tasks run again on the others")
 
     # tasks in the scheduler at once, per worker thread: enough to keep every worker busy while
     # results come back, few enough that 100 K partitions never make a 100 K-task graph
@@ -346,9 +366,9 @@ def local_workers(workers: int | None, task_bytes: int | None, total: int | None
 
 
 def make_executor(scheduler: str | None, store: Store, workers: int | None = None,
-                  task_bytes: int | None = None) -> Executor:
+                  task_bytes: int | None = None, log: Callable[[str], None] = lambda s: None) -> Executor:
     scheduler = resolve_scheduler(scheduler)
     if scheduler == SYNCHRONOUS:
         return SynchronousExecutor()
     # worker processes, unless the root lives in this process (memory://)
-    return DaskExecutor(scheduler, processes=not store.in_memory, workers=workers, memory_limit=task_bytes)
+    return DaskExecutor(scheduler, processes=not store.in_memory, workers=workers, memory_limit=task_bytes, log=log)

@@ -20,6 +20,7 @@ import fsspec
 import numpy as np
 
 from carlaocc.catalog.lineage import DAMAGED_SUFFIX, LineageLog
+from carlaocc.catalog.lock import RootBusy, root_lock
 from carlaocc.catalog.parquet import parquet_problem
 from carlaocc.catalog.signatures import external_signature, output_signature
 from carlaocc.catalog.store import Store, StoreError, fingerprint_bytes
@@ -274,14 +275,48 @@ class Progress:
     def stop(self, stage: str) -> None: ...
 
 
+def _os_reason(exc: BaseException) -> str:
+    """An OSError's reason in words (``No space left on device``), else the exception's line."""
+    return (getattr(exc, "strerror", None) or str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+
+
+def _lineage_write_error(store: Store, failure: tuple[str, BaseException], unrecorded: int,
+                         failed: list[TaskResult]) -> "LineageWriteError":
+    path, exc = failure
+    first = (f"; the first failed task: {failed[0].stage} {failed[0].partition}: {failed[0].error}"
+             if failed else "")
+    return LineageWriteError(f"cannot record lineage in {store.uri(path)}: {_os_reason(exc)}; {unrecorded} "
+                             f"finished tasks are not recorded and run again next time{first}")
+
+
+class LineageWriteError(StoreError):
+    """The driver could not record what its tasks did (a full disk, no permission): the message
+    names the lineage file and keeps the first failed task's own error."""
+
+
 def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
         stages: list[str] | None = None, scheduler: str | None = None, force: bool = False,
         progress: Progress | None = None, workers: int | None = None,
         log: Callable[[str], None] = lambda s: None,
-        registry: dict[str, StageSpec] | None = None, sequences: tuple[str, ...] = ()) -> list[StageOutcome]:
+        registry: dict[str, StageSpec] | None = None, sequences: tuple[str, ...] = (),
+        wait: bool = True) -> list[StageOutcome]:
     """Run the selected stages (all by default) of ``registry`` (the registered stages by
     default) in order, the per-sequence ones for the sequences matching ``sequences`` (fnmatch
-    patterns on sequence ids; empty: all); stops after a stage with failures."""
+    patterns on sequence ids; empty: all); stops after a stage with failures.
+
+    Holds the root's writer lock throughout (:func:`carlaocc.catalog.lock.root_lock`): with another
+    command writing the root, waits for it (saying so through ``log``), or with ``wait=False``
+    raises :class:`PlanError` naming it before anything is read or written."""
+    try:
+        with root_lock(store, wait=wait, on_wait=log):
+            return _run_locked(store, config, voxel_sizes, stages, scheduler, force, progress, workers, log,
+                               registry, sequences)
+    except RootBusy as exc:
+        raise PlanError(str(exc)) from None
+
+
+def _run_locked(store, config, voxel_sizes, stages, scheduler, force, progress, workers, log, registry,
+                sequences) -> list[StageOutcome]:
     progress = progress or Progress()
     selected = stage_order(stages, registry)
     ctx, lineage = Context(store, config, voxel_sizes, tuple(sequences)), LineageLog(store)
@@ -294,8 +329,10 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
             break
         upstream_plan = plan_stage(spec, ctx, lineage, False, stale)
         stale[spec.name] = {pp.partition.key for pp in upstream_plan.to_run}
-    # sortable by the driver's clock: lineage's "latest" is ordered by run id, not worker clocks
-    run_id = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ") + "-" + uuid.uuid4().hex[:6]
+    # the run's sequence number in the root orders its records (lineage's "latest"), not a clock
+    run_id, clock_note = lineage.new_run_id(datetime.now(timezone.utc))
+    if clock_note:
+        log(f"note: {clock_note}")
     executor: Executor | None = None
     outcomes: list[StageOutcome] = []
     try:
@@ -339,12 +376,21 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
             code, chash = spec.code_version(), spec.config_hash(config)
             pending: list[RunRecord] = []
             last_flush = [time.monotonic(), 0]
+            lineage_error: list[tuple[str, OSError | StoreError]] = []  # the last failed write, if any
 
             def flush() -> None:
+                # records not written stay pending for the next flush (a disk that fills up, then
+                # frees): the work goes on; the run fails at the end if they never could be written
                 if pending:
-                    lineage.append(spec.name, f"{run_id}-{last_flush[1]:04d}", list(pending))
-                    pending.clear()
-                    last_flush[1] += 1
+                    key = f"stage={spec.name}/{run_id}-{last_flush[1]:04d}"
+                    try:
+                        lineage.append(spec.name, f"{run_id}-{last_flush[1]:04d}", list(pending))
+                    except (OSError, StoreError) as exc:
+                        lineage_error[:] = [(lineage.table.path(key), exc)]
+                    else:
+                        pending.clear()
+                        lineage_error.clear()
+                        last_flush[1] += 1
                 last_flush[0] = time.monotonic()
 
             def on_done(res: TaskResult) -> None:
@@ -371,15 +417,21 @@ def run(store: Store, config: DatasetConfig, voxel_sizes: tuple[float, ...],
                 # workers sized for the finest grid's tasks (a 0.05 m task needs ~5 GB)
                 finest = config.voxelize.grid(min(voxel_sizes)) if voxel_sizes else None
                 executor = make_executor(scheduler, store, workers,
-                                         task_memory(int(np.prod(finest.shape))) if finest else None)
+                                         task_memory(int(np.prod(finest.shape))) if finest else None, log=log)
             progress.start(spec.name, len(todo))
             try:
                 executor.map(spec, store.url, spec.config(config), [pp.partition for pp in todo], on_done)
             finally:
                 flush()
-                # the run's lineage files of the stage as one (and the stage's, past 64 files)
-                lineage.compact_run(spec.name, run_id)
+                if not lineage_error:
+                    try:
+                        # the run's lineage files of the stage as one (and the stage's, past 64 files)
+                        lineage.compact_run(spec.name, run_id)
+                    except (OSError, StoreError) as exc:  # the per-flush files hold every record
+                        log(f"{spec.name}: lineage files not merged ({_os_reason(exc)}); they are read as they are")
                 progress.stop(spec.name)
+            if lineage_error:
+                raise _lineage_write_error(store, lineage_error[0], len(pending), outcome.failed)
             if isinstance(executor, DaskExecutor):
                 log(f"{spec.name}: first {min(len(todo), executor.in_flight())} of {len(todo)} tasks submitted in "
                     f"{executor.submit_seconds:.2f} s (at most {executor.in_flight()} in the scheduler at once)")
