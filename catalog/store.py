@@ -43,6 +43,7 @@ LIDAR_DIR = "lidar"
 ADMESH_MESHES = "admesh/meshes"
 ADMESH_TEXTURES = "admesh/textures"
 SCENE_MESHES = "scenes/meshes"
+PLAN_FILE = "plan.yaml"  # the root's remembered plan (catalog/plan.py)
 
 
 class StoreError(Exception):

@@ -35,10 +35,23 @@ app = typer.Typer(
 )
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"carlaocc {version('carlaocc')}")
+        except PackageNotFoundError:  # run from a source tree that was never installed
+            typer.echo("carlaocc (not installed: no version recorded)")
+        raise typer.Exit(0)
+
+
 @app.callback()
 def _options(
     debug: Annotated[bool, typer.Option("--debug", envvar=DEBUG_ENV, show_envvar=True,
                                         help="on an error, print the full traceback before the one-line error")] = False,
+    version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version,
+                                          help="print carlaocc's version and exit")] = False,
 ) -> None:
     set_debug(debug)
 

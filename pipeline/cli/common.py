@@ -32,6 +32,11 @@ MapsOpt = Annotated[Optional[Path], typer.Option("--maps", help="a folder of Ope
 TaxonomyOpt = Annotated[Optional[str], typer.Option("--taxonomy", help="label table: release (the official CarlaOcc release's utils/labels.py, the default) | carlaocc-v1 (Building a thing; poles, lights, signs stuff); overrides the config's taxonomy")]
 SequencesOpt = Annotated[Optional[str], typer.Option("--sequences", help="build only the sequences matching these comma-separated patterns (fnmatch on sequence ids, e.g. 'town00_*' or 'town0?_high_00'); scenes and splits still cover every sequence")]
 LimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan)")]
+# run / status / stage: what is not given comes from the root's remembered plan (<root>/plan.yaml)
+PlanVoxelSizeOpt = Annotated[Optional[str], typer.Option("--voxel-size", "--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05 (--res is the short alias; default: the root's remembered plan's, else 0.2)")]
+PlanLimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan; default: the remembered plan's slice)")]
+PlanSequencesOpt = Annotated[Optional[str], typer.Option("--sequences", help="build only the sequences matching these comma-separated patterns (fnmatch on sequence ids, e.g. 'town00_*' or 'town0?_high_00'; '*': all); scenes and splits still cover every sequence (default: the remembered plan's slice)")]
+DefaultPlanOpt = Annotated[bool, typer.Option("--default-plan", help="start from the default plan (the root's dataset.yaml, else the embedded default; every frame of every sequence at 0.2 m) instead of the root's remembered plan (<root>/plan.yaml); other options apply on top")]
 
 
 DEBUG_ENV = "CARLAOCC_DEBUG"
@@ -153,9 +158,11 @@ def root_config(root: str | None) -> Path | None:
 
 
 def plan_config(path: Path | None, root: str | None, preset: str | None, maps: Path | None = None,
-                limit_frames: int | None = None, taxonomy: str | None = None) -> DatasetConfig:
-    """:func:`load_config` of ``--config`` or ``--preset`` (not both), then ``--maps`` (the
-    folder's .xodr files as the towns), ``--limit-frames`` and ``--taxonomy`` applied."""
+                limit_frames: int | None = None, taxonomy: str | None = None,
+                base: DatasetConfig | None = None) -> DatasetConfig:
+    """:func:`load_config` of ``--config`` or ``--preset`` (not both; neither: ``base`` when
+    given), then ``--maps`` (the folder's .xodr files as the towns), ``--limit-frames`` and
+    ``--taxonomy`` applied."""
     if preset is not None:
         from carlaocc.catalog.presets import preset_path
 
@@ -165,7 +172,7 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
             path = preset_path(preset)
         except ValueError as exc:
             fail(f"--preset: {exc}")
-    cfg = load_config(path, root)
+    cfg = base if base is not None and path is None else load_config(path, root)
     scenes = cfg.scenes
     if maps is not None:
         files = sorted(maps.glob("*.xodr")) if maps.is_dir() else []
@@ -190,14 +197,62 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
         fail(validation_message("config", exc))
 
 
+def resolve_plan(store: Store, root: str, *, config: Path | None, preset: str | None, maps: Path | None,
+                 limit_frames: int | None, sequences: str | None, taxonomy: str | None, voxel_size: str | None,
+                 default_plan: bool):
+    """The plan a ``run`` or ``status`` works on, and the root's remembered one (None without):
+    the remembered plan (or, with ``default_plan`` or none remembered, the default plan: the
+    root's ``dataset.yaml`` or the embedded default, 0.2 m, no slice), with the keys the options
+    name replaced. Bad options are one-line errors (exit 2)."""
+    from carlaocc.catalog.plan import PlanStore
+    from carlaocc.schemas.plan import DEFAULT_VOXEL_SIZES, Plan, PlanSlice
+
+    try:
+        remembered = PlanStore(store).load()
+    except StoreError as exc:
+        if not default_plan:
+            fail(exc)
+        remembered = None  # --default-plan is the way past an unreadable plan file
+    start = remembered if remembered is not None and not default_plan else None
+    base = start.config if start is not None else load_config(None, root, plan=False)
+    cfg = plan_config(config, root, preset, maps, None, taxonomy, base=base)
+    text = voxel_size if voxel_size is not None else ",".join(
+        str(v) for v in (start.voxel_sizes if start is not None else DEFAULT_VOXEL_SIZES))
+    voxel_sizes = parse_voxel_sizes(text, cfg)
+    old = start.slice if start is not None else PlanSlice()
+    cut = PlanSlice(limit_frames=limit_frames if limit_frames is not None else old.limit_frames,
+                    sequences=sequence_patterns(sequences) if sequences is not None else old.sequences)
+    return Plan(voxel_sizes=voxel_sizes, slice=cut, config=cfg), remembered
+
+
 def sequence_patterns(text: str | None) -> tuple[str, ...]:
     """``--sequences`` as a tuple of fnmatch patterns (empty: every sequence)."""
     return tuple(p.strip() for p in (text or "").split(",") if p.strip())
 
 
-def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:
-    """The dataset config from a YAML/JSON file; without one, the root's own ``dataset.yaml``
-    when it has one (said on stderr), else the embedded default."""
+def remembered_plan(root: str | None):
+    """The root's remembered plan (:class:`~carlaocc.schemas.plan.Plan`), None when it has none
+    (or there is no root there yet); a plan file that cannot be read is a one-line error."""
+    from carlaocc.catalog.plan import PlanStore
+
+    if not root:
+        return None
+    try:
+        return PlanStore(Store(root)).load()
+    except StoreError as exc:
+        fail(exc)
+    except (ValueError, ImportError, OSError):  # not a usable root: the command's own check says so
+        return None
+
+
+def load_config(path: Path | None, root: str | None = None, plan: bool = True) -> DatasetConfig:
+    """The dataset config from a YAML/JSON file; without one, the config of the root's
+    remembered plan (``plan``, the default), else the root's own ``dataset.yaml`` when it has
+    one (said on stderr), else the embedded default."""
+    if path is None and plan:
+        remembered = remembered_plan(root)
+        if remembered is not None:
+            return remembered.effective_config()
     if path is None:
         path = root_config(root)
         if path is None:
@@ -308,9 +363,11 @@ def open_store(root: str, writable: bool) -> Store:
 
 
 class RichProgress:
-    """A progress bar per stage: tasks done / total and elapsed time."""
+    """A progress bar per stage: tasks done / total and elapsed time. ``on_start`` is called once,
+    before the first stage's bar (when the run's up-front checks have passed and work starts)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_start=None) -> None:
+        self._on_start = on_start
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeElapsedColumn, TimeRemainingColumn)
@@ -325,6 +382,9 @@ class RichProgress:
         self._tasks: dict[str, int] = {}
 
     def start(self, stage: str, total: int) -> None:
+        if self._on_start is not None:
+            self._on_start()
+            self._on_start = None
         if not self._tasks:
             self._progress.start()
         self._tasks[stage] = self._progress.add_task(stage, total=total)
