@@ -15,7 +15,7 @@ from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import (ConfigOpt, DefaultPlanOpt, LimitFramesOpt, MapsOpt, PlanLimitFramesOpt,
                                           PlanSequencesOpt, PlanVoxelSizeOpt, PresetOpt, RichProgress, RootOpt,
-                                          TaxonomyOpt, check_towns, fail, load_config, open_store, plan_config,
+                                          TaxonomyOpt, check_towns, did_you_mean, fail, load_config, open_store, plan_config,
                                           resolve_plan, validation_message)
 
 
@@ -48,6 +48,8 @@ def run(
     cfg, voxel_sizes = plan.effective_config(), plan.voxel_sizes
     check_towns(cfg)
     names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+    check_stage_names(names)
+    check_sequence_ids(store, plan, remembered, sequences is not None)
     try:
         stage_order(names)
         resolve_scheduler(scheduler, probe=True)
@@ -93,6 +95,34 @@ def run(
     else:
         typer.echo(f"done: ran {ran} of {total} tasks in {time.perf_counter() - t0:.1f} s")
     typer.echo(closing_line(store, root))
+
+
+def check_stage_names(names: list[str] | None) -> None:
+    """Every ``--stages`` name is a stage, else one line naming it and the closest stage."""
+    from carlaocc.pipeline.engine.registry import STAGES
+
+    for n in names or []:
+        if n not in STAGES:
+            fail(f"--stages: unknown stage {n!r}{did_you_mean(n, STAGES)}; stages: {', '.join(STAGES)}")
+
+
+def check_sequence_ids(store, plan, remembered, given: bool) -> None:
+    """A ``--sequences`` item without wildcards that names no sequence of the root is a typo:
+    one line naming it and the closest sequence id. Checked only while the plan's config is the
+    one the root's sequences were made with (a new config may make new sequences)."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import SequenceRecord
+
+    if not given or not plan.slice.sequences or remembered is None or remembered.config != plan.config:
+        return
+    table = ParquetTable(store, SequenceRecord)
+    known = sorted(s.sequence_id for s in table.load()) if table.paths() else []
+    if not known:
+        return
+    for pattern in plan.slice.sequences:
+        if not any(c in pattern for c in "*?[") and pattern not in known:
+            fail(f"--sequences: no sequence {pattern!r} in {store.url}{did_you_mean(pattern, known)}; "
+                 f"`carlaocc info --root {store.url} -v` lists them (patterns such as 'town00_*' work too)")
 
 
 def remember_plan(store, plan, remembered) -> None:

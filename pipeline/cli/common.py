@@ -105,6 +105,38 @@ def error_line(exc: BaseException) -> tuple[str, int]:
     return f"{type(exc).__name__}: {one_line(exc)} ({DEBUG_HINT})", 1
 
 
+def did_you_mean(word: str, choices, prefix: str = "") -> str:
+    """``" (did you mean X?)"`` naming the choice closest to a mistyped ``word`` (one a prefix of
+    the other counts as close: ``--resolution`` -> ``--res``), else ``""``. ``prefix`` is ignored
+    when comparing (``--`` of options)."""
+    import difflib
+
+    names = [str(c) for c in choices]
+    bare = word[len(prefix):] if prefix and word.startswith(prefix) else word
+    stems = {c: c[len(prefix):] if prefix and c.startswith(prefix) else c for c in names}
+    # a choice whose stem starts the word or the other way round, or holds it whole (--frames in
+    # --limit-frames): those first; otherwise the closest spellings (of the stems, not the '--')
+    near = [c for c, st in stems.items() if len(st) >= 3 and len(bare) >= 3
+            and (bare.startswith(st) or st.startswith(bare) or (len(bare) >= 4 and bare in st))]
+    if not near:
+        by_stem = {st: c for c, st in stems.items()}
+        near = [by_stem[m] for m in difflib.get_close_matches(bare, list(by_stem), n=2, cutoff=0.6)]
+    return f" (did you mean {' or '.join(near[:2])}?)" if near else ""
+
+
+def unknown_option_line(exc, command_path: str) -> str:
+    """The one line for an option the command does not take, naming the closest it does take
+    (with its aliases: ``--voxel-size / --res``)."""
+    cmd = exc.ctx.command if exc.ctx is not None else None
+    params = [p for p in getattr(cmd, "params", []) if getattr(p, "opts", None) and p.param_type_name == "option"]
+    longs = {o: p for p in params for o in (*p.opts, *p.secondary_opts) if o.startswith("--")}
+    hint = did_you_mean(exc.option_name, longs, prefix="--")
+    if hint:
+        picked = {id(longs[o]): longs[o] for o in hint.removeprefix(" (did you mean ").removesuffix("?)").split(" or ")}
+        hint = " (did you mean " + " or ".join(" / ".join(p.opts) for p in picked.values()) + "?)"
+    return f"no such option {exc.option_name} for `{command_path}`{hint}; `{command_path} --help` lists its options"
+
+
 def report_exception(exc: BaseException) -> None:
     """Print ``exc`` as the one error line (its traceback first with ``--debug``) and exit."""
     if debug_enabled():
@@ -125,7 +157,17 @@ class ErrorGroup(TyperGroup):
         from typer.exceptions import TyperException
 
         try:
-            return super().invoke(ctx)
+            try:
+                return super().invoke(ctx)
+            except Exception as exc:
+                # an option the command does not take (click's NoSuchOption, vendored by Typer as
+                # typer._click): one line with the right hint, not click's usage block
+                if type(exc).__name__ != "NoSuchOption" or not hasattr(exc, "option_name"):
+                    raise
+                sub = getattr(exc, "ctx", None)
+                typer.echo(f"error: {unknown_option_line(exc, sub.command_path if sub else ctx.command_path)}",
+                           err=True)
+                raise typer.Exit(2) from None
         except (TyperException, typer.Exit, typer.Abort, KeyboardInterrupt, SystemExit):
             raise
         except BrokenPipeError:
