@@ -124,6 +124,22 @@ def did_you_mean(word: str, choices, prefix: str = "") -> str:
     return f" (did you mean {' or '.join(near[:2])}?)" if near else ""
 
 
+def check_sequences(store: Store, ids, option: str) -> None:
+    """Every sequence id in ``ids`` is one of the root's, else one line naming it, the closest
+    id and how to list them (exit 2)."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import SequenceRecord
+
+    if not ids:
+        return
+    table = ParquetTable(store, SequenceRecord)
+    known = sorted(s.sequence_id for s in table.load()) if table.paths() else []
+    for sid in ids:
+        if sid not in known:
+            fail(f"{option} {sid}: no such sequence in {store.url}{did_you_mean(sid, known)}; "
+                 f"`carlaocc info --root {store.url} -v` lists them")
+
+
 def unknown_option_line(exc, command_path: str) -> str:
     """The one line for an option the command does not take, naming the closest it does take
     (with its aliases: ``--voxel-size / --res``)."""

@@ -18,7 +18,7 @@ from typer.core import TyperCommand
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
-from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, fail, load_config, open_store, parse_floats, write_bytes
+from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, check_sequences, fail, load_config, open_store, parse_floats, write_bytes
 from carlaocc.schemas.grid import voxel_size_key
 
 
@@ -109,6 +109,7 @@ def export_cmd(
         options["encoding"] = label_encoding
     cfg = load_config(config, root)
     store = open_store(root, writable=False)
+    check_sequences(store, sequence or [], "--sequence")
     try:
         voxel_size = resolve_voxel_size(store, fmt, voxel_size)
         total = frame_count(store, voxel_size, sequence)
