@@ -136,3 +136,17 @@ def test_info_and_version(root):
     assert all(f"    {s}:" in r.output for s in SEQS)
     r = cli.invoke(app, ["--version"])
     assert r.exit_code == 0 and r.output.strip() == f"carlaocc {version('carlaocc')}"
+
+
+def test_the_report_states_the_slice_it_covers():
+    from carlaocc.pipeline.tasks.report import slice_line
+    from carlaocc.pipeline.tasks.report_page import render_html
+
+    seqs = [SequenceRecord(sequence_id=s, town=s[:6], seed=1, frame_count=2, rate_hz=20.0, traffic_level="low",
+                           ego_asset_id="e") for s in SEQS]
+    line = slice_line(seqs[:2], seqs, ("town00_*",))
+    assert line == "2 of 3 sequences (--sequences town00_*), 2 frames each"
+    assert slice_line(seqs, seqs, ()) == "every sequence (3), 2 frames each"
+    page = render_html(root="r", sequences=seqs[:2], grids=[], totals={}, asset_rows=[], quality=[], usage=[],
+                       lineage=[], images={}, slice=line)
+    assert f'<p class="muted" id="slice">covers: {line}</p>' in page
