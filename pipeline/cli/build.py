@@ -237,6 +237,18 @@ def _write_recording_config(store, root: str, recording: str) -> None:
     path = Path(root) / DATASET_CONFIG
     text = yaml.safe_dump(cfg.model_dump(mode="json", exclude_defaults=True), sort_keys=False)
     path.write_text(text)
+    # a remembered plan takes the new config (its voxel sizes and slice stay): `run` without
+    # options must build what was just ingested
+    from carlaocc.catalog.plan import PlanStore
+
+    plans = PlanStore(store)
+    try:
+        plan = plans.load()
+    except StoreError:
+        plan = None  # an unreadable plan: `run` says so itself
+    if plan is not None and plan.config != cfg:
+        plans.save(plan.model_copy(update={"config": cfg}))
+        typer.echo(f"plan: {plans.url} now holds this config (its voxel sizes and slice kept)", err=True)
     maps = ", ".join(t.map for t in cfg.scenes.towns if t.style == "carla-recording")
     typer.echo(f"wrote {path}: towns {maps} from {recording}; `carlaocc run --root {root} --voxel-size 0.1` builds them")
 
