@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from carlaocc.pipeline.cli.common import DEBUG_ENV, ErrorGroup, set_debug
+from carlaocc.pipeline.cli.common import DEBUG_ENV, CommandGroup, ErrorGroup, set_debug
 
 app = typer.Typer(
     cls=ErrorGroup,
@@ -56,15 +56,15 @@ def _options(
     set_debug(debug)
 
 
-catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
+catalog_app = typer.Typer(cls=CommandGroup, help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
                           rich_markup_mode=None)
 app.add_typer(catalog_app, name="catalog")
-admesh_app = typer.Typer(help="Look at the ADMesh library: render assets to PNG (headless).",
+admesh_app = typer.Typer(cls=CommandGroup, help="Look at the ADMesh library: render assets to PNG (headless).",
                          no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(admesh_app, name="admesh")
-scenes_app = typer.Typer(help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
+scenes_app = typer.Typer(cls=CommandGroup, help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
                          rich_markup_mode=None)
 app.add_typer(scenes_app, name="scenes")
-show_app = typer.Typer(help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
+show_app = typer.Typer(cls=CommandGroup, help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
                        rich_markup_mode=None)
 app.add_typer(show_app, name="show")

@@ -162,7 +162,32 @@ def report_exception(exc: BaseException) -> None:
     raise typer.Exit(code)
 
 
-class ErrorGroup(TyperGroup):
+class CommandGroup(TyperGroup):
+    """A command group whose mistyped commands and options are one line naming the closest ones
+    (exit 2), not click's usage block: ``carlaocc`` and its sub-groups (``catalog``, ``show``...)."""
+
+    def parse_args(self, ctx, args):
+        # an option of `carlaocc` itself mistyped (--verison): one line, as for a command's
+        try:
+            return super().parse_args(ctx, args)
+        except Exception as exc:
+            if type(exc).__name__ != "NoSuchOption" or not hasattr(exc, "option_name"):
+                raise
+            typer.echo(f"error: {unknown_option_line(exc, ctx.command_path)}", err=True)
+            raise typer.Exit(2) from None
+
+    def resolve_command(self, ctx, args):
+        # a mistyped command (carlaocc stauts): one line naming the closest commands
+        name = args[0] if args else ""
+        if name and not name.startswith("-") and self.get_command(ctx, name) is None:
+            commands = self.list_commands(ctx)
+            typer.echo(f"error: no such command {name!r}{did_you_mean(name, commands)}; `{ctx.command_path} "
+                       f"--help` lists the commands", err=True)
+            raise typer.Exit(2)
+        return super().resolve_command(ctx, args)
+
+
+class ErrorGroup(CommandGroup):
     """The ``carlaocc`` group: every command runs inside the one error path -- an exception no
     command turned into its own error line becomes one (:func:`error_line`), never a traceback
     unless ``--debug``. Typer's own exits and usage errors pass through. Output piped into a
