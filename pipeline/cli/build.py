@@ -15,8 +15,8 @@ from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import (ConfigOpt, DefaultPlanOpt, LimitFramesOpt, MapsOpt, PlanLimitFramesOpt,
                                           PlanSequencesOpt, PlanVoxelSizeOpt, PresetOpt, RichProgress, RootOpt,
-                                          TaxonomyOpt, check_towns, did_you_mean, fail, load_config, open_store, plan_config,
-                                          resolve_plan, validation_message)
+                                          TaxonomyOpt, check_towns, did_you_mean, fail, load_config, open_store,
+                                          plan_config, resolve_plan, validation_message)
 
 
 @app.command()

@@ -183,3 +183,12 @@ def test_status_names_the_config_keys_that_changed(tmp_path):
     lines = r.output.splitlines()
     assert f"by config.ingest.seed: {cfg.ingest.seed} -> {cfg.ingest.seed + 1}" in lines[0]
     assert lines[1] == "ingest    stale 1/1: 1 config changed (seed)"
+
+
+def test_export_without_a_voxel_size_takes_the_remembered_plans(root, tmp_path):
+    """occ3d needs a voxel size: without --voxel-size it is the remembered plan's (finest), and
+    the export says so (the root holds no occupancy, so it then stops naming that size)."""
+    PlanStore(root).save(Plan(voxel_sizes=(0.4, 0.8)))
+    r = cli.invoke(app, ["export", "occ3d", "--out", str(tmp_path / "o"), "--root", root.url])
+    assert "export occ3d: --voxel-size 0.4 (the root's remembered plan)" in r.output, r.output
+    assert r.exit_code == 2 and "0.4 m" in r.output.splitlines()[-1], r.output
