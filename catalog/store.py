@@ -12,6 +12,7 @@ import functools
 import hashlib
 import os
 import posixpath
+import tempfile
 import uuid
 from dataclasses import dataclass
 
@@ -43,6 +44,7 @@ LIDAR_DIR = "lidar"
 ADMESH_MESHES = "admesh/meshes"
 ADMESH_TEXTURES = "admesh/textures"
 SCENE_MESHES = "scenes/meshes"
+PLAN_FILE = "plan.yaml"  # the root's remembered plan (catalog/plan.py)
 
 
 class StoreError(Exception):
@@ -196,6 +198,14 @@ class Store:
                 raise StoreError(f"dataset root {self.url} is not writable: {probe} is a file")
             if not os.access(probe, os.W_OK | os.X_OK):
                 raise StoreError(f"dataset root {self.url} is not writable: no write permission on {probe}")
+            # permissions do not tell everything (root may write anywhere by them; /proc, sysfs or a
+            # read-only mount refuse anyway): make and remove a hidden directory where the root
+            # would be created, so a root that cannot be made is refused before any work
+            try:
+                os.rmdir(tempfile.mkdtemp(prefix=".tmp-probe-", dir=probe))
+            except OSError as exc:
+                raise StoreError(f"dataset root {self.url} cannot be created: {probe} refuses new files "
+                                 f"({exc.strerror or exc}); give a directory you can write, e.g. --root ./data") from None
             return
         fs, root = self.fs, self.root
         try:

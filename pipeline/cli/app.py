@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from carlaocc.pipeline.cli.common import DEBUG_ENV, ErrorGroup, set_debug
+from carlaocc.pipeline.cli.common import DEBUG_ENV, CommandGroup, ErrorGroup, set_debug
 
 app = typer.Typer(
     cls=ErrorGroup,
@@ -35,23 +35,36 @@ app = typer.Typer(
 )
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"carlaocc {version('carlaocc')}")
+        except PackageNotFoundError:  # run from a source tree that was never installed
+            typer.echo("carlaocc (not installed: no version recorded)")
+        raise typer.Exit(0)
+
+
 @app.callback()
 def _options(
     debug: Annotated[bool, typer.Option("--debug", envvar=DEBUG_ENV, show_envvar=True,
                                         help="on an error, print the full traceback before the one-line error")] = False,
+    version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version,
+                                          help="print carlaocc's version and exit")] = False,
 ) -> None:
     set_debug(debug)
 
 
-catalog_app = typer.Typer(help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
+catalog_app = typer.Typer(cls=CommandGroup, help="Read-only SQL over the dataset catalog (DuckDB).", no_args_is_help=True,
                           rich_markup_mode=None)
 app.add_typer(catalog_app, name="catalog")
-admesh_app = typer.Typer(help="Look at the ADMesh library: render assets to PNG (headless).",
+admesh_app = typer.Typer(cls=CommandGroup, help="Look at the ADMesh library: render assets to PNG (headless).",
                          no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(admesh_app, name="admesh")
-scenes_app = typer.Typer(help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
+scenes_app = typer.Typer(cls=CommandGroup, help="Towns and sequences: export meshes, edit sequences.", no_args_is_help=True,
                          rich_markup_mode=None)
 app.add_typer(scenes_app, name="scenes")
-show_app = typer.Typer(help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
+show_app = typer.Typer(cls=CommandGroup, help="Look at the dataset: render frames to PNG (headless).", no_args_is_help=True,
                        rich_markup_mode=None)
 app.add_typer(show_app, name="show")

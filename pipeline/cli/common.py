@@ -32,6 +32,11 @@ MapsOpt = Annotated[Optional[Path], typer.Option("--maps", help="a folder of Ope
 TaxonomyOpt = Annotated[Optional[str], typer.Option("--taxonomy", help="label table: release (the official CarlaOcc release's utils/labels.py, the default) | carlaocc-v1 (Building a thing; poles, lights, signs stuff); overrides the config's taxonomy")]
 SequencesOpt = Annotated[Optional[str], typer.Option("--sequences", help="build only the sequences matching these comma-separated patterns (fnmatch on sequence ids, e.g. 'town00_*' or 'town0?_high_00'); scenes and splits still cover every sequence")]
 LimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan)")]
+# run / status / stage: what is not given comes from the root's remembered plan (<root>/plan.yaml)
+PlanVoxelSizeOpt = Annotated[Optional[str], typer.Option("--voxel-size", "--res", help="voxel size(s) in metres, comma-separated, e.g. 0.2 or 0.2,0.05 (--res is the short alias; default: the root's remembered plan's, else 0.2)")]
+PlanLimitFramesOpt = Annotated[Optional[int], typer.Option("--limit-frames", min=2, help="build only the first N frames of every sequence (a slice of the plan: the same poses as the whole plan; default: the remembered plan's slice)")]
+PlanSequencesOpt = Annotated[Optional[str], typer.Option("--sequences", help="build only the sequences matching these comma-separated patterns (fnmatch on sequence ids, e.g. 'town00_*' or 'town0?_high_00'; '*': all); scenes and splits still cover every sequence (default: the remembered plan's slice)")]
+DefaultPlanOpt = Annotated[bool, typer.Option("--default-plan", help="start from the default plan (the root's dataset.yaml, else the embedded default; every frame of every sequence at 0.2 m) instead of the root's remembered plan (<root>/plan.yaml); other options apply on top")]
 
 
 DEBUG_ENV = "CARLAOCC_DEBUG"
@@ -100,6 +105,54 @@ def error_line(exc: BaseException) -> tuple[str, int]:
     return f"{type(exc).__name__}: {one_line(exc)} ({DEBUG_HINT})", 1
 
 
+def did_you_mean(word: str, choices, prefix: str = "") -> str:
+    """``" (did you mean X?)"`` naming the choice closest to a mistyped ``word`` (one a prefix of
+    the other counts as close: ``--resolution`` -> ``--res``), else ``""``. ``prefix`` is ignored
+    when comparing (``--`` of options)."""
+    import difflib
+
+    names = [str(c) for c in choices]
+    bare = word[len(prefix):] if prefix and word.startswith(prefix) else word
+    stems = {c: c[len(prefix):] if prefix and c.startswith(prefix) else c for c in names}
+    # a choice whose stem starts the word or the other way round, or holds it whole (--frames in
+    # --limit-frames): those first; otherwise the closest spellings (of the stems, not the '--')
+    near = [c for c, st in stems.items() if len(st) >= 3 and len(bare) >= 3
+            and (bare.startswith(st) or st.startswith(bare) or (len(bare) >= 4 and bare in st))]
+    if not near:
+        by_stem = {st: c for c, st in stems.items()}
+        near = [by_stem[m] for m in difflib.get_close_matches(bare, list(by_stem), n=2, cutoff=0.6)]
+    return f" (did you mean {' or '.join(near[:2])}?)" if near else ""
+
+
+def check_sequences(store: Store, ids, option: str) -> None:
+    """Every sequence id in ``ids`` is one of the root's, else one line naming it, the closest
+    id and how to list them (exit 2)."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import SequenceRecord
+
+    if not ids:
+        return
+    table = ParquetTable(store, SequenceRecord)
+    known = sorted(s.sequence_id for s in table.load()) if table.paths() else []
+    for sid in ids:
+        if sid not in known:
+            fail(f"{option} {sid}: no such sequence in {store.url}{did_you_mean(sid, known)}; "
+                 f"`carlaocc info --root {store.url} -v` lists them")
+
+
+def unknown_option_line(exc, command_path: str) -> str:
+    """The one line for an option the command does not take, naming the closest it does take
+    (with its aliases: ``--voxel-size / --res``)."""
+    cmd = exc.ctx.command if exc.ctx is not None else None
+    params = [p for p in getattr(cmd, "params", []) if getattr(p, "opts", None) and p.param_type_name == "option"]
+    longs = {o: p for p in params for o in (*p.opts, *p.secondary_opts) if o.startswith("--")}
+    hint = did_you_mean(exc.option_name, longs, prefix="--")
+    if hint:
+        picked = {id(longs[o]): longs[o] for o in hint.removeprefix(" (did you mean ").removesuffix("?)").split(" or ")}
+        hint = " (did you mean " + " or ".join(" / ".join(p.opts) for p in picked.values()) + "?)"
+    return f"no such option {exc.option_name} for `{command_path}`{hint}; `{command_path} --help` lists its options"
+
+
 def report_exception(exc: BaseException) -> None:
     """Print ``exc`` as the one error line (its traceback first with ``--debug``) and exit."""
     if debug_enabled():
@@ -109,7 +162,32 @@ def report_exception(exc: BaseException) -> None:
     raise typer.Exit(code)
 
 
-class ErrorGroup(TyperGroup):
+class CommandGroup(TyperGroup):
+    """A command group whose mistyped commands and options are one line naming the closest ones
+    (exit 2), not click's usage block: ``carlaocc`` and its sub-groups (``catalog``, ``show``...)."""
+
+    def parse_args(self, ctx, args):
+        # an option of `carlaocc` itself mistyped (--verison): one line, as for a command's
+        try:
+            return super().parse_args(ctx, args)
+        except Exception as exc:
+            if type(exc).__name__ != "NoSuchOption" or not hasattr(exc, "option_name"):
+                raise
+            typer.echo(f"error: {unknown_option_line(exc, ctx.command_path)}", err=True)
+            raise typer.Exit(2) from None
+
+    def resolve_command(self, ctx, args):
+        # a mistyped command (carlaocc stauts): one line naming the closest commands
+        name = args[0] if args else ""
+        if name and not name.startswith("-") and self.get_command(ctx, name) is None:
+            commands = self.list_commands(ctx)
+            typer.echo(f"error: no such command {name!r}{did_you_mean(name, commands)}; `{ctx.command_path} "
+                       f"--help` lists the commands", err=True)
+            raise typer.Exit(2)
+        return super().resolve_command(ctx, args)
+
+
+class ErrorGroup(CommandGroup):
     """The ``carlaocc`` group: every command runs inside the one error path -- an exception no
     command turned into its own error line becomes one (:func:`error_line`), never a traceback
     unless ``--debug``. Typer's own exits and usage errors pass through. Output piped into a
@@ -120,7 +198,17 @@ class ErrorGroup(TyperGroup):
         from typer.exceptions import TyperException
 
         try:
-            return super().invoke(ctx)
+            try:
+                return super().invoke(ctx)
+            except Exception as exc:
+                # an option the command does not take (click's NoSuchOption, vendored by Typer as
+                # typer._click): one line with the right hint, not click's usage block
+                if type(exc).__name__ != "NoSuchOption" or not hasattr(exc, "option_name"):
+                    raise
+                sub = getattr(exc, "ctx", None)
+                typer.echo(f"error: {unknown_option_line(exc, sub.command_path if sub else ctx.command_path)}",
+                           err=True)
+                raise typer.Exit(2) from None
         except (TyperException, typer.Exit, typer.Abort, KeyboardInterrupt, SystemExit):
             raise
         except BrokenPipeError:
@@ -153,9 +241,11 @@ def root_config(root: str | None) -> Path | None:
 
 
 def plan_config(path: Path | None, root: str | None, preset: str | None, maps: Path | None = None,
-                limit_frames: int | None = None, taxonomy: str | None = None) -> DatasetConfig:
-    """:func:`load_config` of ``--config`` or ``--preset`` (not both), then ``--maps`` (the
-    folder's .xodr files as the towns), ``--limit-frames`` and ``--taxonomy`` applied."""
+                limit_frames: int | None = None, taxonomy: str | None = None,
+                base: DatasetConfig | None = None) -> DatasetConfig:
+    """:func:`load_config` of ``--config`` or ``--preset`` (not both; neither: ``base`` when
+    given), then ``--maps`` (the folder's .xodr files as the towns), ``--limit-frames`` and
+    ``--taxonomy`` applied."""
     if preset is not None:
         from carlaocc.catalog.presets import preset_path
 
@@ -165,7 +255,7 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
             path = preset_path(preset)
         except ValueError as exc:
             fail(f"--preset: {exc}")
-    cfg = load_config(path, root)
+    cfg = base if base is not None and path is None else load_config(path, root)
     scenes = cfg.scenes
     if maps is not None:
         files = sorted(maps.glob("*.xodr")) if maps.is_dir() else []
@@ -190,14 +280,62 @@ def plan_config(path: Path | None, root: str | None, preset: str | None, maps: P
         fail(validation_message("config", exc))
 
 
+def resolve_plan(store: Store, root: str, *, config: Path | None, preset: str | None, maps: Path | None,
+                 limit_frames: int | None, sequences: str | None, taxonomy: str | None, voxel_size: str | None,
+                 default_plan: bool):
+    """The plan a ``run`` or ``status`` works on, and the root's remembered one (None without):
+    the remembered plan (or, with ``default_plan`` or none remembered, the default plan: the
+    root's ``dataset.yaml`` or the embedded default, 0.2 m, no slice), with the keys the options
+    name replaced. Bad options are one-line errors (exit 2)."""
+    from carlaocc.catalog.plan import PlanStore
+    from carlaocc.schemas.plan import DEFAULT_VOXEL_SIZES, Plan, PlanSlice
+
+    try:
+        remembered = PlanStore(store).load()
+    except StoreError as exc:
+        if not default_plan:
+            fail(exc)
+        remembered = None  # --default-plan is the way past an unreadable plan file
+    start = remembered if remembered is not None and not default_plan else None
+    base = start.config if start is not None else load_config(None, root, plan=False)
+    cfg = plan_config(config, root, preset, maps, None, taxonomy, base=base)
+    text = voxel_size if voxel_size is not None else ",".join(
+        str(v) for v in (start.voxel_sizes if start is not None else DEFAULT_VOXEL_SIZES))
+    voxel_sizes = parse_voxel_sizes(text, cfg)
+    old = start.slice if start is not None else PlanSlice()
+    cut = PlanSlice(limit_frames=limit_frames if limit_frames is not None else old.limit_frames,
+                    sequences=sequence_patterns(sequences) if sequences is not None else old.sequences)
+    return Plan(voxel_sizes=voxel_sizes, slice=cut, config=cfg), remembered
+
+
 def sequence_patterns(text: str | None) -> tuple[str, ...]:
     """``--sequences`` as a tuple of fnmatch patterns (empty: every sequence)."""
     return tuple(p.strip() for p in (text or "").split(",") if p.strip())
 
 
-def load_config(path: Path | None, root: str | None = None) -> DatasetConfig:
-    """The dataset config from a YAML/JSON file; without one, the root's own ``dataset.yaml``
-    when it has one (said on stderr), else the embedded default."""
+def remembered_plan(root: str | None):
+    """The root's remembered plan (:class:`~carlaocc.schemas.plan.Plan`), None when it has none
+    (or there is no root there yet); a plan file that cannot be read is a one-line error."""
+    from carlaocc.catalog.plan import PlanStore
+
+    if not root:
+        return None
+    try:
+        return PlanStore(Store(root)).load()
+    except StoreError as exc:
+        fail(exc)
+    except (ValueError, ImportError, OSError):  # not a usable root: the command's own check says so
+        return None
+
+
+def load_config(path: Path | None, root: str | None = None, plan: bool = True) -> DatasetConfig:
+    """The dataset config from a YAML/JSON file; without one, the config of the root's
+    remembered plan (``plan``, the default), else the root's own ``dataset.yaml`` when it has
+    one (said on stderr), else the embedded default."""
+    if path is None and plan:
+        remembered = remembered_plan(root)
+        if remembered is not None:
+            return remembered.effective_config()
     if path is None:
         path = root_config(root)
         if path is None:
@@ -308,9 +446,11 @@ def open_store(root: str, writable: bool) -> Store:
 
 
 class RichProgress:
-    """A progress bar per stage: tasks done / total and elapsed time."""
+    """A progress bar per stage: tasks done / total and elapsed time. ``on_start`` is called once,
+    before the first stage's bar (when the run's up-front checks have passed and work starts)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_start=None) -> None:
+        self._on_start = on_start
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                    TimeElapsedColumn, TimeRemainingColumn)
@@ -325,6 +465,9 @@ class RichProgress:
         self._tasks: dict[str, int] = {}
 
     def start(self, stage: str, total: int) -> None:
+        if self._on_start is not None:
+            self._on_start()
+            self._on_start = None
         if not self._tasks:
             self._progress.start()
         self._tasks[stage] = self._progress.add_task(stage, total=total)

@@ -37,9 +37,12 @@ from typing import Annotated, Any, Optional
 import numpy as np
 import typer
 
+from carlaocc.pipeline.cli.common import CommandGroup
+
 __all__ = ["eval_app"]
 
 eval_app = typer.Typer(
+    cls=CommandGroup,
     help="Score a model trained on the data: semantic occupancy (IoU, mIoU), panoptic occupancy "
     "(PQ, SQ, RQ), monocular depth (AbsRel ... delta) and 3D detection (nuScenes mAP, mATE, mASE, "
     "mAOE). Prints a table; --json writes everything.",

@@ -19,7 +19,8 @@ from typer.core import TyperCommand
 
 from carlaocc.catalog.store import StoreError
 from carlaocc.pipeline.cli.app import app
-from carlaocc.pipeline.cli.common import ConfigOpt, RootOpt, fail, load_config, open_store, parse_floats, write_bytes
+from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, check_sequences, fail, load_config, open_store,
+                                          parse_floats, remembered_plan, write_bytes)
 from carlaocc.schemas.grid import voxel_size_key
 
 
@@ -110,6 +111,13 @@ def export_cmd(
         options["encoding"] = label_encoding
     cfg = load_config(config, root)
     store = open_store(root, writable=False)
+    check_sequences(store, sequence or [], "--sequence")
+    spec = FORMATS[fmt]
+    if voxel_size is None and spec.default_voxel_size is None and not spec.finest_by_default:
+        plan = remembered_plan(root)  # the voxel size the root was planned at (its finest)
+        if plan is not None:
+            voxel_size = min(plan.voxel_sizes)
+            typer.echo(f"export {fmt}: --voxel-size {voxel_size_key(voxel_size)} (the root's remembered plan)", err=True)
     try:
         voxel_size = resolve_voxel_size(store, fmt, voxel_size)
         total = frame_count(store, voxel_size, sequence)

@@ -140,9 +140,21 @@ def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, 
         root=store.url, sequences=sequences, grids=grids, totals=totals, asset_rows=asset_rows,
         quality=quality, usage=[(u.part, u.files, u.bytes) for u in usage],
         lineage=stage_lineage(LineageLog(store).load()), images=png, label_table=cfg.taxonomy,
+        slice=part.params.get("slice"),
     )
     outputs[REPORT_HTML] = store.write_bytes(REPORT_HTML, page.encode())
     return outputs
+
+
+def slice_line(chosen: list, every: list, patterns: tuple[str, ...]) -> str:
+    """The part of the dataset a report covers, in words: ``"2 of 3 sequences (--sequences
+    town00_*), 2 frames each"``."""
+    counts = sorted({s.frame_count for s in chosen})
+    frames = (f"{counts[0]} frames each" if len(counts) == 1 else f"{counts[0]}-{counts[-1]} frames each"
+              if counts else "no frames")
+    which = (f"{len(chosen)} of {len(every)} sequences (--sequences {','.join(patterns)})" if patterns
+             else f"every sequence ({len(every)})")
+    return f"{which}, {frames}"
 
 
 def report_config(config: DatasetConfig) -> QualityConfig:
@@ -173,7 +185,8 @@ def _report_partitions(ctx: Context) -> list[Partition]:
         if lineage.latest("sensors"):
             needs |= {("sensors", p.key) for p in sensors_partitions(ctx) if p.key == f"{seq.sequence_id}/{frame:04d}"}
     return [Partition("dataset", {"grids": [g.model_dump(mode="json") for g in grids],
-                                  "sequences": [s.sequence_id for s in seqs]},
+                                  "sequences": [s.sequence_id for s in seqs],
+                                  "slice": slice_line(seqs, sequences(ctx, selected=False), ctx.sequence_patterns)},
                       needs=tuple(sorted(needs)))]
 
 

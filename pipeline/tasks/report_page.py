@@ -153,9 +153,10 @@ SECTIONS = ("size", "sequences", "statistics", "quality", "frame", "lineage")
 def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridSpec],
                 totals: dict[float, VoxelSizeStats], asset_rows: list[AssetStatisticsRecord],
                 quality: list[QualityRecord], usage: list[tuple[str, int, int]], lineage: list[StageLineage],
-                images: dict[str, bytes], label_table: str | None = None) -> str:
+                images: dict[str, bytes], label_table: str | None = None, slice: str | None = None) -> str:
     """The report page: one string of HTML with every picture inlined (``images``: name -> PNG);
-    ``label_table``: the dataset's (which classes are things)."""
+    ``label_table``: the dataset's (which classes are things); ``slice``: the part of the
+    dataset's plan it covers, in words."""
 
     table = taxonomy.label_table(label_table)
     voxel_size_keys = ", ".join(f"{g.key} m" for g in grids)
@@ -165,6 +166,7 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
            "<h1>carlaocc dataset report</h1>",
            f"<p class=\"muted\">root <code>{_e(root)}</code> · {len(sequences)} sequences · {frames} frames · "
            f"voxel sizes {_e(voxel_size_keys)} · taxonomy {_e(table.version)}</p>",
+           f"<p class=\"muted\" id=\"slice\">covers: {_e(slice)}</p>" if slice else "",
            "<nav>" + "".join(f'<a href="#{s}">{s}</a>' for s in SECTIONS) + "</nav>"]
     # dataset size
     total_files, total_bytes = sum(u[1] for u in usage), sum(u[2] for u in usage)

@@ -47,6 +47,7 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.commands.export import detgt, flow, grids, infos, npz, release
 from carlaocc.pipeline.commands.export.spec import ExportFormat, ExportJob, ExportSummary, voxelized_sequences
 from carlaocc.schemas.configs import DatasetConfig
+from carlaocc.schemas.grid import voxel_size_key
 
 FORMATS: dict[str, ExportFormat] = {f.name: f for m in (grids, npz, release, infos, flow, detgt) for f in m.FORMATS}
 
@@ -65,6 +66,14 @@ def resolve_voxel_size(store: Store, fmt: str, voxel_size: float | None) -> floa
     format's default, else the finest size built where the format allows it; ValueError when
     the format needs one."""
     spec = export_format(fmt)
+    if voxel_size is not None and spec.default_voxel_size is not None:
+        # a format with its own voxel size pools its grids from a size dividing it
+        ratio = spec.default_voxel_size / voxel_size
+        if ratio < 1 - 1e-6 or abs(ratio - round(ratio)) > 1e-6:
+            d = voxel_size_key(spec.default_voxel_size)
+            raise ValueError(f"export {fmt} pools its {d} m grids from occupancy built at {d} m or a voxel size "
+                             f"dividing it, not {voxel_size_key(voxel_size)} m: build {d} m first (`carlaocc run "
+                             f"--res {d} --root {store.url}`), then export with --res {d}")
     if voxel_size is not None:
         return voxel_size
     if spec.default_voxel_size is not None:
