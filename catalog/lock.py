@@ -17,13 +17,15 @@ writer works is a consistent file set, but possibly of a run half done: ``status
 
 Local roots (and NFSv4, where Linux maps ``flock`` onto POSIX byte-range locks the server keeps):
 an exclusive ``flock`` on the lock file. The kernel releases it when the holding process ends,
-however it ends (``kill -9``, a crash, a lost node's lease on NFS), so a lock is never left stale
-and the file is never removed once a root holds data (removing a lock file others may have open
-races). Taking the lock writes nothing: the empty file is made once, with the root, so a run with
-nothing to do leaves every file of the root as it was. Who holds it is read from the kernel's
+however it ends (``kill -9``, a crash, a lost node's lease on NFS), so a lock is never left stale.
+The empty file exists while a command holds the lock: the command that made it removes it when
+it lets go, and one that waited on it checks, once it has it, that the file it locked is still the
+root's lock file (else it opens the new one and waits again), so removing it races with no one.
+Nothing else is written: a root at rest holds no lock file (one killed holder may leave an empty,
+unlocked one behind, harmless), and a run with nothing to do leaves the root as it was. Who holds it is read from the kernel's
 table of locks (``/proc/locks``: the holder's pid, then its command line), on this host; a holder
 on another host (NFS) is "another process". A refusal on a root that did not exist removes the
-folders and the lock file it made, so it leaves nothing behind.
+folders it made too.
 
 Object stores (``s3://``, ``gs://``...): no lock is taken. A lease by conditional writes (S3's
 ``If-None-Match``) would need each store's own API through fsspec, which does not expose it
@@ -158,7 +160,12 @@ def root_lock(store: Store, wait: bool = True, on_wait: Callable[[str], None] = 
     while True:
         try:
             os.makedirs(store.root, exist_ok=True)
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+            try:  # made by this call: removed when it lets go, so a root at rest holds no lock file
+                fd, created = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666), True
+            except FileExistsError:
+                fd, created = os.open(path, os.O_RDWR | os.O_CLOEXEC), False
+        except FileNotFoundError:
+            continue  # removed between the two opens by the holder letting go: again
         except OSError as exc:
             raise StoreError(f"cannot take the root lock {path}: {exc.strerror or exc} (a root is written by one "
                              "command at a time; its lock file must be writable)") from None
@@ -198,10 +205,12 @@ def root_lock(store: Store, wait: bool = True, on_wait: Callable[[str], None] = 
             with _HELD_GUARD:
                 del _HELD[me]
     finally:
-        if made and os.listdir(store.root) == [LOCK_FILE]:
-            # a root this command made and wrote nothing into (a refusal): leave no trace
-            with contextlib.suppress(OSError):
+        # the lock file goes with the lock (whoever waits on it opens it anew: see above), and so
+        # does a root this command made and wrote nothing into (a refusal): no trace is left
+        with contextlib.suppress(OSError):
+            if created:
                 os.unlink(path)
+            if made and not os.listdir(store.root):
                 for d in made:
                     os.rmdir(d)
         os.close(fd)  # closing the descriptor releases the flock

@@ -65,7 +65,7 @@ def _run(store, cfg=None, **kw):
 
 
 def _files(root: Path) -> dict[str, bytes]:
-    """Every file of a root but the lock file (whose holder writes who it is)."""
+    """Every file of a root but the lock file (which exists while its holder holds it)."""
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
             if p.is_file() and p.name != LOCK_FILE}
 
@@ -122,7 +122,7 @@ def test_a_writer_waits_for_the_holder_saying_so_then_runs(tmp_path):
     # every record of the run was written after the holder let go
     records = LineageLog(store).load()
     assert records and min(r.started_at for r in records) >= released[0]
-    assert (tmp_path / "data" / LOCK_FILE).exists()
+    assert not (tmp_path / "data" / LOCK_FILE).exists()  # the lock file goes with the lock
 
 
 def test_the_lock_is_released_by_a_killed_holder(tmp_path):

@@ -76,7 +76,7 @@ def fake_runner(monkeypatch):
 
     calls = []
 
-    def fake(store, cfg, voxel_sizes, names, scheduler, force, progress, workers, log, sequences):
+    def fake(store, cfg, voxel_sizes, names, scheduler, force, progress, workers, log, sequences, wait=True):
         calls.append((cfg, voxel_sizes, sequences))
         progress.start("ingest", 0)
         return []
