@@ -148,41 +148,62 @@ def _reference_cameras() -> tuple[CameraSpec, ...]:
     return tuple(CameraSpec(name=n, x=x, y=y, z=1.55, yaw_deg=yaw) for n, x, y, yaw in table)
 
 
+def _pairs(items) -> list[tuple[str, str, float]]:
+    """Stereo pairs among ``(name, (x, y, z) ego metres, ego yaw degrees, image key)`` items (see
+    :func:`stereo_pairs`)."""
+    pairs, used = [], set()
+    for i, (an, (ax, ay, az), ayaw, akey) in enumerate(items):
+        for bn, (bx, by, bz), byaw, bkey in items[i + 1 :]:
+            if an in used or bn in used:
+                continue
+            dyaw = (ayaw - byaw + 180.0) % 360.0 - 180.0
+            if abs(dyaw) > 1e-4 or abs(az - bz) > 1e-3 or akey != bkey:
+                continue
+            psi = math.radians(ayaw)
+            # offset b - a along the heading (must vanish) and along the camera's left axis
+            along = (bx - ax) * math.cos(psi) + (by - ay) * math.sin(psi)
+            left = -(bx - ax) * math.sin(psi) + (by - ay) * math.cos(psi)
+            if abs(along) > 1e-3 or abs(left) < 1e-3:
+                continue
+            pairs.append((bn, an, abs(left)) if left > 0 else (an, bn, abs(left)))
+            used |= {an, bn}
+    return pairs
+
+
 def stereo_pairs(cameras) -> list[tuple[str, str, float]]:
     """``(left, right, baseline_m)`` of every stereo pair among ``cameras``: two cameras with the
     same heading, height and image size whose offset is perpendicular to their heading (within
     1 mm). ``left`` is the one on the left as seen looking along the pair's heading (for a pair
     facing the rear, the one on the ego's right side). Each camera is in at most one pair, taken in
     the cameras' order."""
-    pairs, used = [], set()
-    for i, a in enumerate(cameras):
-        for b in cameras[i + 1 :]:
-            if a.name in used or b.name in used:
-                continue
-            same = (abs(a.ego_yaw_deg - b.ego_yaw_deg) < 1e-6 and abs(a.z - b.z) < 1e-3
-                    and (a.width, a.height, a.hfov_deg) == (b.width, b.height, b.hfov_deg))
-            if not same:
-                continue
-            (ax, ay, _), (bx, by, _) = a.ego_position(), b.ego_position()
-            psi = math.radians(a.ego_yaw_deg)
-            # offset b - a along the heading (must vanish) and along the camera's left axis
-            along = (bx - ax) * math.cos(psi) + (by - ay) * math.sin(psi)
-            left = -(bx - ax) * math.sin(psi) + (by - ay) * math.cos(psi)
-            if abs(along) > 1e-3 or abs(left) < 1e-3:
-                continue
-            pairs.append((b.name, a.name, abs(left)) if left > 0 else (a.name, b.name, abs(left)))
-            used |= {a.name, b.name}
-    return pairs
+    return _pairs([(c.name, c.ego_position(), c.ego_yaw_deg, (c.width, c.height, c.hfov_deg)) for c in cameras])
+
+
+def _roles(names, directions, pairs) -> dict[str, str]:
+    roles = dict(zip(names, directions))
+    for left, right, _ in pairs:
+        roles[left] += f", stereo left (with {right})"
+        roles[right] += f", stereo right (with {left})"
+    return roles
 
 
 def camera_roles(cameras) -> dict[str, str]:
     """``name -> description`` of each camera: its direction in words and, for a camera of a stereo
     pair, its place in it, e.g. ``"front, stereo left (with camera_01)"``."""
-    roles = {c.name: c.direction for c in cameras}
-    for left, right, _ in stereo_pairs(cameras):
-        roles[left] += f", stereo left (with {right})"
-        roles[right] += f", stereo right (with {left})"
-    return roles
+    return _roles([c.name for c in cameras], [c.direction for c in cameras], stereo_pairs(cameras))
+
+
+def pose_roles(poses: dict[str, Matrix]) -> dict[str, str]:
+    """:func:`camera_roles` from cameras' poses instead of a rig: ``name -> 4x4`` pose of the
+    camera's OpenCV optical frame (z forward) in the ego or LiDAR frame (x forward, y left, z
+    up), e.g. a recorded frame's ``sensor_poses`` brought into its LiDAR frame. A camera's
+    heading is its optical axis projected on the ground plane; a pair needs the same heading
+    and height and an offset across it."""
+    items = []
+    for name, T in poses.items():
+        yaw = math.degrees(math.atan2(T[1][2], T[0][2]))  # the optical z axis, seen from above
+        items.append((name, (T[0][3], T[1][3], T[2][3]), yaw, None))
+    return _roles([n for n, *_ in items], [facing(y) for _, _, y, _ in items], _pairs(items))
 
 
 def rig_lines(rig: "RigConfig") -> list[str]:

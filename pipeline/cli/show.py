@@ -125,13 +125,14 @@ def show_occupancy(
     store = open_store(root, writable=False)
     if len(voxel_sizes) == 1:
         sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, voxel_sizes[0])
-        image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", mode=mode)
+        image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m, colouring: {mode}",
+                                 mode=mode).image
     else:
         frames = []
         for size in voxel_sizes:
             sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, size)
             frames.append((f"{grid.key} m", sem, inst, grid))
-        image = multi_voxel_size_figure(frames, mode=mode, title=f"{seq} frame {frame}")
+        image = multi_voxel_size_figure(frames, mode=mode, title=f"{seq} frame {frame}, colouring: {mode}").image
     write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 
@@ -185,9 +186,11 @@ def show_sensors(
     transparency region tinted red and of the omission region blue (epsilon from the config).
     With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""
     from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.schemas.rig import camera_roles
     from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
     cfg = load_config(config, root)
+    roles = camera_roles(cfg.scenes.rig.cameras)  # the direction each camera faces, in words
     store = open_store(root, writable=False)
     sensors = SensorStore(store)
     stored = sensors.cameras(seq)
@@ -215,10 +218,10 @@ def show_sensors(
         if read("normal") is None:
             fail(f"{seq}/{cam} has no normal map: run the sensors stage")
         view = CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
-                          read("depth_raw"), read("semantic_raw"), read("rgb"))
+                          read("depth_raw"), read("semantic_raw"), read("rgb"), direction=roles.get(cam, ""))
         if joints is not None:
             view = _with_skeletons(view, joints, poses, cfg.scenes.rig, cam)
         views.append(view)
-    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
+    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step).image
     write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")

@@ -490,9 +490,10 @@ def _frame_camera(lo, hi, el: float, az: float, H: int, W: int, fov_deg: float, 
 
 
 def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azimuth_deg, mode, fov_deg, bounds,
-               max_voxels, background, antialias, margin, outline) -> tuple[np.ndarray, int]:  # fmt: skip
+               max_voxels, background, antialias, margin, outline, z_range=None) -> tuple[np.ndarray, int]:  # fmt: skip
     """:func:`perspective_view` on checked arrays (see :func:`grid_arrays`) with voxel (0, 0, 0) at
-    ``grid_origin``; returns the image and the pooling factor."""
+    ``grid_origin``; returns the image and the pooling factor. ``z_range`` (m), when given, is
+    the height mode's ramp range (else the bounds' z range, else the drawn voxels')."""
     check_mode(mode)
     H, W = image_size(size)
     ss = max(1, int(antialias))
@@ -518,7 +519,9 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
         return blank, f
     i, j, k = idx[:, 0], idx[:, 1], idx[:, 2]
     z = origin[2] + (k + 0.5) * pooled_voxel_size
-    if bounds is not None and len(bounds) > 2 and bounds[2] is not None:
+    if z_range is not None:
+        z_range = (float(z_range[0]), float(z_range[1]))
+    elif bounds is not None and len(bounds) > 2 and bounds[2] is not None:
         z_range = (float(bounds[2][0]), float(bounds[2][1]))
     else:
         z_range = (float(z.min()), float(z.max()))

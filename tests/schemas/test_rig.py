@@ -108,3 +108,14 @@ def test_reference_rig_in_the_dataset_frame():
     # a rotated single camera: no pair, its own direction
     one = (CameraSpec(name="c", x=1.0, y=0.5, yaw_deg=-45.0), CameraSpec(name="d", x=1.0, y=-0.5, yaw_deg=0.0))
     assert stereo_pairs(one) == [] and camera_roles(one) == {"c": "front-left", "d": "front"}
+
+
+def test_roles_from_poses_agree_with_the_rig():
+    from carlaocc.schemas.rig import camera_roles, pose_roles
+
+    rig = RigConfig()
+    # the optical frames' poses in the LiDAR frame (as sensor_poses and the frames table give them)
+    to_lidar = np.linalg.inv(np.array(rig.lidar.sensor_to_ego()))
+    poses = {c.name: (to_lidar @ np.array(c.camera_to_ego())).tolist() for c in rig.cameras}
+    assert pose_roles(poses) == camera_roles(rig.cameras)
+    assert pose_roles(poses)["camera_04"] == "rear, stereo right (with camera_05)"

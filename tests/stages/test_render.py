@@ -163,3 +163,76 @@ def test_project_skeletons_and_draw():
     assert tuple(out[20, 20]) == (140, 140, 140)  # the hidden one, grey
     assert tuple(out[20, 35]) == (140, 140, 140)  # the bone between them (one end hidden): grey
     assert not image.any()  # the input is left as it is
+
+
+def _camera_views():
+    """Two 40 x 60 cameras: a road (class Road) under a car (instance 7) at 5 m, sky above (no
+    surface), normals facing the camera."""
+    from carlaocc.schemas.taxonomy import by_name
+    from carlaocc.stages.render.sensors import CameraView
+
+    road, car = by_name("Road").id, by_name("Car").id
+    depth = np.zeros((40, 60), np.float32)
+    depth[20:] = 2.0
+    depth[10:30, 20:40] = 5.0
+    sem = np.zeros((40, 60), np.uint8)
+    sem[20:] = road
+    sem[10:30, 20:40] = car
+    inst = np.where(sem == car, 7, 0).astype(np.uint32)
+    normal = np.zeros((40, 60, 3), np.float32)
+    normal[depth > 0] = (0.0, 0.0, -1.0)
+    return [CameraView(name, depth, sem, inst, normal, direction=d)
+            for name, d in (("camera_00", "front, stereo left (with camera_01)"), ("camera_03", "right"))]
+
+
+def test_sensor_sheet_titles_keys_and_pixels():
+    from carlaocc.schemas.taxonomy import by_name, palette
+    from carlaocc.stages.render.colours import instance_colors
+    from carlaocc.stages.render.sensors import depth_image, sensor_sheet
+
+    views = _camera_views()
+    sheet = sensor_sheet(views, step=1)
+    # every panel names its camera and the direction it faces
+    assert sheet.titles[:2] == ["camera_00 (front, stereo left (with camera_01)): depth", "camera_03 (right): depth"]
+    assert [t.split(": ")[-1] for t in sheet.titles] == ["depth"] * 2 + ["normal"] * 2 + ["semantic"] * 2 + ["instance"] * 2
+    depth, normal, semantic, instance = sheet.keys
+    # depth: a scale in metres whose tick positions follow the ramp sqrt(1 m / depth)
+    ticks = dict((label, pos) for pos, label in depth.scale.ticks)
+    assert ticks["5"] == pytest.approx(np.sqrt(1 / 5)) and ticks["80"] == pytest.approx(np.sqrt(1 / 80))
+    # the scale's colour at 5 m is the colour the depth map draws at 5 m
+    k = int(round(np.sqrt(1 / 5) * 63))
+    assert np.abs(depth.scale.colours[k].astype(int) - depth_image(np.array([[1 / (k / 63) ** 2]]))[0, 0]).max() <= 1
+    assert ("no surface", ((0, 0, 0),)) in [(e.label, e.colours) for e in depth.entries]
+    # normals: a surface facing the camera is (128, 128, 255), as the maps draw it
+    assert normal.entries[0].label == "faces the camera" and normal.entries[0].colours == ((128, 128, 255),)
+    assert [e.label for e in semantic.entries] == ["Road", "Car"]
+    car = by_name("Car").id
+    assert semantic.entries[1].colours == (tuple(palette()[car]),)
+    assert instance.entries[0].kind == "instances" and instance.entries[0].colours == (tuple(int(v) for v in instance_colors(7)),)
+    # pixels inside the panels are the maps' colours, one sheet pixel per map pixel
+    r0, r1, c0, c1 = sheet.boxes[0]
+    assert (r1 - r0, c1 - c0) == (40, 60)
+    assert (sheet.image[r0 + 20, c0 + 30] == depth_image(np.array([[5.0]]))[0, 0]).all()
+    assert (sheet.image[r0 + 2, c0 + 2] == 0).all()
+    r0, r1, c0, c1 = sheet.boxes[5]  # camera_03 semantic
+    assert (sheet.image[r0 + 35, c0 + 5] == palette()[by_name("Road").id]).all()
+    r0, r1, c0, c1 = sheet.boxes[7]  # camera_03 instance: the car in its instance colour
+    assert (sheet.image[r0 + 20, c0 + 30] == instance_colors(7)).all()
+
+
+def test_sensor_sheet_rgb_row_and_repair_tints():
+    import dataclasses
+
+    from carlaocc.stages.render.sensors import OMISSION_TINT, sensor_sheet
+
+    rgb = np.zeros((40, 60, 3), np.uint8)
+    rgb[:, :, 1] = 200
+    views = [dataclasses.replace(v, rgb=rgb, depth_raw=v.depth, semantic_raw=v.semantic) for v in _camera_views()]
+    sheet = sensor_sheet(views, step=2)
+    assert sheet.titles[0] == "camera_00 (front, stereo left (with camera_01)): rgb"
+    r0, r1, c0, c1 = sheet.boxes[0]
+    assert (r1 - r0, c1 - c0) == (20, 30) and (sheet.image[r0:r1, c0:c1] == rgb[::2, ::2]).all()
+    keys = {t.split(": ")[-1]: k for t, k in zip(sheet.titles[::2], sheet.keys)}
+    assert set(keys) == {"rgb", "depth", "normal", "semantic", "instance", "raw depth", "rectified depth",
+                         "raw semantic", "rectified semantic"}
+    assert ("omission region (no raw label)", (OMISSION_TINT,)) in [(e.label, e.colours) for e in keys["raw semantic"].entries]
