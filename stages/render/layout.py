@@ -132,7 +132,7 @@ def _key_layout(key: Key | None, height: int) -> tuple[int, int, int]:
     cols = max(1, -(-lines // per_col))
     widest = max([_text_px(e.label, FONT_PT) + (0 if e.kind == "text" else 26) for e in key.entries]
                  + [_text_px(key.heading, FONT_PT, bold=True), 40.0])
-    col_w = int(math.ceil(widest)) + 12
+    col_w = int(math.ceil(widest * 1.06)) + 14  # Agg draws a little wider than the path metrics
     width = cols * col_w + (_SCALE_PX if key.scale is not None else 0)
     tall = max(min(per_col, lines) * _ROW_PX + 6, 100 if key.scale is not None else 0)
     return width, tall, per_col

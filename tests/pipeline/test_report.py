@@ -222,3 +222,25 @@ def test_store_usage_counts_parts(tmp_path):
     (tmp_path / "root" / "admesh" / ".tmp-x").write_bytes(b"999")
     usage = {u.part: (u.files, u.bytes) for u in store_usage(store, exclude=("metrics/report.html",))}
     assert usage == {"admesh": (2, 6), "other": (1, 2)}
+
+
+def test_lineage_is_a_readable_table_with_hashes_folded(small):
+    from carlaocc.pipeline.tasks.report_page import render_html
+
+    recs = [_run("voxelize", f"s/0.4/{t:04d}", {f"occupancy.zarr/s/0.4/semantic[{t}]": "x"}, {"scenes/s": "y"})
+            for t in range(3)]
+    recs = [r.model_copy(update={"code_version": "0123456789abcdef" * 4}) for r in recs]
+    recs[2] = recs[2].model_copy(update={"status": "failed", "run_id": "20250103T000000Z-def"})
+    page = render_html(root="r", sequences=[], grids=[], totals={}, asset_rows=[], quality=[], usage=[],
+                       lineage=stage_lineage(recs), images={})
+    section = page[page.index('id="lineage"'):]
+    readable, folded = section.split("<details><summary>hashes", 1)
+    # stage, completed partitions, when, task time, the short code version, what it read and wrote
+    for text in ("<th>stage</th>", "<th>completed</th>", "<th>finished (UTC)</th>", "<th>code</th>",
+                 "<b>voxelize</b>", "2 of 3", "2025-01-02 03:04:07", "6.0 s", "<code>01234567</code>",
+                 "scenes ×3", "occupancy.zarr/semantic ×3"):
+        assert text in readable, text
+    # the hashes and run ids only inside the folded element
+    assert "0123456789abcdef" not in readable and "20250102T030405Z-abc" not in readable and "cf6" not in readable
+    assert "0123456789abcdef" * 4 in folded and "20250103T000000Z-def" in folded and "cf6" in folded
+    assert folded.index("</details>") > folded.index("cf6")
