@@ -264,7 +264,8 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
             status = f'<span class="bad">{status}</span>'
         rows.append([f"<b>{_e(L.stage)}</b>", status, f"{_e(L.ended)}", _duration(L.task_seconds),
                      _short_versions(L.code_versions),
-                     ", ".join(f"{_e(k)} ×{n:,}" for k, n in L.inputs.items()) or "—",
+                     ", ".join(f"{'external files' if k == 'file' else _e(k)} ×{n:,}" for k, n in L.inputs.items())
+                     or "—",
                      ", ".join(f"{_e(k)} ×{n:,}" for k, n in L.outputs.items())])
         hashes.append([_e(L.stage), "<br>".join(_e(r) for r in L.run_ids),
                        "<br>".join(f"<code>{_e(c)}</code>" for c in L.code_versions),

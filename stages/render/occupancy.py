@@ -50,6 +50,7 @@ __all__ = [
     "FREE_RGB",
     "bev_height_map",
     "classes_present",
+    "orthographic_extent",
     "perspective_view",
     "pool_occupancy",
     "surface_voxels",
@@ -487,6 +488,24 @@ def _frame_camera(lo, hi, el: float, az: float, H: int, W: int, fov_deg: float, 
     basis = np.ascontiguousarray(np.stack([right, up, fwd]))
     light = key_light(right, up, fwd)
     return cam, basis, persp, float(scale), float(offx), float(offy), light
+
+
+def orthographic_extent(bounds, size, elevation_deg: float, azimuth_deg: float,
+                        margin: float = 0.03) -> tuple[float, float, float, float]:
+    """(left, right, bottom, top) of an orthographic :func:`perspective_view` (``fov_deg=0``)
+    framing the metric ``bounds`` ((xmin, xmax), (ymin, ymax), (zmin, zmax)) into ``size``
+    pixels: the image edges in metres along the view's screen axes (``right`` and ``up`` of
+    :func:`carlaocc.stages.render.raster.camera_axes`), measured from the centre of ``bounds``.
+    A point p lands at pixel column ``(u - left) / (right - left) * W`` and row
+    ``(top - v) / (top - bottom) * H`` with (u, v) = ((p - centre) . right, (p - centre) . up).
+    At ``elevation_deg`` 0, ``up`` is +z: bottom and top are heights above the centre."""
+    H, W = image_size(size)
+    lo = np.array([b[0] for b in bounds], float)
+    hi = np.array([b[1] for b in bounds], float)
+    # the same framing the view computes (the supersampling scales pixels and offsets alike)
+    _, _, _, scale, offx, offy, _ = _frame_camera(lo, hi, elevation_deg, azimuth_deg, H, W, 0.0, margin)
+    # screen x = offx + scale u, y = offy - scale v, inverted at the image edges
+    return (-offx / scale, (W - offx) / scale, (offy - H) / scale, offy / scale)
 
 
 def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azimuth_deg, mode, fov_deg, bounds,

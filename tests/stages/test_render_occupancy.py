@@ -297,3 +297,26 @@ def _shade_mask(img, base) -> np.ndarray:
     img, base = img.astype(float), np.asarray(base, float)
     s = img.sum(axis=2, keepdims=True) / base.sum()
     return (np.abs(img - s * base).max(axis=2) <= 3) & (s[..., 0] > 0.3)
+
+
+def test_orthographic_extent_places_a_voxel_where_the_view_draws_it():
+    from carlaocc.stages.render.occupancy import orthographic_extent
+    from carlaocc.stages.render.raster import camera_axes
+
+    grid = _grid(0.25)
+    sem = np.zeros(grid.shape, np.uint8)
+    inst = np.zeros(grid.shape, np.uint32)
+    _box(sem, inst, grid, (2.0, 2.5), (-1.0, -0.5), (0.5, 1.0), POLE)  # a 0.5 m cube
+    bounds = ((-4.0, 8.0), (-4.0, 4.0), (-2.0, 3.0))
+    for el, az in ((0.0, 90.0), (0.0, 180.0), (20.0, 30.0)):
+        img = perspective_view(sem, inst, grid, size=(200, 300), elevation_deg=el, azimuth_deg=az, fov_deg=0.0,
+                               bounds=bounds, mode="semantic", outline=False, antialias=1)
+        left, right, bottom, top = orthographic_extent(bounds, (200, 300), el, az)
+        r_, u_, _ = camera_axes(el, az)
+        p = np.array([2.25, -0.75, 0.75]) - np.array([2.0, 0.0, 0.5])  # cube centre from the bounds' centre
+        col = (p @ r_ - left) / (right - left) * 300
+        row = (top - p @ u_) / (top - bottom) * 200
+        drawn = np.argwhere(np.any(img != 255, axis=2)).mean(axis=0)
+        assert abs(drawn[0] - row) < 1.5 and abs(drawn[1] - col) < 1.5, (el, az, drawn, row, col)
+        # square pixels: as many metres per pixel across as down
+        assert (right - left) / 300 == pytest.approx((top - bottom) / 200)
