@@ -17,8 +17,9 @@ from carlaocc.schemas.configs import DatasetConfig
 
 
 def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int, size: int = 512):
-    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view,
-    each part in its semantic class's palette colour, glass translucent."""
+    """(labels, images, class ids, any translucent part) of assets chosen by id or by a SQL WHERE
+    clause over the assets view, each part in its semantic class's palette colour, glass
+    translucent."""
     from carlaocc.catalog.admesh import dedupe_parts
     from carlaocc.catalog.meshes import MeshStore
     from carlaocc.catalog.parquet import ParquetTable
@@ -43,7 +44,7 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
     parts = {}
     for p in dedupe_parts(ParquetTable(store, PartRecord).load()):
         parts.setdefault(p.asset_id, []).append(p)
-    meshes, labels, images = MeshStore(store), [], []
+    meshes, labels, images, classes, translucent = MeshStore(store), [], [], set(), False
     for aid, category, subclass, mesh_path in rows:
         recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
         try:
@@ -55,7 +56,9 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
                       for r, (v, f) in zip(recs, arrays)]
         images.append(render_asset(mesh_parts, size=size))
         labels.append(f"{category}/{subclass} {aid[:8]}")
-    return labels, images
+        classes |= {r.semantic_id for r in recs}
+        translucent |= any(r.transparent for r in recs)
+    return labels, images, classes, translucent
 
 
 @admesh_app.command("show")
@@ -65,7 +68,7 @@ def admesh_show(
     root: RootOpt = "data",
 ) -> None:
     """Render one asset to a PNG (semantic colours, glass translucent), headless."""
-    labels, images = _render_assets(open_store(root, writable=False), None, asset_id, 1)
+    labels, images, _, _ = _render_assets(open_store(root, writable=False), None, asset_id, 1)
     write_png(out, images[0])
     typer.echo(f"{labels[0]} -> {out}")
 
@@ -79,11 +82,13 @@ def admesh_sheet(
     size: Annotated[int, typer.Option("--size", min=64, max=1024, help="thumbnail edge, pixels")] = 256,
     root: RootOpt = "data",
 ) -> None:
-    """A contact sheet of the assets a query selects (semantic colours), headless."""
-    from carlaocc.stages.render.sheets import contact_sheet
+    """A sheet of the assets a query selects (parts in their class colours, a legend of the
+    classes), headless."""
+    from carlaocc.stages.render.assets import asset_sheet
 
-    labels, images = _render_assets(open_store(root, writable=False), where, None, limit, size)
-    write_png(out, contact_sheet(images, labels, columns=columns))
+    labels, images, classes, translucent = _render_assets(open_store(root, writable=False), where, None, limit, size)
+    write_png(out, asset_sheet(images, labels, classes, columns=columns, translucent=translucent,
+                               title=f"{len(images)} assets where {where}").image)
     typer.echo(f"{len(images)} assets -> {out}")
 
 

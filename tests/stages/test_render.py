@@ -1,5 +1,5 @@
-"""Headless preview rendering: framing, colours, transparency, determinism, the bitmap font and
-contact sheets."""
+"""Headless preview rendering: framing, colours, transparency, determinism; the asset and camera
+sheets (titles, keys, the pixels inside their panels)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import trimesh
 
 from carlaocc.schemas.meshes import MeshPart
 from carlaocc.stages.render.assets import render_asset
-from carlaocc.stages.render.sheets import FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, text_width
 
 WHITE = np.array([255, 255, 255], dtype=np.uint8)
 
@@ -101,47 +100,24 @@ def test_twenty_thousand_triangles_render():
     assert fg[128, 128] and fg.mean() > 0.3
 
 
-def test_text_and_font():
-    assert text_width("", 1) == 0 and text_width("A", 1) == 5 and text_width("AB", 2) == 22
-    img = np.zeros((9, 20, 3), dtype=np.uint8)
-    draw_text(img, "I-", 1, 1, (255, 255, 255))
-    on = img[:, :, 0] > 0
-    assert on[1, 2:5].all()  # the top bar of "I"
-    assert on[4, 7:12].all() and not on[3, 7:12].any()  # the dash
-    # unknown characters draw a "?", text past the border is clipped
-    draw_text(img, "\u00e9\u00e9\u00e9\u00e9", 15, 5, (9, 9, 9))
-    assert (img[:, :, 0] == 9).any()
+def test_asset_sheet_titles_and_class_key():
+    from carlaocc.schemas.taxonomy import by_name, palette
+    from carlaocc.stages.render.assets import asset_sheet
 
-
-def test_contact_sheet_layout_and_labels():
-    rng = np.random.default_rng(0)
-    images = [rng.integers(0, 255, (40, 50, 3), dtype=np.uint8) for _ in range(7)]
-    images[3] = images[3][:30, :44]  # a smaller tile is centred in its cell
-    labels = ["Car/sedan", "", "Bus/city_bus", "Tree 3", "x", "y", "z"]
-    sheet = contact_sheet(images, labels, columns=3, label_background=(236, 236, 236), text_color=(20, 20, 20))
-    strip = label_strip_height(1)
-    assert strip > FONT_HEIGHT
-    assert sheet.shape == (3 * (40 + strip), 3 * 50, 3) and sheet.dtype == np.uint8
-    assert (sheet[0:40, 0:50] == images[0]).all()
-    label0 = sheet[40 : 40 + strip, 0:50]
-    label1 = sheet[40 : 40 + strip, 50:100]
-    assert (label0 == 20).all(axis=2).sum() > 20  # text pixels under the first image
-    assert not (label1 == 20).all(axis=2).any()  # an empty label leaves a blank strip
-    assert (label1 == 236).all()
-    # the last row has two empty cells of background
-    assert (sheet[2 * (40 + strip) :, 50:] == 255).all()
-    # one row when there are fewer images than columns; a bigger scale gives a taller strip
-    one = contact_sheet(images[:2], labels[:2], columns=6, label_scale=2)
-    assert one.shape == (40 + label_strip_height(2), 100, 3)
-
-
-def test_contact_sheet_checks_its_input():
-    with pytest.raises(ValueError):
-        contact_sheet([np.zeros((4, 4, 3), np.uint8)], ["a", "b"])
-    with pytest.raises(ValueError):
-        contact_sheet([], [])
-    long = contact_sheet([np.zeros((10, 30, 3), np.uint8)], ["a very long label indeed"])
-    assert long.shape == (10 + label_strip_height(1), 30, 3)
+    car, glass = by_name("Car").id, by_name("Pole").id
+    images = [np.full((30, 40, 3), v, np.uint8) for v in (10, 60, 110, 160, 210)]
+    labels = [f"Car/high_seq {k}" for k in range(5)]
+    sheet = asset_sheet(images, labels, {car, glass, 999}, columns=3, translucent=True)
+    assert sheet.titles == labels  # text as given ("high_seq" in a real font)
+    (key,) = sheet.keys  # one key, on the first row
+    assert key.labels == ["Pole", "Car", "translucent: glass (drawn see-through)"]
+    assert key.entries[1].colours == (tuple(palette()[car]),)
+    # three panels on the first row, two on the second, each image drawn as it is
+    assert [b[0] for b in sheet.boxes] == [sheet.boxes[0][0]] * 3 + [sheet.boxes[3][0]] * 2
+    for (r0, r1, c0, c1), im in zip(sheet.boxes, images):
+        assert (sheet.image[r0:r1, c0:c1] == im).all()
+    with pytest.raises(ValueError, match="labels"):
+        asset_sheet(images, labels[:2], {car})
 
 
 def test_project_skeletons_and_draw():
