@@ -56,7 +56,7 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     return png_bytes(sheet.image)
 
 
-def _camera_roles(store: Store, seq: str, frame: int) -> dict[str, str]:
+def recorded_camera_roles(store: Store, seq: str, frame: int) -> dict[str, str]:
     """``camera -> direction in words (and stereo place)`` from the frame's recorded sensor poses
     (the rig the sequence was recorded with, whatever the config says now); empty without them."""
     from carlaocc.pipeline.tasks.frame import frame_rows
@@ -80,7 +80,7 @@ def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
     camera titled with its direction, or None without cameras."""
 
     sensors = SensorStore(store)
-    roles = _camera_roles(store, seq, frame)
+    roles = recorded_camera_roles(store, seq, frame)
     views = []
     for cam in sensors.cameras(seq):
         names = set(sensors.names(seq, cam))

@@ -254,7 +254,10 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
     out.append('<h2 id="frame">A rendered frame</h2>')
     out.append(_img(images, "frame", "occupancy of one frame") or "<p class=\"muted\">no occupancy frame</p>")
     if "sensors" in images:
-        out += [f'<h3>Its cameras (every {SENSOR_STEP}th pixel)</h3>', _img(images, "sensors", "camera maps")]
+        out += [f'<h3>Its cameras: RGB (when the sensors stage stored it) and maps, every {SENSOR_STEP}th pixel</h3>',
+                '<p class="muted">a column per camera, titled with the direction it faces (from the recorded '
+                'sensor poses); each row ends in its key</p>',
+                _img(images, "sensors", "camera RGB and maps")]
     # lineage
     out.append('<h2 id="lineage">Lineage</h2>')
     rows, hashes = [], []
