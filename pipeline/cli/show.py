@@ -119,8 +119,10 @@ def show_occupancy(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Render one frame's occupancy: a bird's-eye height map and a 3D view (one voxel size), or
-    the multi-voxel-size figure (3D views and a zoomed bird's-eye crop per voxel size)."""
+    """Render one frame's occupancy: a top view with axes in metres and a 3D view (one voxel size),
+    or the multi-voxel-size figure (3D views and a zoomed top view per voxel size); a key states
+    the colouring (classes, things by their instances' colours, the ego marker; in height mode a
+    scale in metres)."""
     from carlaocc.stages.render.figures import multi_voxel_size_figure, occupancy_figure
 
     if mode not in ("instance", "semantic", "height"):
@@ -186,7 +188,8 @@ def show_sensors(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Contact sheet of one frame's camera maps (the RGB -- recorded, or rendered from the scene --, depth,
+    """Sheet of one frame's camera maps, each panel titled with its camera and the direction it
+    faces, each row with its key (the RGB -- recorded, or rendered from the scene --, depth,
     normals, semantics, instances per camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
     transparency region tinted red and of the omission region blue (epsilon from the config).
     With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""
