@@ -706,9 +706,10 @@ def test_show_sensors_png(built, tmp_path):
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--root", built.url, "--out", str(out)])
     assert r.exit_code == 0, r.output
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # a column per camera (704 px at --step 2), five rows of 188 px (rgb first) and their keys
+    # a column per camera (704 px at --step 2) and its key; nine rows of 188 px (rgb, the four
+    # maps, the four rectification maps), each with its titles
     w, h = (int(v) for v in r.output.split("(")[1].split(")")[0].split("x"))
-    assert 6 * 704 < w < 6 * 704 + 1000 and 5 * 188 < h < 5 * 188 + 400, r.output
+    assert 6 * 704 < w < 6 * 704 + 1000 and 9 * 188 < h < 9 * (188 + 60), r.output
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--camera", "camera_09",
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 2 and "camera_09" in r.output
