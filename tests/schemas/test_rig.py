@@ -2,6 +2,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
@@ -119,3 +121,15 @@ def test_roles_from_poses_agree_with_the_rig():
     poses = {c.name: (to_lidar @ np.array(c.camera_to_ego())).tolist() for c in rig.cameras}
     assert pose_roles(poses) == camera_roles(rig.cameras)
     assert pose_roles(poses)["camera_04"] == "rear, stereo right (with camera_05)"
+
+
+@given(st.floats(-1000.0, 1000.0, allow_nan=False))
+def test_facing_names_the_nearest_of_eight_directions(yaw):
+    from carlaocc.schemas.rig import facing
+
+    names = ["front", "front-left", "left", "rear-left", "rear", "rear-right", "right", "front-right"]
+    word = facing(yaw)
+    # the named direction is within half a sector (22.5 deg, with rounding slack) of the heading
+    off = (yaw - 45.0 * names.index(word) + 180.0) % 360.0 - 180.0
+    assert abs(off) <= 22.5 + 1e-9
+    assert facing(yaw + 360.0) == word or abs(abs(off) - 22.5) < 1e-6
