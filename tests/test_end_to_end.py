@@ -705,7 +705,11 @@ def test_show_sensors_png(built, tmp_path):
     out = tmp_path / "sensors.png"
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--root", built.url, "--out", str(out)])
     assert r.exit_code == 0, r.output
-    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and "x1989" in r.output  # a row per camera: rgb first
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a column per camera (704 px at --step 2) and its key; nine rows of 188 px (rgb, the four
+    # maps, the four rectification maps), each with its titles
+    w, h = (int(v) for v in r.output.split("(")[1].split(")")[0].split("x"))
+    assert 6 * 704 < w < 6 * 704 + 1000 and 9 * 188 < h < 9 * (188 + 60), r.output
     r = cli.invoke(app, ["show", "sensors", "--seq", seq, "--frame", "3", "--camera", "camera_09",
                          "--root", built.url, "--out", str(out)])
     assert r.exit_code == 2 and "camera_09" in r.output
@@ -725,6 +729,9 @@ def test_show_sensors_draws_skeletons_where_walkers_are_seen(built, tmp_path):
         r = cli.invoke(app, [*args, "--skeletons", "--out", str(b)])
         assert r.exit_code == 0, r.output
         A, B = np.asarray(Image.open(a).convert("RGB")), np.asarray(Image.open(b).convert("RGB"))
+        # the panels (six 1408 px columns with 10 px gaps, from x = 10): the keys at the right add
+        # the skeletons' entries
+        A, B = A[:, : 10 + 6 * 1418], B[:, : 10 + 6 * 1418]
         changed = np.any(A != B, axis=2)
         if changed.any():
             colours = {tuple(c) for c in B[changed]}

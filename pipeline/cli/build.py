@@ -443,11 +443,20 @@ def show_config(config: ConfigOpt = None, root: Annotated[Optional[str], typer.O
         taxonomy: TaxonomyOpt = None) -> None:
     """Print the effective dataset config as YAML (a starting point for --config files): the
     --config file or --preset plan, else the root's dataset.yaml, else the embedded default; with
-    a summary of the plan (towns, sequences, frames) on stderr."""
+    a summary of the plan (towns, sequences, frames) on stderr. The rig's fields are in CARLA's
+    convention, as published (y right, yaw positive to the right); YAML comments after them give
+    the rig in the dataset's frame (y left) with the direction each sensor faces in words."""
     import yaml
+
+    from carlaocc.schemas.rig import rig_lines
 
     cfg = plan_config(config, root, preset, maps, limit_frames, taxonomy)
     typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+    typer.echo("# scenes.rig above is in CARLA's convention, as published (y right, yaw positive to the right).\n"
+               "# The rig in the dataset's ego frame (x forward, y left, z up, m; yaw positive to the left;\n"
+               "# docs/architecture.md \"Reference rig\"):")
+    for line in rig_lines(cfg.scenes.rig):
+        typer.echo(f"#   {line}")
     towns = cfg.scenes.towns
     seqs = sum(t.sequences_of(level) for t in towns for level in t.traffic_levels if t.style != "carla-recording")
     typer.echo(f"plan: {len(towns)} towns, {seqs} simulated sequences x {cfg.scenes.frame_count} frames at "

@@ -17,8 +17,9 @@ from carlaocc.schemas.configs import DatasetConfig
 
 
 def _render_assets(store: Store, where: str | None, asset_id: str | None, limit: int, size: int = 512):
-    """(labels, images) of assets chosen by id or by a SQL WHERE clause over the assets view,
-    each part in its semantic class's palette colour, glass translucent."""
+    """(labels, images, class ids, any translucent part) of assets chosen by id or by a SQL WHERE
+    clause over the assets view, each part in its semantic class's palette colour, glass
+    translucent."""
     from carlaocc.catalog.admesh import dedupe_parts
     from carlaocc.catalog.meshes import MeshStore
     from carlaocc.catalog.parquet import ParquetTable
@@ -43,7 +44,7 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
     parts = {}
     for p in dedupe_parts(ParquetTable(store, PartRecord).load()):
         parts.setdefault(p.asset_id, []).append(p)
-    meshes, labels, images = MeshStore(store), [], []
+    meshes, labels, images, classes, translucent = MeshStore(store), [], [], set(), False
     for aid, category, subclass, mesh_path in rows:
         recs = sorted(parts.get(aid, []), key=lambda r: r.part_index)
         try:
@@ -55,7 +56,9 @@ def _render_assets(store: Store, where: str | None, asset_id: str | None, limit:
                       for r, (v, f) in zip(recs, arrays)]
         images.append(render_asset(mesh_parts, size=size))
         labels.append(f"{category}/{subclass} {aid[:8]}")
-    return labels, images
+        classes |= {r.semantic_id for r in recs}
+        translucent |= any(r.transparent for r in recs)
+    return labels, images, classes, translucent
 
 
 @admesh_app.command("show")
@@ -65,7 +68,7 @@ def admesh_show(
     root: RootOpt = "data",
 ) -> None:
     """Render one asset to a PNG (semantic colours, glass translucent), headless."""
-    labels, images = _render_assets(open_store(root, writable=False), None, asset_id, 1)
+    labels, images, _, _ = _render_assets(open_store(root, writable=False), None, asset_id, 1)
     write_png(out, images[0])
     typer.echo(f"{labels[0]} -> {out}")
 
@@ -79,11 +82,13 @@ def admesh_sheet(
     size: Annotated[int, typer.Option("--size", min=64, max=1024, help="thumbnail edge, pixels")] = 256,
     root: RootOpt = "data",
 ) -> None:
-    """A contact sheet of the assets a query selects (semantic colours), headless."""
-    from carlaocc.stages.render.sheets import contact_sheet
+    """A sheet of the assets a query selects (parts in their class colours, a legend of the
+    classes), headless."""
+    from carlaocc.stages.render.assets import asset_sheet
 
-    labels, images = _render_assets(open_store(root, writable=False), where, None, limit, size)
-    write_png(out, contact_sheet(images, labels, columns=columns))
+    labels, images, classes, translucent = _render_assets(open_store(root, writable=False), where, None, limit, size)
+    write_png(out, asset_sheet(images, labels, classes, columns=columns, translucent=translucent,
+                               title=f"{len(images)} assets where {where}").image)
     typer.echo(f"{len(images)} assets -> {out}")
 
 
@@ -114,8 +119,10 @@ def show_occupancy(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Render one frame's occupancy: a bird's-eye height map and a 3D view (one voxel size), or
-    the multi-voxel-size figure (3D views and a zoomed bird's-eye crop per voxel size)."""
+    """Render one frame's occupancy: a top view with axes in metres and a 3D view (one voxel size),
+    or the multi-voxel-size figure (3D views and a zoomed top view per voxel size); a key states
+    the colouring (classes, things by their instances' colours, the ego marker; in height mode a
+    scale in metres)."""
     from carlaocc.stages.render.figures import multi_voxel_size_figure, occupancy_figure
 
     if mode not in ("instance", "semantic", "height"):
@@ -125,13 +132,14 @@ def show_occupancy(
     store = open_store(root, writable=False)
     if len(voxel_sizes) == 1:
         sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, voxel_sizes[0])
-        image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", mode=mode)
+        image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m, colouring: {mode}",
+                                 mode=mode).image
     else:
         frames = []
         for size in voxel_sizes:
             sem, inst, grid = _occupancy_frame(store, cfg, seq, frame, size)
             frames.append((f"{grid.key} m", sem, inst, grid))
-        image = multi_voxel_size_figure(frames, mode=mode, title=f"{seq} frame {frame}")
+        image = multi_voxel_size_figure(frames, mode=mode, title=f"{seq} frame {frame}, colouring: {mode}").image
     write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")
 
@@ -180,14 +188,17 @@ def show_sensors(
     root: RootOpt = "data",
     config: ConfigOpt = None,
 ) -> None:
-    """Contact sheet of one frame's camera maps (the RGB -- recorded, or rendered from the scene --, depth,
+    """Sheet of one frame's camera maps, each panel titled with its camera and the direction it
+    faces, each row with its key (the RGB -- recorded, or rendered from the scene --, depth,
     normals, semantics, instances per camera) and the rectification figure: raw vs rectified depth and semantics, pixels of the
     transparency region tinted red and of the omission region blue (epsilon from the config).
     With --skeletons, the walkers' posed joints and bones over the semantic and instance maps."""
     from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.schemas.rig import camera_roles
     from carlaocc.stages.render.sensors import CameraView, sensor_sheet
 
     cfg = load_config(config, root)
+    roles = camera_roles(cfg.scenes.rig.cameras)  # the direction each camera faces, in words
     store = open_store(root, writable=False)
     sensors = SensorStore(store)
     stored = sensors.cameras(seq)
@@ -215,10 +226,10 @@ def show_sensors(
         if read("normal") is None:
             fail(f"{seq}/{cam} has no normal map: run the sensors stage")
         view = CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
-                          read("depth_raw"), read("semantic_raw"), read("rgb"))
+                          read("depth_raw"), read("semantic_raw"), read("rgb"), direction=roles.get(cam, ""))
         if joints is not None:
             view = _with_skeletons(view, joints, poses, cfg.scenes.rig, cam)
         views.append(view)
-    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step)
+    image = sensor_sheet(views, epsilon=cfg.sensors.epsilon, step=step).image
     write_png(out, image)
     typer.echo(f"wrote {out} ({image.shape[1]}x{image.shape[0]})")

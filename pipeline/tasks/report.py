@@ -50,15 +50,37 @@ def _frame_png(store: Store, seq: str, grid: GridSpec, frame: int) -> bytes:
     small = int(np.prod(grid.shape)) <= RENDER_INSTANCE_VOXELS and occ.exists(seq, grid, "instance")
     data = occ.read_frame(seq, grid, frame, ("semantic", "instance") if small else ("semantic",))
     sem, inst = data["semantic"], data.get("instance")
-    image = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m", height=FRAME_HEIGHT,
-                             mode="instance" if small else "semantic")
-    return png_bytes(image)
+    mode = "instance" if small else "semantic"
+    sheet = occupancy_figure(sem, inst, grid, f"{seq} frame {frame} at {grid.key} m, colouring: {mode}",
+                             height=FRAME_HEIGHT, mode=mode)
+    return png_bytes(sheet.image)
+
+
+def recorded_camera_roles(store: Store, seq: str, frame: int) -> dict[str, str]:
+    """``camera -> direction in words (and stereo place)`` from the frame's recorded sensor poses
+    (the rig the sequence was recorded with, whatever the config says now); empty without them."""
+    from carlaocc.pipeline.tasks.frame import frame_rows
+    from carlaocc.schemas.records import FrameRecord, SensorPoseRecord
+    from carlaocc.schemas.rig import pose_roles
+    from carlaocc.stages.geometry import invert_pose, pose_from_list
+
+    if not ParquetTable(store, SensorPoseRecord).exists(seq):
+        return {}
+    frames = frame_rows(store, FrameRecord, seq, frame)
+    if not frames:
+        return {}
+    to_lidar = invert_pose(pose_from_list(frames[0].lidar_pose))
+    cams = set(SensorStore(store).cameras(seq))
+    return pose_roles({r.sensor: (to_lidar @ pose_from_list(r.pose)).tolist()
+                       for r in frame_rows(store, SensorPoseRecord, seq, frame) if r.sensor in cams})
 
 
 def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
-    """The camera contact sheet of one frame (rectified maps only), or None without cameras."""
+    """The camera sheet of one frame (the RGB when every camera has it, the rectified maps), each
+    camera titled with its direction, or None without cameras."""
 
     sensors = SensorStore(store)
+    roles = recorded_camera_roles(store, seq, frame)
     views = []
     for cam in sensors.cameras(seq):
         names = set(sensors.names(seq, cam))
@@ -68,10 +90,11 @@ def _sensors_png(store: Store, seq: str, frame: int) -> bytes | None:
         def read(name: str):
             return sensors.read_image(seq, cam, frame, name) if name in names else None
 
-        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal")))
+        views.append(CameraView(cam, read("depth"), read("semantic"), read("instance"), read("normal"),
+                                rgb=read("rgb"), direction=roles.get(cam, "")))
     if not views:
         return None
-    return png_bytes(sensor_sheet(views, step=SENSOR_STEP))
+    return png_bytes(sensor_sheet(views, step=SENSOR_STEP).image)
 
 
 def report_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str, str]:

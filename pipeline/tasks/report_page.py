@@ -138,6 +138,29 @@ def _table(head: list[str], rows: list[list], numeric: set[int] = frozenset()) -
     return f"<table><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>"
 
 
+def _duration(seconds: float) -> str:
+    """12.3 -> '12.3 s', 754 -> '12 min 34 s', 7384 -> '2 h 03 min'."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    m, s = divmod(int(round(seconds)), 60)
+    if m < 60:
+        return f"{m} min {s:02d} s"
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min"
+
+
+def short_version(version: str) -> str:
+    """A code version's first 8 characters (as git shortens a commit)."""
+    return version[:8]
+
+
+def _short_versions(versions: list[str]) -> str:
+    """The short code version of a stage's partitions; several when they were built with
+    different code (the latest build first would need the records: they are listed sorted)."""
+    short = [f"<code>{_e(short_version(v))}</code>" for v in versions]
+    return short[0] if len(short) == 1 else f"{len(short)} versions: " + ", ".join(short)
+
+
 def _swatch(class_id: int) -> str:
     r, g, b = taxonomy.by_id(class_id).color
     return f'<span class="sw" style="background:rgb({r},{g},{b})"></span>{_e(taxonomy.by_id(class_id).name)}'
@@ -233,27 +256,38 @@ def render_html(*, root: str, sequences: list[SequenceRecord], grids: list[GridS
     out.append('<h2 id="frame">A rendered frame</h2>')
     out.append(_img(images, "frame", "occupancy of one frame") or "<p class=\"muted\">no occupancy frame</p>")
     if "sensors" in images:
-        out += [f'<h3>Its cameras (every {SENSOR_STEP}th pixel)</h3>', _img(images, "sensors", "camera maps")]
+        out += [f'<h3>Its cameras: RGB (when the sensors stage stored it) and maps, every {SENSOR_STEP}th pixel</h3>',
+                '<p class="muted">a column per camera, titled with the direction it faces (from the recorded '
+                'sensor poses); each row ends in its key</p>',
+                _img(images, "sensors", "camera RGB and maps")]
     # lineage
     out.append('<h2 id="lineage">Lineage</h2>')
-    rows = []
+    rows, hashes = [], []
     for L in lineage:
-        status = f"{L.completed}/{L.partitions} completed"
+        status = f"{L.completed} of {L.partitions}"
         if L.completed != L.partitions:
             status = f'<span class="bad">{status}</span>'
-        rows.append([f"<b>{_e(L.stage)}</b>", L.partitions, "<br>".join(_e(r) for r in L.run_ids),
-                     "<br>".join(f"<code>{_e(c)}</code>" for c in L.code_versions),
-                     "<br>".join(f"<code>{_e(c)}</code>" for c in L.config_hashes), status,
-                     f"{_e(L.started)} → {_e(L.ended)} UTC<br>{L.task_seconds:.1f} s in tasks",
-                     "<br>".join(f"{_e(k)} ×{n}" for k, n in L.inputs.items()) + f"<br><code>{L.input_digest}</code>",
-                     "<br>".join(f"{_e(k)} ×{n}" for k, n in L.outputs.items())
-                     + f"<br><code>{L.output_digest}</code>"])
-    out += ['<p class="muted">latest record of every partition of every stage (catalog/runs); inputs are the '
-            'upstream partitions (and external files) each task read, outputs the artefacts it wrote, with one '
-            'digest of each side over all partitions. This page is recorded after it is written: a report row is '
-            'the previous build of the page.</p>',
-            _table(["stage", "partitions", "run", "code version", "config hash", "status", "time", "inputs",
-                    "outputs"], rows, {1})]
+        rows.append([f"<b>{_e(L.stage)}</b>", status, f"{_e(L.ended)}", _duration(L.task_seconds),
+                     _short_versions(L.code_versions),
+                     ", ".join(f"{'external files' if k == 'file' else _e(k)} ×{n:,}" for k, n in L.inputs.items())
+                     or "—",
+                     ", ".join(f"{_e(k)} ×{n:,}" for k, n in L.outputs.items())])
+        hashes.append([_e(L.stage), "<br>".join(_e(r) for r in L.run_ids),
+                       "<br>".join(f"<code>{_e(c)}</code>" for c in L.code_versions),
+                       "<br>".join(f"<code>{_e(c)}</code>" for c in L.config_hashes),
+                       f"<code>{L.input_digest}</code> → <code>{L.output_digest}</code>",
+                       f"{_e(L.started)} → {_e(L.ended)}"])
+    out += ['<p class="muted">what built this root, stage by stage: the latest record of every partition '
+            '(catalog/runs). <i>Completed</i>: partitions whose latest run succeeded; <i>finished</i>: when the '
+            'last of them ended (UTC); <i>task time</i>: the tasks\' durations added up; <i>code</i>: the short '
+            'code version (a hash of the stage\'s source) its partitions were built with; <i>read</i> and '
+            '<i>wrote</i>: upstream partitions (and external files) read, artefacts written. This page is '
+            'recorded after it is written: a report row is the previous build of the page.</p>',
+            _table(["stage", "completed", "finished (UTC)", "task time", "code", "read", "wrote"], rows),
+            "<details><summary>hashes: run ids, code versions, config hashes, input → output digests</summary>",
+            _table(["stage", "run", "code version", "config hash", "inputs → outputs digest", "time span (UTC)"],
+                   hashes),
+            "</details>"]
     for L in lineage:
         rows = []
         for r in L.records:

@@ -1,11 +1,14 @@
-"""Headless pictures, pure numpy + numba (no GUI, no OpenGL, no plotting library), deterministic:
-the same inputs give byte-identical ``(H, W, 3)`` uint8 RGB images (``carlaocc.catalog.images`` writes them).
+"""Headless pictures, deterministic: the same inputs give byte-identical ``(H, W, 3)`` uint8 RGB
+images (``carlaocc.catalog.images`` writes them). Views are pure numpy + numba (no GUI, no
+OpenGL); words, axes, legends and colour scales are matplotlib's (Agg, no ``pyplot``), laid out
+by :mod:`carlaocc.stages.render.layout`.
 
 * :mod:`carlaocc.stages.render.raster` -- the one z-buffer triangle rasterizer every 3D view draws with
   (``fill_triangle``, a numba kernel), the camera axes, key light and Lambert constants.
 * :mod:`carlaocc.stages.render.assets` -- ``render_asset``: shaded previews of an asset's mesh parts
-  (orthographic, transparent parts blended, ground shadow).
-* :mod:`carlaocc.stages.render.sheets` -- the 5x7 bitmap font (``draw_text``) and labelled contact sheets.
+  (orthographic, transparent parts blended, ground shadow); ``asset_sheet`` lays them out.
+* :mod:`carlaocc.stages.render.layout` -- ``compose``: sheets of titled panels drawn pixel for pixel,
+  metric axes on top views, a key per row (legend entries, colour scales) in matplotlib's font.
 * :mod:`carlaocc.stages.render.colours` -- colouring modes (instance, semantic, height) and the hashed
   colours of instance ids.
 * :mod:`carlaocc.stages.render.occupancy` -- occupancy grids: bird's-eye height maps and 3D voxel views

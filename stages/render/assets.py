@@ -31,7 +31,7 @@ import numpy as np
 from carlaocc.schemas.meshes import MeshPart
 from carlaocc.stages.render.raster import AMBIENT, DIFFUSE, camera_axes, image_size, key_light, raster_triangles
 
-__all__ = ["render_asset"]
+__all__ = ["asset_sheet", "render_asset"]
 
 SHADOW_DARKEN = 0.80  # the ground shadow multiplies the background by this
 
@@ -129,3 +129,26 @@ def render_asset(
     if ss > 1:  # box filter down to the requested size
         img = img.reshape(H, ss, W, ss, 3).mean(axis=(1, 3))
     return np.ascontiguousarray(np.clip(np.round(img), 0, 255).astype(np.uint8))
+
+
+def asset_sheet(images: Sequence[np.ndarray], labels: Sequence[str], class_ids, columns: int = 6,
+                translucent: bool = False, title: str | None = None):
+    """A sheet of asset previews (:func:`render_asset`, parts in their class colours): rows of
+    ``columns`` panels titled with ``labels``, the first row's key naming the classes
+    ``class_ids`` drawn (their palette swatches) and, with ``translucent``, that glass is drawn
+    see-through. Returns a :class:`carlaocc.stages.render.layout.Sheet`."""
+    from carlaocc.schemas.taxonomy import CLASSES, palette
+    from carlaocc.stages.render.layout import Key, LegendEntry, Panel, compose
+
+    if len(images) != len(labels):
+        raise ValueError(f"{len(images)} images but {len(labels)} labels")
+    if not images or columns < 1:
+        raise ValueError("asset_sheet needs at least one image and one column")
+    panels = [Panel(str(lab), np.asarray(im, np.uint8)[:, :, :3]) for im, lab in zip(images, labels)]
+    entries = [LegendEntry(CLASSES[c].name, (tuple(palette()[c]),)) for c in sorted(set(int(c) for c in class_ids))
+               if 0 <= c < len(CLASSES)]
+    if translucent:
+        entries.append(LegendEntry("translucent: glass (drawn see-through)", kind="text"))
+    key = Key("colour: class of each part", tuple(entries))
+    rows = [(panels[k : k + columns], key if k == 0 else None) for k in range(0, len(panels), columns)]
+    return compose(rows, title=title)

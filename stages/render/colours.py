@@ -15,7 +15,7 @@ import numpy as np
 
 from carlaocc.schemas.taxonomy import palette
 
-__all__ = ["MODES", "check_mode", "instance_colors", "voxel_colours"]
+__all__ = ["MODES", "check_mode", "height_ramp", "instance_colors", "voxel_colours"]
 
 MODES = ("instance", "semantic", "height")
 _PALETTE = np.asarray(palette() + ((0, 0, 0),) * (256 - len(palette())), dtype=np.float32)  # any uint8 id
@@ -58,8 +58,10 @@ def instance_colors(ids) -> np.ndarray:
     return np.round(np.stack([r, g, b], axis=-1) * 255.0).astype(np.uint8)
 
 
-def _height_ramp(t: np.ndarray) -> np.ndarray:
-    t = np.clip(t, 0.0, 1.0)
+def height_ramp(t: np.ndarray) -> np.ndarray:
+    """Float32 RGB (0..255) of the height ramp at positions ``t`` (0 = lowest, 1 = highest;
+    clipped), dark blue through cyan, green and yellow to red."""
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
     return np.stack([np.interp(t, _RAMP_T, _RAMP_RGB[:, c]) for c in range(3)], axis=-1).astype(np.float32)
 
 
@@ -67,7 +69,7 @@ def voxel_colours(sem, inst, z, mode: str, z_range) -> np.ndarray:
     """Float32 RGB (0..255) in ``mode`` of voxels with classes ``sem``, instances ``inst`` and heights ``z``."""
     if mode == "height":
         lo, hi = z_range
-        return _height_ramp((z - lo) / max(hi - lo, 1e-9))
+        return height_ramp((z - lo) / max(hi - lo, 1e-9))
     out = _PALETTE[sem]
     if mode == "instance":
         things = inst != 0

@@ -1,11 +1,18 @@
-"""Figures of occupancy frames, composed of the views of :mod:`carlaocc.stages.render.occupancy`.
+"""Figures of occupancy frames, composed of the views of :mod:`carlaocc.stages.render.occupancy`
+and laid out by :func:`carlaocc.stages.render.layout.compose` (matplotlib's text, a key per row).
 
-:func:`occupancy_figure`: one frame at a glance, a title strip over the BEV, the 3D view and a
-legend of the classes present. :func:`multi_voxel_size_figure`: one column per voxel size, the
-3D view and the BEV of the same metric window around the ego, the BEV nearest-neighbour sampled
-to a common pixel size so coarse voxels show as bigger blocks. Inputs as in
-:mod:`carlaocc.stages.render.occupancy` (``[x, y, z]`` grids, LiDAR frame, metres); outputs ``(H, W, 3)``
-uint8 RGB, deterministic.
+:func:`occupancy_figure`: one frame at a glance, a title over the top view (axes in metres), the
+3D view and the key. :func:`multi_voxel_size_figure`: one column per voxel size, the 3D view over
+the top view of the same metric window around the ego, the top view nearest-neighbour sampled to a
+common pixel size so coarse voxels show as bigger blocks. Inputs as in
+:mod:`carlaocc.stages.render.occupancy` (``[x, y, z]`` grids, LiDAR frame, metres); outputs a
+:class:`~carlaocc.stages.render.layout.Sheet` (the ``(H, W, 3)`` uint8 RGB image, the panel titles
+and boxes, the keys), deterministic.
+
+Every key states the colouring: in ``instance`` mode a class whose voxels carry instance ids is
+listed with the colours of its instances, never with a class colour it is not drawn in
+(:func:`class_entries`); the ego marker and free columns have entries; ``height`` mode has a
+scale in metres instead of classes.
 """
 
 from __future__ import annotations
@@ -17,17 +24,16 @@ import numpy as np
 
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.taxonomy import CLASSES, palette
-from carlaocc.stages.render.colours import check_mode
+from carlaocc.schemas.rig import facing
+from carlaocc.stages.render.colours import check_mode, height_ramp, instance_colors
+from carlaocc.stages.render.layout import ColourScale, Key, LegendEntry, Panel, Sheet, compose
 from carlaocc.stages.render.occupancy import (DEFAULT_MAX_VOXELS, FREE_RGB, bev_colours, bev_image, block_top,
                                              classes_present, crop_indices, draw_ego, grid_arrays, top_surface,
                                              voxel_view)  # fmt: skip
-from carlaocc.stages.render.sheets import FONT_HEIGHT, FONT_WIDTH, draw_text, text_width
 
-__all__ = ["multi_voxel_size_figure", "occupancy_figure"]
+__all__ = ["EGO_ENTRY", "FREE_ENTRY", "class_entries", "height_scale", "multi_voxel_size_figure", "occupancy_figure"]
 
 _FIG_BG = (255, 255, 255)
-_STRIP_BG = (236, 236, 236)
-_TEXT = (20, 20, 20)
 
 
 def _top_range(ktop_list, grids) -> tuple[float, float] | None:
@@ -68,52 +74,64 @@ def _resize_nearest(img: np.ndarray, rows: int, cols: int) -> np.ndarray:
     return np.ascontiguousarray(img[r][:, c])
 
 
-def _place(canvas: np.ndarray, img: np.ndarray, y: int, x: int) -> None:
-    canvas[y : y + img.shape[0], x : x + img.shape[1]] = img
+_MODE_HEADINGS = {
+    "instance": "colour: class; things one colour per instance",
+    "semantic": "colour: class (taxonomy palette)",
+    "height": "colour: height of the voxel",
+}
+EGO_ENTRY = LegendEntry("ego (LiDAR origin), tip forward", ((255, 255, 255),), "marker")
+FREE_ENTRY = LegendEntry("free column (nothing occupied)", (FREE_RGB,))
 
 
-def _fit_text(text: str, width: int, scale: int) -> str:
-    max_chars = max(1, (width + scale) // ((FONT_WIDTH + 1) * scale))
-    return text if len(text) <= max_chars else text[: max(0, max_chars - 2)] + ".."[:max_chars]
-
-
-def _strip(width: int, text: str, scale: int, centre: bool = True) -> np.ndarray:
-    h = (FONT_HEIGHT + 4) * scale
-    strip = np.empty((h, width, 3), np.uint8)
-    strip[:] = _STRIP_BG
-    text = _fit_text(text, width - 4 * scale, scale)
-    x = (width - text_width(text, scale)) // 2 if centre else 2 * scale
-    draw_text(strip, text, x, 2 * scale, _TEXT, scale)
-    return strip
-
-
-def _legend(class_ids: Sequence[int], mode: str, height: int, scale: int, things: set[int]) -> np.ndarray:
-    """Legend panel: a colour swatch and the name of every class, in columns of at most
-    ``height`` pixels; ``things`` (the classes with instance ids in the frame, whichever label
-    table built it) are starred in instance mode (one colour per instance)."""
-    row_h = (FONT_HEIGHT + 4) * scale
-    names = [CLASSES[c].name + (" *" if mode == "instance" and c in things else "") for c in class_ids]
-    notes = ["* colour per instance"] if mode == "instance" and any(c in things for c in class_ids) else []
-    if mode == "height":
-        names, notes = ["(colour = height)"], []
-    lines = len(names) + len(notes)
-    per_col = max(1, (height - 2 * scale) // row_h)
-    ncols = max(1, -(-lines // per_col))
-    sw = FONT_HEIGHT * scale
-    col_w = sw + 3 * scale + max([text_width(n, scale) for n in names + notes] + [1]) + 4 * scale
-    panel = np.empty((max(height, row_h), ncols * col_w, 3), np.uint8)
-    panel[:] = _FIG_BG
-    for n, name in enumerate(names + notes):
-        c, r = divmod(n, per_col)
-        x, y = c * col_w + scale, scale + r * row_h
-        if n < len(names) and mode != "height":
-            panel[y : y + sw, x : x + sw] = np.asarray(palette()[class_ids[n]], np.uint8)
-            panel[y : y + sw, x : x + sw][[0, -1]] = _TEXT
-            panel[y : y + sw, x : x + sw][:, [0, -1]] = _TEXT
-            draw_text(panel, name, x + sw + 3 * scale, y, _TEXT, scale)
+def class_entries(semantic: np.ndarray, instance: np.ndarray | None, mode: str) -> list[LegendEntry]:
+    """Legend entries of the classes present in a grid (or a map), in class order: a class swatch
+    in its palette colour, except, in instance mode, for a class whose voxels carry instance ids
+    (things in the dataset's label table): it is drawn one colour per instance, so its entry shows
+    the colours of up to four of its instances and says so, claiming no class colour."""
+    sem = np.asarray(semantic)
+    inst = None if instance is None else np.asarray(instance)
+    out = []
+    # the (class, id) pairs of the voxels with an instance id, gathered once
+    if mode == "instance" and inst is not None:
+        things = inst > 0
+        t_sem, t_inst = sem[things], inst[things]
+    else:
+        t_sem, t_inst = np.empty(0, sem.dtype), np.empty(0, np.uint32)
+    for c in (int(c) for c in classes_present(sem) if c < len(CLASSES)):
+        name = CLASSES[c].name
+        ids = np.unique(t_inst[t_sem == c])
+        if len(ids):
+            cols = tuple(tuple(int(v) for v in col) for col in instance_colors(ids[:4]))
+            n = len(ids)
+            out.append(LegendEntry(f"{name}: one colour per instance ({n} here)", cols, "instances"))
         else:
-            draw_text(panel, name, x, y, _TEXT, scale)
-    return panel
+            out.append(LegendEntry(name, (tuple(palette()[c]),)))
+    return out
+
+
+def height_scale(z_range, label: str) -> ColourScale:
+    """The height ramp over ``z_range`` (lowest, highest) metres as a colour scale, ticks at the
+    two ends and at round heights between them."""
+    lo, hi = float(z_range[0]), float(z_range[1])
+    ramp = np.round(height_ramp(np.linspace(0.0, 1.0, 64))).astype(np.uint8)
+    if hi <= lo:
+        return ColourScale(label, ramp, ((0.0, f"{lo:.1f}"),))
+    # round steps of 1, 2 or 5 x 10^k giving 2 to 6 ticks inside the range
+    span = hi - lo
+    step = next(m * 10.0**k for k in range(-2, 4) for m in (1, 2, 5) if span / (m * 10.0**k) <= 5)
+    first = math.ceil(lo / step) * step
+    inner = [first + n * step for n in range(int((hi - first) / step) + 1)]
+    ticks = [(0.0, f"{lo:.1f}"), (1.0, f"{hi:.1f}")]
+    ticks += [((v - lo) / span, f"{v:g}") for v in inner if 0.08 < (v - lo) / span < 0.92]
+    return ColourScale(label, ramp, tuple(sorted(ticks)))
+
+
+def _occupied_z(sem: np.ndarray, z0: float, voxel_size: float) -> tuple[float, float] | None:
+    """(lowest, highest) voxel centre height of the occupied voxels, metres (``None``: empty)."""
+    occ = np.flatnonzero(sem.any(axis=(0, 1)))
+    if occ.size == 0:
+        return None
+    return z0 + (occ[0] + 0.5) * voxel_size, z0 + (occ[-1] + 0.5) * voxel_size
 
 
 def occupancy_figure(
@@ -127,55 +145,56 @@ def occupancy_figure(
     elevation_deg: float = 35.0,
     azimuth_deg: float = 180.0,
     max_voxels: int = DEFAULT_MAX_VOXELS,
-) -> np.ndarray:
-    """One frame at a glance: a title strip over [BEV | 3D view | legend of the classes present],
-    the panels ``height`` pixels high with a caption strip under the BEV and the 3D view (the 3D
-    caption names the pooling, if any). The BEV (:func:`bev_height_map`, ego marked) is block-
-    downsampled to at least ``height`` rows and nearest-resized to exactly ``height``; the 3D view
-    (:func:`perspective_view`) is ``height`` x ``16/9 height``."""
+) -> Sheet:
+    """One frame at a glance: under ``title``, [top view | 3D view | key], the views ``height``
+    pixels high. The top view (bird's-eye, the top-most voxel of each column, ego marked) has
+    axes in metres in the LiDAR frame (x forward up the page, y left to the left), block-
+    downsampled to at least ``height`` rows and nearest-resized to exactly ``height``; the 3D
+    view (:func:`perspective_view`) is ``height`` x ``16/9 height`` and says where it looks from
+    and its pooling. The key states the colouring: class swatches (things in instance mode by
+    the colours of their instances, see :func:`class_entries`), the ego marker and free columns,
+    or in height mode the height scale in metres shared by both views."""
     check_mode(mode)
     H = int(height)
     if H < 32:
         raise ValueError(f"height must be >= 32 pixels, got {height}")
     sem, inst, has = grid_arrays(semantic, instance, grid)
     inst_arg = inst if has else None
-    scale = 1 if H < 400 else 2
     X = sem.shape[0]
-    # BEV: block top-most downsample to >= H rows, then nearest-resize to H rows
+    # one height range for both views in height mode: the occupied voxel centres
+    z_range = _occupied_z(sem, grid.origin[2], grid.voxel_size) if mode == "height" else None
+    # top view: block top-most downsample to >= H rows, then nearest-resize to H rows
     f = max(1, X // H)
     ktop, stop, itop = top_surface(sem, inst_arg)
     if f > 1:
         ktop, stop, itop = block_top(ktop, stop, itop, f)
     cell = grid.voxel_size * f
-    bev = bev_image(bev_colours(ktop, stop, itop, grid.origin[2], grid.voxel_size, mode, None, True, FREE_RGB))
-    draw_ego(bev, grid.origin[0] + ktop.shape[0] * cell, grid.origin[1] + ktop.shape[1] * cell, cell)
+    x_top, y_left = grid.origin[0] + ktop.shape[0] * cell, grid.origin[1] + ktop.shape[1] * cell
+    bev = bev_image(bev_colours(ktop, stop, itop, grid.origin[2], grid.voxel_size, mode, z_range, True, FREE_RGB))
+    draw_ego(bev, x_top, y_left, cell)
     bw = max(1, int(round(bev.shape[1] * H / bev.shape[0])))
     bev = _resize_nearest(bev, H, bw)
     view, pool = voxel_view(sem, inst, has, grid.origin, grid.voxel_size, (H, int(round(H * 16 / 9))),
                             elevation_deg, azimuth_deg, mode, 40.0, None, max_voxels, _FIG_BG, 2, 0.03,
-                            True)  # fmt: skip
-    present = [int(c) for c in classes_present(sem) if c < len(CLASSES)]
-    # the classes carrying instance ids in this frame (the dataset's label table decided which)
-    things = {int(c) for c in np.unique(sem[inst > 0])} if has else set()
-    legend = _legend(present, mode, H, scale, things)
-    gap = 6 * scale
-    voxel_size_label = f"{grid.voxel_size:g} m"
-    cap_bev = _strip(bev.shape[1], f"BEV {voxel_size_label}, up = forward", scale)
+                            True, z_range)  # fmt: skip
+    size = f"{grid.voxel_size:g} m"
     pooled = f", pooled x{pool} ({grid.voxel_size * pool:g} m)" if pool > 1 else ""
-    cap_3d = _strip(view.shape[1], f"3D {voxel_size_label}{pooled}", scale)
-    width = bev.shape[1] + view.shape[1] + legend.shape[1] + 2 * gap
-    title_strip = _strip(width, str(title), scale + 1, centre=False)
-    cap_h = cap_bev.shape[0]
-    fig = np.empty((title_strip.shape[0] + gap + max(H, legend.shape[0]) + cap_h, width, 3), np.uint8)
-    fig[:] = _FIG_BG
-    _place(fig, title_strip, 0, 0)
-    y = title_strip.shape[0] + gap
-    _place(fig, bev, y, 0)
-    _place(fig, cap_bev, y + H, 0)
-    _place(fig, view, y, bev.shape[1] + gap)
-    _place(fig, cap_3d, y + H, bev.shape[1] + gap)
-    _place(fig, legend, y, bev.shape[1] + view.shape[1] + 2 * gap)
-    return fig
+    panels = [
+        Panel(f"top view, {size} voxels", bev, (y_left, grid.origin[1], grid.origin[0], x_top),
+              "y, m (left +)", "x, m (forward +)"),
+        Panel(f"3D, {size}{pooled}: from {_view_words(azimuth_deg)}, {elevation_deg:g} deg up", view),
+    ]
+    entries = [] if mode == "height" else class_entries(sem, inst if has else None, mode)
+    entries += [EGO_ENTRY, FREE_ENTRY]
+    if mode != "height":
+        entries.append(LegendEntry("top view: darker = lower top", kind="text"))
+    scale = height_scale(z_range, "voxel centre z, m (LiDAR frame)") if z_range is not None else None
+    return compose([(panels, Key(_MODE_HEADINGS[mode], tuple(entries), scale))], title=str(title))
+
+
+def _view_words(azimuth_deg: float) -> str:
+    """Where a 3D view's camera stands, in words: azimuth 180 is behind the ego."""
+    return {"front": "ahead", "rear": "behind"}.get(facing(azimuth_deg), facing(azimuth_deg))
 
 
 def multi_voxel_size_figure(
@@ -188,14 +207,14 @@ def multi_voxel_size_figure(
     azimuth_deg: float = 180.0,
     max_voxels: int = DEFAULT_MAX_VOXELS,
     title: str | None = None,
-) -> np.ndarray:
+) -> Sheet:
     """The multi-voxel-size figure: one column per ``(label, semantic, instance, grid)`` frame
-    (typically the same scene at 0.05 / 0.1 / 0.2 / 0.4 m), the label on top, then the 3D view of
-    the metric ``window`` ((xmin, xmax), (ymin, ymax), all heights) and the BEV of the same window
-    with the ego marked, ``cell_size`` pixels per window x extent, nearest-neighbour sampled so
-    coarser voxels show as bigger blocks. Every column uses the same camera (framing the window
-    over the common occupied height range) and the same BEV height normalisation; an optional
-    ``title`` strip goes on top."""
+    (typically the same scene at 0.05 / 0.1 / 0.2 / 0.4 m): the 3D view of the metric ``window``
+    ((xmin, xmax), (ymin, ymax), all heights) over the top view of the same window with axes in
+    metres and the ego marked, ``cell_size`` pixels per window x extent, nearest-neighbour
+    sampled so coarser voxels show as bigger blocks. Every column uses the same camera (framing
+    the window over the common occupied height range) and the same height normalisation; each
+    row's key states the colouring (the classes of every column; in height mode the scale)."""
     check_mode(mode)
     if not frames:
         raise ValueError("multi_voxel_size_figure needs at least one frame")
@@ -205,7 +224,6 @@ def multi_voxel_size_figure(
     rows = int(cell_size)
     cols = max(1, int(round(rows * (ymax - ymin) / (xmax - xmin))))
     view_h = max(1, int(round(cols * 0.75)))
-    scale = 1 if cols < 300 else 2
     crops = []
     for label, semantic, instance, grid in frames:
         sem, inst, has = grid_arrays(semantic, instance, grid)
@@ -221,26 +239,25 @@ def multi_voxel_size_figure(
     z_range = _top_range([c[6][0] for c in crops], [c[3] for c in crops])
     zs = [c[7] for c in crops if c[7] is not None]
     zbox = (min(z[0] for z in zs), max(z[1] for z in zs)) if zs else None
-    gap = 8
-    label_h = (FONT_HEIGHT + 4) * (scale + 1)
-    col_h = label_h + view_h + gap + rows
-    fig_w = len(crops) * cols + (len(crops) - 1) * gap
-    title_strip = _strip(fig_w, title, scale + 1, centre=False) if title else np.empty((0, fig_w, 3), np.uint8)
-    top = title_strip.shape[0] + (gap if title else 0)
-    fig = np.empty((top + col_h, fig_w, 3), np.uint8)
-    fig[:] = _FIG_BG
-    _place(fig, title_strip, 0, 0)
-    for n, (label, csem, cinst, grid, i0, j0, (ktop, stop, itop), _) in enumerate(crops):
-        x0 = n * (cols + gap)
-        _place(fig, _strip(cols, label, scale + 1), top, x0)
+    views, bevs, entries = [], [], {}
+    for label, csem, cinst, grid, i0, j0, (ktop, stop, itop), _ in crops:
+        view = np.full((view_h, cols, 3), _FIG_BG, np.uint8)
         if zbox is not None and csem.size:
             corner = (grid.origin[0] + i0 * grid.voxel_size, grid.origin[1] + j0 * grid.voxel_size, grid.origin[2])
             view, _ = voxel_view(csem, cinst if cinst is not None else np.zeros((1, 1, 1), np.uint32),
                                  cinst is not None, corner, grid.voxel_size, (view_h, cols), elevation_deg,
                                  azimuth_deg, mode, 40.0, (window[0], window[1], zbox), max_voxels, _FIG_BG, 2,
                                  0.03, True)  # fmt: skip
-            _place(fig, view, top + label_h, x0)
+        views.append(Panel(f"{label}: 3D from {_view_words(azimuth_deg)}", view))
         bev = _bev_window(ktop, stop, itop, grid, i0, j0, window, (rows, cols), mode, z_range, True, FREE_RGB)
         draw_ego(bev, xmax, ymax, (xmax - xmin) / rows)
-        _place(fig, bev, top + label_h + view_h + gap, x0)
-    return fig
+        bevs.append(Panel(f"{label}: top view", bev, (ymax, ymin, xmin, xmax), "y, m (left +)", "x, m (forward +)"))
+        if mode != "height" and csem.size:
+            for e in class_entries(csem, cinst, mode):
+                entries.setdefault(e.label.split(":")[0], e)
+    heading = _MODE_HEADINGS[mode]
+    scale_3d = height_scale(zbox, "height, m (LiDAR frame)") if mode == "height" and zbox is not None else None
+    scale_bev = height_scale(z_range, "top voxel z, m") if mode == "height" and z_range is not None else None
+    top_notes = [] if mode == "height" else [LegendEntry("top view: darker = lower top", kind="text")]
+    return compose([(views, Key(heading, tuple(entries.values()), scale_3d)),
+                    (bevs, Key("top view", (EGO_ENTRY, FREE_ENTRY, *top_notes), scale_bev))], title=title)

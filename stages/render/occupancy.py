@@ -50,6 +50,7 @@ __all__ = [
     "FREE_RGB",
     "bev_height_map",
     "classes_present",
+    "orthographic_extent",
     "perspective_view",
     "pool_occupancy",
     "surface_voxels",
@@ -489,10 +490,29 @@ def _frame_camera(lo, hi, el: float, az: float, H: int, W: int, fov_deg: float, 
     return cam, basis, persp, float(scale), float(offx), float(offy), light
 
 
+def orthographic_extent(bounds, size, elevation_deg: float, azimuth_deg: float,
+                        margin: float = 0.03) -> tuple[float, float, float, float]:
+    """(left, right, bottom, top) of an orthographic :func:`perspective_view` (``fov_deg=0``)
+    framing the metric ``bounds`` ((xmin, xmax), (ymin, ymax), (zmin, zmax)) into ``size``
+    pixels: the image edges in metres along the view's screen axes (``right`` and ``up`` of
+    :func:`carlaocc.stages.render.raster.camera_axes`), measured from the centre of ``bounds``.
+    A point p lands at pixel column ``(u - left) / (right - left) * W`` and row
+    ``(top - v) / (top - bottom) * H`` with (u, v) = ((p - centre) . right, (p - centre) . up).
+    At ``elevation_deg`` 0, ``up`` is +z: bottom and top are heights above the centre."""
+    H, W = image_size(size)
+    lo = np.array([b[0] for b in bounds], float)
+    hi = np.array([b[1] for b in bounds], float)
+    # the same framing the view computes (the supersampling scales pixels and offsets alike)
+    _, _, _, scale, offx, offy, _ = _frame_camera(lo, hi, elevation_deg, azimuth_deg, H, W, 0.0, margin)
+    # screen x = offx + scale u, y = offy - scale v, inverted at the image edges
+    return (-offx / scale, (W - offx) / scale, (offy - H) / scale, offy / scale)
+
+
 def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azimuth_deg, mode, fov_deg, bounds,
-               max_voxels, background, antialias, margin, outline) -> tuple[np.ndarray, int]:  # fmt: skip
+               max_voxels, background, antialias, margin, outline, z_range=None) -> tuple[np.ndarray, int]:  # fmt: skip
     """:func:`perspective_view` on checked arrays (see :func:`grid_arrays`) with voxel (0, 0, 0) at
-    ``grid_origin``; returns the image and the pooling factor."""
+    ``grid_origin``; returns the image and the pooling factor. ``z_range`` (m), when given, is
+    the height mode's ramp range (else the bounds' z range, else the drawn voxels')."""
     check_mode(mode)
     H, W = image_size(size)
     ss = max(1, int(antialias))
@@ -518,7 +538,9 @@ def voxel_view(sem, inst, has, grid_origin, voxel_size, size, elevation_deg, azi
         return blank, f
     i, j, k = idx[:, 0], idx[:, 1], idx[:, 2]
     z = origin[2] + (k + 0.5) * pooled_voxel_size
-    if bounds is not None and len(bounds) > 2 and bounds[2] is not None:
+    if z_range is not None:
+        z_range = (float(z_range[0]), float(z_range[1]))
+    elif bounds is not None and len(bounds) > 2 and bounds[2] is not None:
         z_range = (float(bounds[2][0]), float(bounds[2][1]))
     else:
         z_range = (float(z.min()), float(z.max()))

@@ -10,7 +10,8 @@ normals as ``(1 - n) / 2`` per channel (a surface facing the camera, n = (0, 0, 
 blue-violet; zero normals are black); semantics by the taxonomy palette; instances by
 :func:`carlaocc.stages.render.colours.instance_colors` with stuff in its class colour darkened to 40 %.
 In the rectification rows, pixels of the transparency region are tinted red and those of the
-omission region blue (the paper's figure).
+omission region blue (the paper's figure). :func:`sensor_sheet` lays the maps out with
+:func:`carlaocc.stages.render.layout.compose`: a key per row says all of this on the sheet.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ import numpy as np
 
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.render.colours import instance_colors
-from carlaocc.stages.render.sheets import contact_sheet
+from carlaocc.stages.render.figures import class_entries
+from carlaocc.stages.render.layout import ColourScale, Key, LegendEntry, Panel, Sheet, compose
 from carlaocc.stages.scenes.people.pedestrians import SKELETON_BONES
 
 _DEPTH_T = np.array([0.0, 0.2, 0.45, 0.7, 1.0])
@@ -91,6 +93,9 @@ class CameraView:
     # (u right, v down, pixel centres at i + 0.5; NaN behind the camera) and (W, J) visibility
     skeleton_uv: np.ndarray | None = None
     skeleton_visible: np.ndarray | None = None
+    # the direction the camera faces in words, e.g. "front, stereo left (with camera_01)"
+    # (carlaocc.schemas.rig.camera_roles); "" when the rig does not know the camera
+    direction: str = ""
 
 
 def project_skeletons(joints_cam: np.ndarray, K, depth: np.ndarray, tolerance: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
@@ -169,11 +174,71 @@ def _skeletons(image: np.ndarray, view: CameraView, step: int) -> np.ndarray:
     return draw_skeletons(image, view.skeleton_uv, view.skeleton_visible, SKELETON_BONES, step)
 
 
-def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int = 2) -> np.ndarray:
-    """The contact sheet of a frame: a column per camera, rows (the recorded RGB when every view
-    has it,) depth, normals, semantics, instances and, where raw maps exist, raw depth / rectified depth / raw semantics / rectified
-    semantics with the repaired pixels highlighted; skeletons (when the views carry them) over the
-    semantic and instance maps. Images are subsampled by ``step``."""
+def _depth_scale(near: float = 1.0) -> ColourScale:
+    """The colour scale of :func:`depth_image`: the ramp sampled through the function itself,
+    ticks at round depths in metres (position ``sqrt(near / depth)``)."""
+    t = np.linspace(0.0, 1.0, 64)
+    depths = np.where(t > 0, near / np.maximum(t, 1e-9) ** 2, 0.0)
+    ramp = depth_image(depths[:, None])[:, 0]
+    ramp[0] = depth_image(np.array([[1e9]]))[0, 0]  # the far end of the ramp, not "no surface" black
+    ticks = tuple((float(np.sqrt(near / d)), f"{d:g}" + (" or less" if d <= near else "")) for d in (1, 2, 5, 10, 20, 80))
+    return ColourScale("planar depth, m", ramp, ticks)
+
+
+# canonical normals in the OpenCV camera frame (x right, y down, z forward) and their words
+_NORMAL_KEY = (((0.0, 0.0, -1.0), "faces the camera"), ((0.0, -1.0, 0.0), "faces up (ground)"),
+               ((-1.0, 0.0, 0.0), "faces the image's left"), ((1.0, 0.0, 0.0), "faces the image's right"))
+
+
+def _keys(views: Sequence[CameraView], step: int, epsilon: float) -> dict[str, Key]:
+    """The key of each row of :func:`sensor_sheet`, its colours computed by the functions that
+    draw the row."""
+    s = slice(None, None, max(int(step), 1))
+    black = LegendEntry("no surface", ((0, 0, 0),))
+    normals = tuple(LegendEntry(words, (tuple(int(v) for v in normal_image(np.array([[n]], np.float32))[0, 0]),))
+                    for n, words in _NORMAL_KEY)
+    sem = np.concatenate([v.semantic[s, s].ravel() for v in views])
+    keys = {
+        "rgb": Key("RGB: recorded, or rendered from the scene"),
+        "depth": Key("depth: near bright, far dark", (black,), _depth_scale()),
+        "normal": Key("normal, camera frame: RGB = (1 - n) / 2", (*normals, black)),
+        "semantic": Key("colour: class (taxonomy palette)", tuple(class_entries(sem, None, "semantic"))),
+    }
+    skeleton = ()
+    if any(v.skeleton_uv is not None and len(v.skeleton_uv) for v in views):
+        skeleton = (LegendEntry("skeleton, visible", ((255, 255, 255),)), LegendEntry("skeleton, hidden", ((140, 140, 140),)))
+        keys["semantic"] = Key(keys["semantic"].heading, keys["semantic"].entries + skeleton)
+    if all(v.instance is not None for v in views):
+        inst = np.concatenate([v.instance[s, s].ravel() for v in views])
+        ids = np.unique(inst[inst > 0])
+        entries = []
+        if len(ids):
+            cols = tuple(tuple(int(c) for c in col) for col in instance_colors(ids[:4]))
+            entries.append(LegendEntry(f"things: one colour per instance ({len(ids)} here)", cols, "instances"))
+        entries.append(LegendEntry("stuff: its class colour at 40 %", kind="text"))
+        keys["instance"] = Key("colour: instance", (*entries, *skeleton))
+    repaired = (LegendEntry(f"transparency region (raw depth >= {epsilon:g} m behind)", (TRANSPARENCY_TINT,)),
+                LegendEntry("omission region (no raw label)", (OMISSION_TINT,)))
+    keys["raw depth"] = Key("raw: repaired pixels tinted", repaired, _depth_scale())
+    keys["rectified depth"] = Key("rectified depth", (black,), _depth_scale())
+    keys["raw semantic"] = Key("raw: repaired pixels tinted", repaired)
+    keys["rectified semantic"] = keys["semantic"]
+    return keys
+
+
+def camera_title(view: CameraView, row: str) -> str:
+    """A panel's title: the camera, the direction it faces (when known) and the row's map."""
+    return f"{view.camera} ({view.direction}): {row}" if view.direction else f"{view.camera}: {row}"
+
+
+def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int = 2) -> Sheet:
+    """The sheet of a frame's camera maps: a column per camera, rows (the recorded RGB when every
+    view has it,) depth, normals, semantics, instances and, where raw maps exist, raw depth /
+    rectified depth / raw semantics / rectified semantics with the repaired pixels highlighted;
+    skeletons (when the views carry them) over the semantic and instance maps. Images are
+    subsampled by ``step``. Every panel is titled with its camera, the direction it faces and
+    its map (:func:`camera_title`); every row ends in its key (the depth scale in metres, the
+    normal colours, the classes present, the instance colouring, the tints)."""
     if not views:
         raise ValueError("no camera maps to draw")
     s = slice(None, None, max(int(step), 1))
@@ -196,6 +261,5 @@ def sensor_sheet(views: Sequence[CameraView], epsilon: float = 0.05, step: int =
                               for v, (t, o) in zip(views, regions)]),
             ("rectified semantic", [semantic_image(v.semantic[s, s]) for v in views]),
         ]
-    images = [im for _, ims in rows for im in ims]
-    labels = [f"{v.camera} {name}" for name, _ in rows for v in views]
-    return contact_sheet(images, labels, columns=len(views))
+    keys = _keys(views, step, epsilon)
+    return compose([([Panel(camera_title(v, name), im) for v, im in zip(views, ims)], keys[name]) for name, ims in rows])

@@ -198,6 +198,7 @@ def motion_plot(share: MotionShare, title: str = "Static vs dynamic") -> bytes:
         for x, v in enumerate(vals):
             ax2.text(x, max(v, 1) * 1.15, f"{_si(v)}\n{100 * v / total:.3g}%", ha="center", va="bottom", fontsize=8)
         ax2.set_title("occupied voxels")
+        ax2.set_ylabel("voxels (log scale)")
         ax2.grid(axis="y", alpha=0.3)
     else:
         _empty(ax2, "no occupied voxel")
@@ -209,10 +210,21 @@ def metric_label(metric: str) -> str:
     return _METRIC_NAMES.get(metric, metric.replace("_", " "))
 
 
-def quality_plot(rows: Sequence[QualityRecord], title: str = "Quality scores per sequence") -> bytes:
-    """One panel per metric of the sequence-level rows (``frame_index`` None; frame rows are
-    ignored): a bar per sequence, one colour per voxel size, the value on each bar; the y axis
-    zoomed to the values' range (scores sit close to 1)."""
+def score_axis(values: Sequence[float]) -> tuple[float, float, str]:
+    """(bottom, top, y-axis label) of a score panel. Scores of 0..1 sit close to 1, so the axis
+    is zoomed to their range when that range is narrow (under a third of the way from 0), and
+    then says so in its label: ``"score (axis from 0.992, not 0)"``; otherwise it starts at 0."""
+    lo, hi = min(values), max(values)
+    pad = max((hi - lo) * 0.25, 0.002)
+    top = min(1.0, hi) + pad if hi <= 1.0 else hi + pad
+    bottom = max(0.0, lo - 4 * pad)
+    if bottom < top / 3:
+        return 0.0, top, "score"
+    return bottom, top, f"score (axis from {bottom:.3f}, not 0)"
+
+
+def quality_figure(rows: Sequence[QualityRecord], title: str = "Quality scores per sequence") -> Figure:
+    """The figure of :func:`quality_plot` (its axes can be inspected)."""
     seq_rows = [r for r in rows if r.frame_index is None and math.isfinite(r.value)]
     metrics = sorted({r.metric for r in seq_rows})
     n_panels = max(1, len(metrics))
@@ -221,29 +233,43 @@ def quality_plot(rows: Sequence[QualityRecord], title: str = "Quality scores per
     fig.suptitle(title)
     if not metrics:
         _empty(fig.add_subplot(), "no quality score")
-        return to_png(fig)
+        return fig
     axes = fig.subplots(len(metrics), 1, squeeze=False)[:, 0]
     for ax, metric in zip(axes, metrics):
         mine = [r for r in seq_rows if r.metric == metric]
         seqs = sorted({r.sequence_id for r in mine})
         voxel_sizes = sorted({r.voxel_size for r in mine})
         width = 0.8 / len(voxel_sizes)
-        values = [r.value for r in mine]
+        bottom, top, label = score_axis([r.value for r in mine])
+        # bars from 0 when the axis starts at 0; on a zoomed axis a bar's length would not be its
+        # value, so each score is a dot on a stem from the axis' bottom
         for k, voxel_size in enumerate(voxel_sizes):
             xs, ys = [], []
             for r in mine:
                 if r.voxel_size == voxel_size:
                     xs.append(seqs.index(r.sequence_id) - 0.4 + width * (k + 0.5))
                     ys.append(r.value)
-            ax.bar(xs, ys, width=width * 0.9, label=f"{voxel_size:g} m", color=_SOURCE_COLOURS[k % len(_SOURCE_COLOURS)])
+            colour = _SOURCE_COLOURS[k % len(_SOURCE_COLOURS)]
+            if bottom == 0.0:
+                ax.bar(xs, ys, width=width * 0.9, label=f"{voxel_size:g} m", color=colour)
+            else:
+                ax.vlines(xs, bottom, ys, colors=colour, linewidth=1.0, alpha=0.6)
+                ax.plot(xs, ys, "o", color=colour, label=f"{voxel_size:g} m")
             for x, v in zip(xs, ys):
                 ax.text(x, v, f"{v:.4f}", ha="center", va="bottom", fontsize=7)
-        lo, hi = min(values), max(values)
-        pad = max((hi - lo) * 0.25, 0.002)
-        ax.set_ylim(max(0.0, lo - 4 * pad), min(1.0, hi) + pad if hi <= 1.0 else hi + pad)
+        ax.set_ylim(bottom, top)
+        ax.set_ylabel(label, fontsize=8)
         ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3f}"))
         ax.set_xticks(range(len(seqs)), seqs, rotation=15, ha="right", fontsize=8)
         ax.set_title(metric_label(metric), fontsize=10)
         ax.legend(title="voxel", fontsize=7, title_fontsize=7, loc="lower right")
         ax.grid(axis="y", alpha=0.3)
-    return to_png(fig)
+    return fig
+
+
+def quality_plot(rows: Sequence[QualityRecord], title: str = "Quality scores per sequence") -> bytes:
+    """One panel per metric of the sequence-level rows (``frame_index`` None; frame rows are
+    ignored): a score per sequence, one colour per voxel size, the value over each. The y axis
+    is zoomed to the scores' range when they sit close to 1, and its label then says where it
+    starts (:func:`score_axis`); the scores are dots on stems then, bars only on an axis from 0."""
+    return to_png(quality_figure(rows, title))

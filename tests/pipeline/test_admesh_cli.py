@@ -61,7 +61,7 @@ def test_contact_sheet_of_a_query(library, tmp_path):
                          "--size", "96", "--out", str(out), "--root", library.url])
     assert r.exit_code == 0 and "7 assets" in r.output
     w, h = _png_size(out)
-    assert w == 4 * 96 and h > 2 * 96
+    assert w > 4 * 96 and h > 2 * 96  # four columns (and the key), two rows of thumbnails
 
 
 def test_bad_requests_exit_2(library, tmp_path):

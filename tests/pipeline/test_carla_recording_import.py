@@ -239,8 +239,12 @@ def test_show_sensors_puts_the_recorded_rgb_first(built, tmp_path):
 
     sheet = np.asarray(Image.open(out).convert("RGB"))
     rgb = SensorStore(built).read_image(f"town00_{SEQ}", "camera_00", 2, "rgb")
-    # the sheet's top-left tile is camera_00's recorded RGB
-    assert np.array_equal(sheet[: rgb.shape[0], : rgb.shape[1]], rgb)
+    # the sheet's first tile (top left) is camera_00's recorded RGB, pixel for pixel
+    hits = [(r, c) for r in range(sheet.shape[0] - rgb.shape[0])
+            for c in [sheet[r].tobytes().find(rgb[0].tobytes())] if c >= 0 and c % 3 == 0]
+    r, c = hits[0]
+    assert np.array_equal(sheet[r : r + rgb.shape[0], c // 3 : c // 3 + rgb.shape[1]], rgb)
+    assert r < 60 and c // 3 < sheet.shape[1] // 6  # the first row, the first of six columns
 
 
 def test_rig_from_calib_and_the_rear_cameras():

@@ -75,3 +75,16 @@ def test_a_slice_of_the_plan_builds(tmp_path):
     assert actors == [(0,)]
     _, runs = query(store, "SELECT count(*) FROM runs WHERE stage = 'voxelize' AND status = 'completed'")
     assert runs[0][0] == 26
+
+
+def test_config_prints_the_rig_in_the_dataset_frame():
+    r = cli.invoke(app, ["config"])
+    assert r.exit_code == 0
+    # the YAML still loads as the same config (the rig lines are comments)
+    cfg = DatasetConfig.model_validate(yaml.safe_load(r.stdout))
+    assert cfg == DatasetConfig()
+    lines = [ln[4:] for ln in r.stdout.splitlines() if ln.startswith("#   ")]
+    # camera_02 is at CARLA y = -0.46, yaw -90: in the dataset's frame y +0.46, yaw +90, facing left
+    assert any(ln.startswith("camera_02  x +0.00  y +0.46  z 1.55  yaw  +90.0 deg  left") for ln in lines)
+    assert "stereo pair camera_00 (left) / camera_01 (right): baseline 0.60 m" in lines
+    assert "y left" in r.stdout and "CARLA's convention" in r.stdout

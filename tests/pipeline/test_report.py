@@ -222,3 +222,59 @@ def test_store_usage_counts_parts(tmp_path):
     (tmp_path / "root" / "admesh" / ".tmp-x").write_bytes(b"999")
     usage = {u.part: (u.files, u.bytes) for u in store_usage(store, exclude=("metrics/report.html",))}
     assert usage == {"admesh": (2, 6), "other": (1, 2)}
+
+
+def test_lineage_is_a_readable_table_with_hashes_folded(small):
+    from carlaocc.pipeline.tasks.report_page import render_html
+
+    recs = [_run("voxelize", f"s/0.4/{t:04d}", {f"occupancy.zarr/s/0.4/semantic[{t}]": "x"}, {"scenes/s": "y"})
+            for t in range(3)]
+    recs = [r.model_copy(update={"code_version": "0123456789abcdef" * 4}) for r in recs]
+    recs[2] = recs[2].model_copy(update={"status": "failed", "run_id": "20250103T000000Z-def"})
+    page = render_html(root="r", sequences=[], grids=[], totals={}, asset_rows=[], quality=[], usage=[],
+                       lineage=stage_lineage(recs), images={})
+    section = page[page.index('id="lineage"'):]
+    readable, folded = section.split("<details><summary>hashes", 1)
+    # stage, completed partitions, when, task time, the short code version, what it read and wrote
+    for text in ("<th>stage</th>", "<th>completed</th>", "<th>finished (UTC)</th>", "<th>code</th>",
+                 "<b>voxelize</b>", "2 of 3", "2025-01-02 03:04:07", "6.0 s", "<code>01234567</code>",
+                 "scenes ×3", "occupancy.zarr/semantic ×3"):
+        assert text in readable, text
+    # the hashes and run ids only inside the folded element
+    assert "0123456789abcdef" not in readable and "20250102T030405Z-abc" not in readable and "cf6" not in readable
+    assert "0123456789abcdef" * 4 in folded and "20250103T000000Z-def" in folded and "cf6" in folded
+    assert folded.index("</details>") > folded.index("cf6")
+
+
+def test_report_cameras_are_named_from_the_recorded_poses(small):
+    from carlaocc.catalog.sensors import SensorStore
+    from carlaocc.pipeline.tasks.report import recorded_camera_roles
+    from carlaocc.schemas.records import SensorPoseRecord
+    from carlaocc.schemas.rig import RigConfig, camera_roles
+    from carlaocc.stages.geometry import invert_pose
+
+    rig = RigConfig()
+    seq = min(SEQS)  # the sequence the report renders
+    # the ego moved and turned: the world poses differ from the rig's, the roles must not
+    world = np.array([[0.0, -1.0, 0.0, 5.0], [1.0, 0.0, 0.0, -3.0], [0.0, 0.0, 1.0, 0.2], [0, 0, 0, 1.0]])
+    lidar_world = world @ np.array(rig.lidar.sensor_to_ego())
+    frames = [FrameRecord(sequence_id=seq, frame_index=t, timestamp=0.1 * t, ego_pose=world.ravel().tolist(),
+                          lidar_pose=lidar_world.ravel().tolist()) for t in range(FRAMES)]
+    ParquetTable(small, FrameRecord).save(seq, frames)
+    ParquetTable(small, SensorPoseRecord).save(seq, [
+        SensorPoseRecord(sequence_id=seq, frame_index=t, sensor=c.name,
+                         pose=(world @ np.array(c.camera_to_ego())).ravel().tolist())
+        for t in range(FRAMES) for c in rig.cameras])
+    sensors = SensorStore(small)
+    for c in rig.cameras[:2]:
+        sensors.create(seq, c.name, 8, 4, FRAMES, ("depth", "semantic", "instance", "normal", "rgb"))
+        for t in range(FRAMES):
+            sensors.write_image(seq, c.name, t, "depth", np.full((4, 8), 5.0, np.float32))
+            sensors.write_image(seq, c.name, t, "semantic", np.full((4, 8), 7, np.uint8))
+            sensors.write_image(seq, c.name, t, "instance", np.zeros((4, 8), np.uint32))
+            sensors.write_image(seq, c.name, t, "normal", np.zeros((4, 8, 3), np.float32))
+            sensors.write_image(seq, c.name, t, "rgb", np.full((4, 8, 3), 99, np.uint8))
+    roles = recorded_camera_roles(small, seq, 1)
+    assert roles == {n: r for n, r in camera_roles(rig.cameras[:2]).items()}
+    assert roles["camera_00"] == "front, stereo left (with camera_01)"
+    # (the sheet itself, RGB row first: tests/stages/test_render.py; the page: tests/test_end_to_end.py)

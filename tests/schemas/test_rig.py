@@ -2,6 +2,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from carlaocc.schemas.rig import CameraSpec, LidarSpec, RigConfig
@@ -68,3 +70,66 @@ def test_bad_rigs_are_refused():
         LidarSpec(upper_fov_deg=-30, lower_fov_deg=10)
     with pytest.raises(ValidationError):
         RigConfig(camera=())
+
+
+def test_directions_in_words_cover_the_compass():
+    from carlaocc.schemas.rig import facing
+
+    words = [facing(a) for a in (0, 45, 90, 135, 180, -135, -90, -45)]
+    assert words == ["front", "front-left", "left", "rear-left", "rear", "rear-right", "right", "front-right"]
+    # sector edges: 22.4 deg is still front, 22.6 front-left; -180 and 180 are both rear
+    assert (facing(22.4), facing(22.6), facing(-180.0), facing(359.0)) == ("front", "front-left", "rear", "front")
+
+
+def test_reference_rig_in_the_dataset_frame():
+    from carlaocc.schemas.rig import camera_roles, rig_lines, stereo_pairs
+
+    rig = RigConfig()
+    by = {c.name: c for c in rig.cameras}
+    # positions agree with the pose the pipeline uses (sensor_to_ego), yaw with its rotation
+    for cam in rig.cameras:
+        T = np.array(cam.sensor_to_ego())
+        np.testing.assert_allclose(cam.ego_position(), T[:3, 3])
+        yaw = math.radians(cam.ego_yaw_deg)
+        np.testing.assert_allclose([math.cos(yaw), math.sin(yaw)], [T[0, 0], T[1, 0]], atol=1e-12)
+    assert [by[n].direction for n in sorted(by)] == ["front", "front", "left", "right", "rear", "rear"]
+    assert by["camera_04"].ego_yaw_deg == 180.0
+    pairs = stereo_pairs(rig.cameras)
+    assert [(a, b) for a, b, _ in pairs] == [("camera_00", "camera_01"), ("camera_05", "camera_04")]
+    assert [base for _, _, base in pairs] == pytest.approx([0.6, 0.6])
+    # "left" of a pair is the left eye: a far point straight along the pair's axis has a positive
+    # disparity u_left - u_right in the images themselves
+    for left, right, far in (("camera_00", "camera_01", [60.0, 0.0, 1.55]), ("camera_05", "camera_04", [-60.0, 0.0, 1.55])):
+        assert _project(by[left], far)[0] - _project(by[right], far)[0] > 0
+    roles = camera_roles(rig.cameras)
+    assert roles["camera_05"] == "rear, stereo left (with camera_04)" and roles["camera_02"] == "left"
+    lines = rig_lines(rig)
+    assert lines[0].startswith("camera_00  x +0.80  y +0.30  z 1.55  yaw   +0.0 deg  front, stereo left")
+    assert "y -0.46" in lines[3] and "deg  right  1408x376" in lines[3]  # camera_03: y right of the ego in words
+    assert lines[-1] == "stereo pair camera_05 (left) / camera_04 (right): baseline 0.60 m"
+    # a rotated single camera: no pair, its own direction
+    one = (CameraSpec(name="c", x=1.0, y=0.5, yaw_deg=-45.0), CameraSpec(name="d", x=1.0, y=-0.5, yaw_deg=0.0))
+    assert stereo_pairs(one) == [] and camera_roles(one) == {"c": "front-left", "d": "front"}
+
+
+def test_roles_from_poses_agree_with_the_rig():
+    from carlaocc.schemas.rig import camera_roles, pose_roles
+
+    rig = RigConfig()
+    # the optical frames' poses in the LiDAR frame (as sensor_poses and the frames table give them)
+    to_lidar = np.linalg.inv(np.array(rig.lidar.sensor_to_ego()))
+    poses = {c.name: (to_lidar @ np.array(c.camera_to_ego())).tolist() for c in rig.cameras}
+    assert pose_roles(poses) == camera_roles(rig.cameras)
+    assert pose_roles(poses)["camera_04"] == "rear, stereo right (with camera_05)"
+
+
+@given(st.floats(-1000.0, 1000.0, allow_nan=False))
+def test_facing_names_the_nearest_of_eight_directions(yaw):
+    from carlaocc.schemas.rig import facing
+
+    names = ["front", "front-left", "left", "rear-left", "rear", "rear-right", "right", "front-right"]
+    word = facing(yaw)
+    # the named direction is within half a sector (22.5 deg, with rounding slack) of the heading
+    off = (yaw - 45.0 * names.index(word) + 180.0) % 360.0 - 180.0
+    assert abs(off) <= 22.5 + 1e-9
+    assert facing(yaw + 360.0) == word or abs(abs(off) - 22.5) < 1e-6

@@ -1,5 +1,5 @@
-"""Headless preview rendering: framing, colours, transparency, determinism, the bitmap font and
-contact sheets."""
+"""Headless preview rendering: framing, colours, transparency, determinism; the asset and camera
+sheets (titles, keys, the pixels inside their panels)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import trimesh
 
 from carlaocc.schemas.meshes import MeshPart
 from carlaocc.stages.render.assets import render_asset
-from carlaocc.stages.render.sheets import FONT_HEIGHT, contact_sheet, draw_text, label_strip_height, text_width
 
 WHITE = np.array([255, 255, 255], dtype=np.uint8)
 
@@ -101,47 +100,24 @@ def test_twenty_thousand_triangles_render():
     assert fg[128, 128] and fg.mean() > 0.3
 
 
-def test_text_and_font():
-    assert text_width("", 1) == 0 and text_width("A", 1) == 5 and text_width("AB", 2) == 22
-    img = np.zeros((9, 20, 3), dtype=np.uint8)
-    draw_text(img, "I-", 1, 1, (255, 255, 255))
-    on = img[:, :, 0] > 0
-    assert on[1, 2:5].all()  # the top bar of "I"
-    assert on[4, 7:12].all() and not on[3, 7:12].any()  # the dash
-    # unknown characters draw a "?", text past the border is clipped
-    draw_text(img, "\u00e9\u00e9\u00e9\u00e9", 15, 5, (9, 9, 9))
-    assert (img[:, :, 0] == 9).any()
+def test_asset_sheet_titles_and_class_key():
+    from carlaocc.schemas.taxonomy import by_name, palette
+    from carlaocc.stages.render.assets import asset_sheet
 
-
-def test_contact_sheet_layout_and_labels():
-    rng = np.random.default_rng(0)
-    images = [rng.integers(0, 255, (40, 50, 3), dtype=np.uint8) for _ in range(7)]
-    images[3] = images[3][:30, :44]  # a smaller tile is centred in its cell
-    labels = ["Car/sedan", "", "Bus/city_bus", "Tree 3", "x", "y", "z"]
-    sheet = contact_sheet(images, labels, columns=3, label_background=(236, 236, 236), text_color=(20, 20, 20))
-    strip = label_strip_height(1)
-    assert strip > FONT_HEIGHT
-    assert sheet.shape == (3 * (40 + strip), 3 * 50, 3) and sheet.dtype == np.uint8
-    assert (sheet[0:40, 0:50] == images[0]).all()
-    label0 = sheet[40 : 40 + strip, 0:50]
-    label1 = sheet[40 : 40 + strip, 50:100]
-    assert (label0 == 20).all(axis=2).sum() > 20  # text pixels under the first image
-    assert not (label1 == 20).all(axis=2).any()  # an empty label leaves a blank strip
-    assert (label1 == 236).all()
-    # the last row has two empty cells of background
-    assert (sheet[2 * (40 + strip) :, 50:] == 255).all()
-    # one row when there are fewer images than columns; a bigger scale gives a taller strip
-    one = contact_sheet(images[:2], labels[:2], columns=6, label_scale=2)
-    assert one.shape == (40 + label_strip_height(2), 100, 3)
-
-
-def test_contact_sheet_checks_its_input():
-    with pytest.raises(ValueError):
-        contact_sheet([np.zeros((4, 4, 3), np.uint8)], ["a", "b"])
-    with pytest.raises(ValueError):
-        contact_sheet([], [])
-    long = contact_sheet([np.zeros((10, 30, 3), np.uint8)], ["a very long label indeed"])
-    assert long.shape == (10 + label_strip_height(1), 30, 3)
+    car, glass = by_name("Car").id, by_name("Pole").id
+    images = [np.full((30, 40, 3), v, np.uint8) for v in (10, 60, 110, 160, 210)]
+    labels = [f"Car/high_seq {k}" for k in range(5)]
+    sheet = asset_sheet(images, labels, {car, glass, 999}, columns=3, translucent=True)
+    assert sheet.titles == labels  # text as given ("high_seq" in a real font)
+    (key,) = sheet.keys  # one key, on the first row
+    assert key.labels == ["Pole", "Car", "translucent: glass (drawn see-through)"]
+    assert key.entries[1].colours == (tuple(palette()[car]),)
+    # three panels on the first row, two on the second, each image drawn as it is
+    assert [b[0] for b in sheet.boxes] == [sheet.boxes[0][0]] * 3 + [sheet.boxes[3][0]] * 2
+    for (r0, r1, c0, c1), im in zip(sheet.boxes, images):
+        assert (sheet.image[r0:r1, c0:c1] == im).all()
+    with pytest.raises(ValueError, match="labels"):
+        asset_sheet(images, labels[:2], {car})
 
 
 def test_project_skeletons_and_draw():
@@ -163,3 +139,76 @@ def test_project_skeletons_and_draw():
     assert tuple(out[20, 20]) == (140, 140, 140)  # the hidden one, grey
     assert tuple(out[20, 35]) == (140, 140, 140)  # the bone between them (one end hidden): grey
     assert not image.any()  # the input is left as it is
+
+
+def _camera_views():
+    """Two 40 x 60 cameras: a road (class Road) under a car (instance 7) at 5 m, sky above (no
+    surface), normals facing the camera."""
+    from carlaocc.schemas.taxonomy import by_name
+    from carlaocc.stages.render.sensors import CameraView
+
+    road, car = by_name("Road").id, by_name("Car").id
+    depth = np.zeros((40, 60), np.float32)
+    depth[20:] = 2.0
+    depth[10:30, 20:40] = 5.0
+    sem = np.zeros((40, 60), np.uint8)
+    sem[20:] = road
+    sem[10:30, 20:40] = car
+    inst = np.where(sem == car, 7, 0).astype(np.uint32)
+    normal = np.zeros((40, 60, 3), np.float32)
+    normal[depth > 0] = (0.0, 0.0, -1.0)
+    return [CameraView(name, depth, sem, inst, normal, direction=d)
+            for name, d in (("camera_00", "front, stereo left (with camera_01)"), ("camera_03", "right"))]
+
+
+def test_sensor_sheet_titles_keys_and_pixels():
+    from carlaocc.schemas.taxonomy import by_name, palette
+    from carlaocc.stages.render.colours import instance_colors
+    from carlaocc.stages.render.sensors import depth_image, sensor_sheet
+
+    views = _camera_views()
+    sheet = sensor_sheet(views, step=1)
+    # every panel names its camera and the direction it faces
+    assert sheet.titles[:2] == ["camera_00 (front, stereo left (with camera_01)): depth", "camera_03 (right): depth"]
+    assert [t.split(": ")[-1] for t in sheet.titles] == ["depth"] * 2 + ["normal"] * 2 + ["semantic"] * 2 + ["instance"] * 2
+    depth, normal, semantic, instance = sheet.keys
+    # depth: a scale in metres whose tick positions follow the ramp sqrt(1 m / depth)
+    ticks = dict((label, pos) for pos, label in depth.scale.ticks)
+    assert ticks["5"] == pytest.approx(np.sqrt(1 / 5)) and ticks["80"] == pytest.approx(np.sqrt(1 / 80))
+    # the scale's colour at 5 m is the colour the depth map draws at 5 m
+    k = int(round(np.sqrt(1 / 5) * 63))
+    assert np.abs(depth.scale.colours[k].astype(int) - depth_image(np.array([[1 / (k / 63) ** 2]]))[0, 0]).max() <= 1
+    assert ("no surface", ((0, 0, 0),)) in [(e.label, e.colours) for e in depth.entries]
+    # normals: a surface facing the camera is (128, 128, 255), as the maps draw it
+    assert normal.entries[0].label == "faces the camera" and normal.entries[0].colours == ((128, 128, 255),)
+    assert [e.label for e in semantic.entries] == ["Road", "Car"]
+    car = by_name("Car").id
+    assert semantic.entries[1].colours == (tuple(palette()[car]),)
+    assert instance.entries[0].kind == "instances" and instance.entries[0].colours == (tuple(int(v) for v in instance_colors(7)),)
+    # pixels inside the panels are the maps' colours, one sheet pixel per map pixel
+    r0, r1, c0, c1 = sheet.boxes[0]
+    assert (r1 - r0, c1 - c0) == (40, 60)
+    assert (sheet.image[r0 + 20, c0 + 30] == depth_image(np.array([[5.0]]))[0, 0]).all()
+    assert (sheet.image[r0 + 2, c0 + 2] == 0).all()
+    r0, r1, c0, c1 = sheet.boxes[5]  # camera_03 semantic
+    assert (sheet.image[r0 + 35, c0 + 5] == palette()[by_name("Road").id]).all()
+    r0, r1, c0, c1 = sheet.boxes[7]  # camera_03 instance: the car in its instance colour
+    assert (sheet.image[r0 + 20, c0 + 30] == instance_colors(7)).all()
+
+
+def test_sensor_sheet_rgb_row_and_repair_tints():
+    import dataclasses
+
+    from carlaocc.stages.render.sensors import OMISSION_TINT, sensor_sheet
+
+    rgb = np.zeros((40, 60, 3), np.uint8)
+    rgb[:, :, 1] = 200
+    views = [dataclasses.replace(v, rgb=rgb, depth_raw=v.depth, semantic_raw=v.semantic) for v in _camera_views()]
+    sheet = sensor_sheet(views, step=2)
+    assert sheet.titles[0] == "camera_00 (front, stereo left (with camera_01)): rgb"
+    r0, r1, c0, c1 = sheet.boxes[0]
+    assert (r1 - r0, c1 - c0) == (20, 30) and (sheet.image[r0:r1, c0:c1] == rgb[::2, ::2]).all()
+    keys = {t.split(": ")[-1]: k for t, k in zip(sheet.titles[::2], sheet.keys)}
+    assert set(keys) == {"rgb", "depth", "normal", "semantic", "instance", "raw depth", "rectified depth",
+                         "raw semantic", "rectified semantic"}
+    assert ("omission region (no raw label)", (OMISSION_TINT,)) in [(e.label, e.colours) for e in keys["raw semantic"].entries]

@@ -214,35 +214,82 @@ def test_bad_inputs_are_rejected():
 # ---------------------------------------------------------------------------------------------
 
 
-def test_occupancy_figure_has_title_panels_and_legend():
+def _sheet_pixel(sheet, panel: int, x: float, y: float, extent) -> np.ndarray:
+    """The sheet's colour at metric (x, y) inside a top-view panel with ``extent`` (left, right,
+    bottom, top) = (y_left, y_right, x_bottom, x_top)."""
+    r0, r1, c0, c1 = sheet.boxes[panel]
+    yl, yr, xb, xt = extent
+    row = r0 + int((xt - x) / (xt - xb) * (r1 - r0))
+    col = c0 + int((yl - y) / (yl - yr) * (c1 - c0))
+    return sheet.image[row, col]
+
+
+def test_occupancy_figure_states_its_colouring():
     sem, inst, grid = _scene()
-    fig = occupancy_figure(sem, inst, grid, "frame 000042", height=120)
-    assert fig.dtype == np.uint8 and fig.ndim == 3
-    assert fig.shape[1] > 120 * 16 // 9 + 120 * 2 // 3  # BEV + 3D view + legend side by side
-    title = fig[:12]
-    assert (title == [20, 20, 20]).all(axis=2).any()  # text in the title strip
-    for cls in (ROAD, CAR, POLE):  # legend swatches of the classes present
-        assert (fig == palette()[cls]).all(axis=2).sum() >= 16
-    assert not (fig == palette()[SIGN]).all(axis=2).any()
+    fig = occupancy_figure(sem, inst, grid, "high_seq frame 000042", height=160)
+    assert fig.image.dtype == np.uint8 and fig.image.ndim == 3
+    assert fig.titles == ["top view, 0.25 m voxels", "3D, 0.25 m: from behind, 35 deg up"]
+    (key,) = fig.keys
+    assert key.heading == "colour: class; things one colour per instance"
+    by = {e.label.split(":")[0]: e for e in key.entries}
+    # stuff by its class colour; the car, drawn in its instance's colour, claims no class colour
+    assert by["Road"].colours == (tuple(palette()[ROAD]),) and by["Pole"].colours == (tuple(palette()[POLE]),)
+    car = by["Car"]
+    assert car.kind == "instances" and car.label == "Car: one colour per instance (1 here)"
+    assert car.colours == (tuple(int(v) for v in instance_colors(CAR_ID)),)
+    assert all(tuple(palette()[CAR]) not in e.colours for e in key.entries)
+    assert "TrafficSign" not in by
+    assert by["ego (LiDAR origin), tip forward"].kind == "marker"
+    # the top view's metric axes: the car (x 3..5, y -2..-1) is in its instance colour (shaded by
+    # height), the ego at the origin is the white marker, the hole (free) is FREE_RGB
+    extent = (4.0, -4.0, -4.0, 8.0)
+    assert _shade_mask(_sheet_pixel(fig, 0, 4.0, -1.5, extent)[None, None], instance_colors(CAR_ID))[0, 0]
+    assert (_sheet_pixel(fig, 0, 0.0, 0.0, extent) == WHITE).all()
+    # semantic mode: the car is a class swatch again
+    sem_fig = occupancy_figure(sem, inst, grid, "t", height=160, mode="semantic")
+    car = next(e for e in sem_fig.keys[0].entries if e.label == "Car")
+    assert car.kind == "swatch" and car.colours == (tuple(palette()[CAR]),)
+    assert _shade_mask(_sheet_pixel(sem_fig, 0, 4.0, -1.5, extent)[None, None], palette()[CAR])[0, 0]
+
+
+def test_height_mode_has_a_scale_in_metres():
+    sem, inst, grid = _scene()
+    fig = occupancy_figure(sem, inst, grid, "t", height=160, mode="height")
+    key = fig.keys[0]
+    assert key.scale is not None and "m" in key.scale.label
+    assert not any(e.kind == "swatch" and e.label == "Car" for e in key.entries)
+    # the scale's ends are the lowest and highest occupied voxel centres, found independently
+    ks = np.flatnonzero(sem.any(axis=(0, 1)))
+    lo, hi = (grid.origin[2] + (k + 0.5) * grid.voxel_size for k in (ks[0], ks[-1]))
+    ticks = dict(key.scale.ticks)
+    assert ticks[0.0] == f"{lo:.1f}" and ticks[1.0] == f"{hi:.1f}"
+
+
+def test_figures_use_a_real_font():
+    """The title is drawn with matplotlib's anti-aliased font: many grey levels, not the two
+    colours of a bitmap font."""
+    sem, inst, grid = _scene()
+    fig = occupancy_figure(sem, inst, grid, "high_seq frame 0", height=120)
+    title = fig.image[: fig.boxes[0][0] - 24]
+    assert len(np.unique(title.reshape(-1, 3), axis=0)) > 8
 
 
 def test_multi_voxel_size_figure_has_one_labelled_column_per_voxel_size():
     frames = [(f"{voxel_size:g} m", *_scene(voxel_size)) for voxel_size in (0.25, 0.5)]
-    one = multi_voxel_size_figure(frames[:1], window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
-    two = multi_voxel_size_figure(frames, window=((-2.0, 6.0), (-4.0, 4.0)), cell_size=96)
-    assert one.dtype == two.dtype == np.uint8 and one.shape[0] == two.shape[0]
-    assert two.shape[1] > 2 * one.shape[1] - 1 - 16 and two.shape[1] > one.shape[1]
-    col = one.shape[1]
-    label_rows = two[:14]
-    text = (label_rows == [20, 20, 20]).all(axis=2)
-    assert text[:, :col].any() and text[:, col:].any()  # a label over each column
-    # the same metric window: both BEVs have the car at the same place, the coarse one blockier
-    bev_rows = slice(two.shape[0] - 96, two.shape[0])
-    left, right = two[bev_rows, :col], two[bev_rows, two.shape[1] - col :]
-    car_l = np.argwhere(_shade_mask(left, instance_colors(CAR_ID))).mean(axis=0)
-    car_r = np.argwhere(_shade_mask(right, instance_colors(CAR_ID))).mean(axis=0)
-    assert np.abs(car_l - car_r).max() <= 4
+    window = ((-2.0, 6.0), (-4.0, 4.0))
+    two = multi_voxel_size_figure(frames, window=window, cell_size=96)
+    assert two.titles == ["0.25 m: 3D from behind", "0.5 m: 3D from behind", "0.25 m: top view", "0.5 m: top view"]
+    # both top views are 96 x 96 pixels of the same metric window: the car at the same place
+    extent = (4.0, -4.0, -2.0, 6.0)
+    for panel in (2, 3):
+        r0, r1, c0, c1 = two.boxes[panel]
+        assert (r1 - r0, c1 - c0) == (96, 96)
+        assert _shade_mask(_sheet_pixel(two, panel, 4.0, -1.5, extent)[None, None], instance_colors(CAR_ID))[0, 0]
+    left, right = (two.image[r0:r1, c0:c1] for r0, r1, c0, c1 in two.boxes[2:])
     assert len(np.unique(right.reshape(-1, 3), axis=0)) <= len(np.unique(left.reshape(-1, 3), axis=0))
+    classes, top = two.keys
+    assert [e.label.split(":")[0] for e in classes.entries] == ["Road", "Pole", "Car"]
+    assert "ego (LiDAR origin), tip forward" in top.labels
 
 
 def _shade_mask(img, base) -> np.ndarray:
@@ -250,3 +297,26 @@ def _shade_mask(img, base) -> np.ndarray:
     img, base = img.astype(float), np.asarray(base, float)
     s = img.sum(axis=2, keepdims=True) / base.sum()
     return (np.abs(img - s * base).max(axis=2) <= 3) & (s[..., 0] > 0.3)
+
+
+def test_orthographic_extent_places_a_voxel_where_the_view_draws_it():
+    from carlaocc.stages.render.occupancy import orthographic_extent
+    from carlaocc.stages.render.raster import camera_axes
+
+    grid = _grid(0.25)
+    sem = np.zeros(grid.shape, np.uint8)
+    inst = np.zeros(grid.shape, np.uint32)
+    _box(sem, inst, grid, (2.0, 2.5), (-1.0, -0.5), (0.5, 1.0), POLE)  # a 0.5 m cube
+    bounds = ((-4.0, 8.0), (-4.0, 4.0), (-2.0, 3.0))
+    for el, az in ((0.0, 90.0), (0.0, 180.0), (20.0, 30.0)):
+        img = perspective_view(sem, inst, grid, size=(200, 300), elevation_deg=el, azimuth_deg=az, fov_deg=0.0,
+                               bounds=bounds, mode="semantic", outline=False, antialias=1)
+        left, right, bottom, top = orthographic_extent(bounds, (200, 300), el, az)
+        r_, u_, _ = camera_axes(el, az)
+        p = np.array([2.25, -0.75, 0.75]) - np.array([2.0, 0.0, 0.5])  # cube centre from the bounds' centre
+        col = (p @ r_ - left) / (right - left) * 300
+        row = (top - p @ u_) / (top - bottom) * 200
+        drawn = np.argwhere(np.any(img != 255, axis=2)).mean(axis=0)
+        assert abs(drawn[0] - row) < 1.5 and abs(drawn[1] - col) < 1.5, (el, az, drawn, row, col)
+        # square pixels: as many metres per pixel across as down
+        assert (right - left) / 300 == pytest.approx((top - bottom) / 200)

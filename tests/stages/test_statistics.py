@@ -219,3 +219,23 @@ def test_plots_refuse_bad_counts():
         plots.class_voxel_plot(np.ones(5))
     with pytest.raises(ValueError, match="negative"):
         plots.instances_plot(-np.ones(N_CLASSES))
+
+
+def test_score_axes_say_where_they_start():
+    from matplotlib.collections import LineCollection
+
+    # scores close to 1: the axis is zoomed and its label says so
+    bottom, top, label = plots.score_axis([0.995, 0.997, 0.999])
+    assert 0.9 < bottom < 0.995 and top > 0.999 and label == f"score (axis from {bottom:.3f}, not 0)"
+    # spread scores: the axis starts at 0
+    assert plots.score_axis([0.2, 0.9]) == (0.0, pytest.approx(1.075), "score")
+    rows = [QualityRecord(sequence_id=f"s{i}", voxel_size=0.2, frame_index=None, metric="spatial_continuity",
+                          value=v, occupied=10, isolated=0) for i, v in enumerate((0.995, 0.998))]
+    (ax,) = plots.quality_figure(rows).axes
+    assert ax.get_ylim()[0] == pytest.approx(bottom := plots.score_axis([0.995, 0.998])[0])
+    assert ax.get_ylabel() == f"score (axis from {bottom:.3f}, not 0)"
+    # a zoomed axis draws dots on stems, not bars whose length would not be the score
+    assert not ax.patches and any(isinstance(c, LineCollection) for c in ax.collections)
+    low = [r.model_copy(update={"value": v}) for r, v in zip(rows, (0.3, 0.9))]
+    (ax,) = plots.quality_figure(low).axes
+    assert ax.get_ylim()[0] == 0.0 and ax.get_ylabel() == "score" and len(ax.patches) == 2
