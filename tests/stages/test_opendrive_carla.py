@@ -15,6 +15,8 @@ Unreal's left-handed frame: (x, -y, z) of OpenDRIVE's. Figures, per map (issue 3
   the lane whose centre line is nearest, so a point in a wide lane nearer the centre of a narrow
   shoulder beside it is reported outside every lane, :func:`test_get_waypoint_nearest_centre_only`).
 * ``widths``: CARLA's lane width against ours at each waypoint's (road, lane, s): the share within 0.05 m.
+* ``solid_marks_drawn``: of the waypoint lane edges CARLA reports a solid (or double) line on,
+  the share within 0.1 m of our RoadLine meshes.
 
 The shared CARLA towns are slow (tens of seconds: ``-m slow``); the fast twins run the same
 check on the small shared maps and on ``tools/make_rural.py``'s map (15 % climb, banked arc,
@@ -99,7 +101,7 @@ def crosscheck(text: str, n_inside: int = 20_000, seed: int = 0) -> dict:
     cmap = carla.Map("crosscheck", text)
     V, F = road_and_roadline(odr)
     wps = [w for w in cmap.generate_waypoints(2.0) if w.lane_type == carla.LaneType.Driving]
-    pts, bank = [], []
+    pts, bank, marks = [], [], []
     widths = []
     for w in wps:
         road = odr.road(w.road_id)
@@ -114,11 +116,19 @@ def crosscheck(text: str, n_inside: int = 20_000, seed: int = 0) -> dict:
             dt = side * hw * (-1.0 if w.lane_id < 0 else 1.0)
             pts.append(p)
             bank.append((t_centre + dt) * math.sin(phi))
+            mark = w.right_lane_marking if side > 0 else w.left_lane_marking if side < 0 else None
+            marks.append("" if mark is None else str(mark.type))
         ours = [st for st in od.lane_boundaries(road, [w.s]) if st.lane_id == w.lane_id]
         widths.append(abs(ours[0].t_outer[0] - ours[0].t_inner[0]) - w.lane_width if ours else np.inf)
     P, dz = np.array(pts), np.array(bank)
     raw = surface_distance(V, F, P)
     banked = surface_distance(V, F, P + np.column_stack([np.zeros((len(P), 2)), dz]))
+    # 4. road marks: CARLA's solid lines at the lane edges it reports them on, on our RoadLine
+    solid = np.isin(np.array(marks), ["Solid", "SolidSolid", "SolidBroken", "BrokenSolid"])
+    near_mark = np.zeros(0)
+    if solid.any():
+        VM, FM = merged(su.road_mark_meshes(odr))
+        near_mark = surface_distance(VM, FM, P[solid] + np.column_stack([np.zeros((solid.sum(), 2)), dz[solid]]), k=8)
     rng = np.random.default_rng(seed)
     S = sample_surface(V, F, n_inside, rng)
     found_raw = np.zeros(len(S), bool)
@@ -135,6 +145,8 @@ def crosscheck(text: str, n_inside: int = 20_000, seed: int = 0) -> dict:
         "inside_raw": float(found_raw.mean()),
         "inside": float(found.mean()),
         "widths": float(np.mean(widths <= 0.05)),
+        "solid_marks": int(solid.sum()),
+        "solid_marks_drawn": float(np.mean(near_mark <= 0.1)) if solid.any() else 1.0,
         "max_width_error": float(widths.max()),
     }
 
@@ -196,6 +208,7 @@ def check(fig: dict) -> None:
     assert fig["waypoints_on_road"] >= 0.995, fig
     assert fig["inside"] >= 0.97, fig
     assert fig["widths"] >= 0.99, fig
+    assert fig["solid_marks_drawn"] >= 0.99, fig
 
 
 def test_rural_map_against_carla():
