@@ -10,8 +10,9 @@ Unreal's left-handed frame: (x, -y, z) of OpenDRIVE's. Figures, per map (issue 3
   lateral offset of the point from the road's reference line; ``waypoints_raw`` without it.
 * ``inside``: 20,000 points sampled uniformly (by area) on our Road and RoadLine meshes that lie in
   some CARLA lane: CARLA's ``get_waypoint(project_to_road=False, lane_type=Any)`` finds one, or the
-  point is within half the lane width of the centre of the lane CARLA projects it to or of that
-  lane's neighbours at the same ``s`` (``inside_raw``: ``get_waypoint`` alone; it only tests
+  point lies in one of CARLA's lane cross-section cells (:func:`lane_cells`: every lane of the
+  cross sections of CARLA's driving waypoints every 0.25 m, its centre, direction and width from
+  CARLA's API) (``inside_raw``: ``get_waypoint`` alone; it only tests
   the lane whose centre line is nearest, so a point in a wide lane nearer the centre of a narrow
   shoulder beside it is reported outside every lane, :func:`test_get_waypoint_nearest_centre_only`).
 * ``widths``: CARLA's lane width against ours at each waypoint's (road, lane, s): the share within 0.05 m.
@@ -131,11 +132,9 @@ def crosscheck(text: str, n_inside: int = 20_000, seed: int = 0) -> dict:
         near_mark = surface_distance(VM, FM, P[solid] + np.column_stack([np.zeros((solid.sum(), 2)), dz[solid]]), k=8)
     rng = np.random.default_rng(seed)
     S = sample_surface(V, F, n_inside, rng)
-    found_raw = np.zeros(len(S), bool)
-    found = np.zeros(len(S), bool)
-    for i, p in enumerate(S):
-        found_raw[i] = cmap.get_waypoint(loc(p), project_to_road=False, lane_type=carla.LaneType.Any) is not None
-        found[i] = found_raw[i] or in_lane_or_neighbours(cmap, p)
+    found_raw = np.array([cmap.get_waypoint(loc(p), project_to_road=False, lane_type=carla.LaneType.Any) is not None
+                          for p in S])  # fmt: skip
+    found = found_raw | inside_lanes(lane_cells(cmap), S)
     widths = np.abs(np.array(widths))
     return {
         "waypoints": len(wps),
@@ -176,28 +175,44 @@ def carla_t(w, road) -> float:
     return poly_at(road.lane_offsets, w.s) + math.copysign(t, w.lane_id)
 
 
-def in_lane_or_neighbours(cmap, p) -> bool:
-    """True if the point lies within half a lane width (horizontally) of the centre of the lane
-    CARLA projects it to, or of one of that lane's neighbours (two each way) at the same s."""
-    w = cmap.get_waypoint(loc(p), project_to_road=True, lane_type=carla.LaneType.Any)
-    if w is None:
-        return False
-    todo, seen = [(w, 0)], set()
-    while todo:
-        c, depth = todo.pop()
-        if c is None or c.lane_id in seen:
+def lane_cells(cmap, step: float = 0.25):
+    """CARLA's lanes as cross-section cells: for every driving waypoint every ``step`` m and all
+    its lateral neighbours (any lane type, both ways), the lane centre (x, y) in OpenDRIVE's
+    frame, the unit forward direction (x, y) and half the lane width, from CARLA's own API."""
+    centre, forward, half, seen = [], [], [], set()
+    for w in cmap.generate_waypoints(step):
+        todo = [w]
+        while todo:  # the whole cross section at this s: neighbours of neighbours, any type
+            c = todo.pop()
+            key = (c.road_id, c.section_id, c.lane_id, round(c.s, 3))
+            if key in seen:
+                continue
+            seen.add(key)
+            if c.lane_width > 0:
+                q, f = c.transform.location, c.transform.get_forward_vector()
+                n = max(math.hypot(f.x, f.y), 1e-12)
+                centre.append((q.x, -q.y))
+                forward.append((f.x / n, -f.y / n))
+                half.append(c.lane_width / 2)
+            todo += [x for x in (c.get_left_lane(), c.get_right_lane()) if x is not None]
+    return np.array(centre), np.array(forward), np.array(half)
+
+
+def inside_lanes(cells, P, step: float = 0.25) -> np.ndarray:
+    """Per point (x, y[, z]): inside some cell of :func:`lane_cells` -- within half a step along
+    the lane (plus 5 cm) and within half the lane width across it."""
+    centre, forward, half = cells
+    reach = math.hypot(step / 2 + 0.05, float(half.max()))
+    tree = cKDTree(centre)
+    out = np.zeros(len(P), bool)
+    for i, cand in enumerate(tree.query_ball_point(np.asarray(P)[:, :2], reach)):
+        if not cand:
             continue
-        seen.add(c.lane_id)
-        q = c.transform.location
-        fwd = c.transform.get_forward_vector()
-        dx, dy = p[0] - q.x, -p[1] - q.y
-        across = abs(-fwd.y * dx + fwd.x * dy) / max(math.hypot(fwd.x, fwd.y), 1e-9)
-        along = abs(fwd.x * dx + fwd.y * dy) / max(math.hypot(fwd.x, fwd.y), 1e-9)
-        if across <= c.lane_width / 2 and along <= 0.5:
-            return True
-        if depth < 2:
-            todo += [(c.get_left_lane(), depth + 1), (c.get_right_lane(), depth + 1)]
-    return False
+        d = np.asarray(P[i][:2]) - centre[cand]
+        along = np.abs(np.sum(d * forward[cand], axis=1))
+        across = np.abs(d[:, 0] * forward[cand][:, 1] - d[:, 1] * forward[cand][:, 0])
+        out[i] = bool(np.any((along <= step / 2 + 0.05) & (across <= half[cand])))
+    return out
 
 
 def report(name: str, fig: dict) -> None:
@@ -257,7 +272,7 @@ def test_carla_ignores_superelevation():
 
 
 def test_get_waypoint_nearest_centre_only():
-    """Why ``inside`` resolves neighbours: a point inside a 4 m driving lane, 0.5 m from its outer
+    """Why ``inside`` also uses CARLA's lane cells: a point inside a 4 m driving lane, 0.5 m from its outer
     edge, is nearer the centre of the 0.3 m shoulder beside it (0.65 m) than its own lane's (1.5 m);
     CARLA's ``get_waypoint(project_to_road=False)`` tests only that nearest lane and finds none."""
     text = ('<?xml version="1.0"?><OpenDRIVE><header revMajor="1" revMinor="4" name="w"/>'
@@ -270,6 +285,7 @@ def test_get_waypoint_nearest_centre_only():
     p = (20.0, -3.5, 0.0)  # OpenDRIVE frame: t = -3.5, inside lane -1 (t in [-4, 0])
     assert cmap.get_waypoint(loc(p), project_to_road=False, lane_type=carla.LaneType.Any) is None
     assert cmap.get_waypoint(loc(p), project_to_road=True, lane_type=carla.LaneType.Any).lane_id == -2
-    assert in_lane_or_neighbours(cmap, p)
-    assert not in_lane_or_neighbours(cmap, (20.0, -4.6, 0.0))  # beyond the shoulder
+    cells = lane_cells(cmap)
+    assert inside_lanes(cells, [p, (20.0, -4.2, 0.0)]).all()
+    assert not inside_lanes(cells, [(20.0, -4.4, 0.0), (20.0, 0.2, 0.0), (41.0, -1.0, 0.0)]).any()
     assert cmap.get_waypoint(loc((20.0, -1.0, 0.0)), project_to_road=False, lane_type=carla.LaneType.Any).lane_id == -1
