@@ -35,6 +35,9 @@ The walk cycle's bone files hold the same bones in the export's mesh axes (walki
 in centimetres; its meshes are in the skeletal mesh's component frame, which is the actor's
 turned -90 degrees about z with the feet at the origin.
 
+The calibration's intrinsics must be CARLA's pinhole of its image size and fov
+(:func:`check_intrinsics`, within :data:`INTRINSICS_TOL` px): the rig is built from size and fov.
+
 What is ignored: ``bg_actor_occ/``, ``fg_actor_occ/`` (precomputed voxels: we voxelize the
 meshes exactly), ``occupancy/``, ``normal/``, the FBX files, ``rgb/image_bev`` and every absolute
 path recorded inside the export's JSON (from the authors' machines). Problems raise
@@ -58,7 +61,7 @@ __all__ = [
     "RecordingError", "Calib", "EgoState", "VehicleState", "PedestrianState", "TrafficFrame", "StaticActor",
     "SequenceDir", "Recording", "LIDAR_HEIGHT", "DEPTH_RANGE", "MESH_TO_WORLD", "OPTICAL_FROM_BODY",
     "discover", "model_key", "read_calib", "read_poses", "read_traffic", "read_actor_info", "read_mesh", "read_ply",
-    "decode_depth", "decode_semantics", "palette_lookup",
+    "decode_depth", "decode_semantics", "palette_lookup", "INTRINSICS_TOL", "pinhole", "check_intrinsics",
 ]  # fmt: skip
 
 LIDAR_HEIGHT = 1.73  # m: the LiDAR above the ego's origin (the authors' sensor config)
@@ -257,7 +260,36 @@ def read_calib(path) -> Calib:
         raise RecordingError(f"{path}: camera size {width}x{height} / fov {fov} out of range")
     if not cams:
         raise RecordingError(f"{path}: no camera transforms under sensors (cam_00 ...)")
+    check_intrinsics(K, width, height, fov, str(path))
     return Calib(width=width, height=height, fov_deg=fov, intrinsics=K, cam_to_lidar=dict(sorted(cams.items())))
+
+
+INTRINSICS_TOL = 0.5  # px: the largest difference allowed between the file's K and CARLA's pinhole
+
+
+def pinhole(width: int, height: int, fov_deg: float) -> np.ndarray:
+    """CARLA's camera intrinsics for an image of ``width`` x ``height`` px and a horizontal field
+    of view ``fov_deg``: square pixels, ``f = (width / 2) / tan(fov / 2)`` px, principal point at
+    the image centre (``width / 2``, ``height / 2``)."""
+    f = (width / 2) / np.tan(np.radians(fov_deg) / 2)
+    return np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+
+
+def check_intrinsics(K: np.ndarray, width: int, height: int, fov_deg: float, where: str) -> None:
+    """:class:`RecordingError` naming ``where`` when the intrinsics ``K`` are not CARLA's pinhole
+    for that image size and fov within :data:`INTRINSICS_TOL` px (focal lengths, principal
+    point; the skew and the last row exactly): the rig is built from size and fov, so images
+    made with other intrinsics would not line up with our ray-cast maps."""
+    want = pinhole(width, height, fov_deg)
+    diff = np.abs(np.asarray(K, dtype=np.float64) - want)
+    if diff.max() <= INTRINSICS_TOL:
+        return
+    fov_k = 2 * np.degrees(np.arctan((width / 2) / K[0, 0])) if K[0, 0] > 0 else float("nan")
+    raise RecordingError(
+        f"{where}: cam_settings.intrinsics (fx {K[0, 0]:.3f}, fy {K[1, 1]:.3f}, cx {K[0, 2]:.3f}, cy {K[1, 2]:.3f}) "
+        f"disagree with the image size {width}x{height} and fov {fov_deg:g} deg (fx = fy {want[0, 0]:.3f}, "
+        f"cx {want[0, 2]:.3f}, cy {want[1, 2]:.3f}; the intrinsics' fx means a fov of {fov_k:.3f} deg): "
+        f"correct cam_settings.width/height/fov or the intrinsics")
 
 
 def read_poses(path) -> tuple[dict[int, np.ndarray], list[tuple[int, str]]]:

@@ -197,6 +197,13 @@ def ingest(
         resolve_scheduler(scheduler, probe=True)
     except PlanError as exc:
         fail(str(exc))
+    if cfg.kind == "carla-recording":  # a recording's calibration is checked before anything is written
+        from carlaocc.catalog.carla_recording import RecordingError, discover, read_calib
+
+        try:
+            read_calib(discover(cfg.root).calib)
+        except RecordingError as exc:
+            fail(f"recording {cfg.root}: {exc}")
     store = open_store(root, writable=True)
     progress = RichProgress()
     try:

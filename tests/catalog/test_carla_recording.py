@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from PIL import Image
 
 from carlaocc.catalog import carla_recording as cr
@@ -167,3 +168,24 @@ def test_lidar_points_in_the_sensor_frame(recording):
     bad.write_text("\n".join(line for line in lines if not line.startswith("element")) + "\n")
     with pytest.raises(cr.RecordingError, match="element vertex"):
         cr.read_ply(bad)
+
+
+def test_intrinsics_must_match_size_and_fov(copy):
+    """The rig is built from the image size and fov; intrinsics saying otherwise are refused
+    with one line naming the file and both sides (CARLA's pinhole: f = (W/2) / tan(fov/2))."""
+    path = copy / "calib" / "calib.yaml"
+    data = yaml.safe_load(path.read_text())
+    cs = data["cam_settings"]
+    assert np.asarray(cs["intrinsics"]) == pytest.approx(cr.pinhole(cs["width"], cs["height"], cs["fov"]), abs=1e-5)
+    for key, value in (("fov", 90.0), ("width", 180), ("height", 50)):
+        bad = yaml.safe_load(path.read_text())
+        bad["cam_settings"][key] = value
+        path.with_name("bad.yaml").write_text(yaml.dump(bad))
+        with pytest.raises(cr.RecordingError, match=r"bad.yaml: cam_settings.intrinsics .* disagree with the image size"):
+            cr.read_calib(path.with_name("bad.yaml"))
+    bad = yaml.safe_load(path.read_text())
+    bad["cam_settings"]["intrinsics"][1][2] += 0.4  # within INTRINSICS_TOL: rounding in the saver
+    path.with_name("ok.yaml").write_text(yaml.dump(bad))
+    assert cr.read_calib(path.with_name("ok.yaml")).width == cs["width"]
+    with pytest.raises(cr.RecordingError, match=r"a fov of 90\.000 deg"):
+        cr.check_intrinsics(cr.pinhole(200, 100, 90.0), 200, 100, 100.0, "calib.yaml")

@@ -287,7 +287,10 @@ def test_dataset_config_merge_keeps_town_positions(recording, tmp_path):
     other = tmp_path / "rec"
     shutil.copytree(recording, other, ignore=shutil.ignore_patterns("rgb", "depth_carla", "semantics_carla", "*lidar"))
     calib = other / "calib" / "calib.yaml"
-    calib.write_text(calib.read_text().replace("width: 176", "width: 352"))
+    data = yaml.safe_load(calib.read_text())  # twice as wide, with its own (consistent) intrinsics
+    cs = data["cam_settings"]
+    cs["width"], cs["intrinsics"] = 352, cr.pinhole(352, cs["height"], cs["fov"]).tolist()
+    calib.write_text(yaml.dump(data))
     with pytest.raises(StoreError, match="differs from the recording"):
         recording_config(str(other), cfg)
 
@@ -306,3 +309,20 @@ def test_a_release_layout_without_the_raw_maps(recording, tmp_path):
     depth = cr.decode_depth(np.asarray(Image.open(rel / SEQ / "depth" / "image_00" / "0001.png")))
     got = SensorStore(store).read_image(f"town00_{SEQ}", "camera_00", 1, "depth_raw")
     assert np.array_equal(got, np.where(depth >= 80, 0, depth))
+
+
+def test_intrinsics_disagreeing_with_the_fov_are_refused(recording, tmp_path):
+    """A calibration whose intrinsics are not the pinhole of its size and fov: exit 2, one line
+    naming calib.yaml, nothing written."""
+    rec = tmp_path / "rec"
+    shutil.copytree(recording, rec)
+    calib = rec / "calib" / "calib.yaml"
+    data = yaml.safe_load(calib.read_text())
+    data["cam_settings"]["fov"] = 90.0
+    calib.write_text(yaml.dump(data))
+    root = tmp_path / "d"
+    r = cli.invoke(app, ["ingest", "carla-recording", str(rec), "--root", str(root), "--scheduler", "synchronous"])
+    assert r.exit_code == 2, r.output
+    assert "calib.yaml: cam_settings.intrinsics" in r.output and "fov 90 deg" in r.output
+    assert len(r.output.strip().splitlines()) == 1
+    assert not root.exists() or not any(root.iterdir())

@@ -11,7 +11,11 @@ World frame = the file's inertial frame (metres, right-handed, Z up).
   Successors follow lane links inside a road, road links (``elementType="road"`` with the lane's
   successor / predecessor id) and junction connections (``incomingRoad`` + ``laneLink from``); a
   link is kept only when the lane's end meets the successor's start within :data:`JOIN_TOL` m
-  (the rest are counted as mismatches). Left / right neighbours: adjacent driving lanes of the
+  horizontally and :data:`JOIN_STEP` m vertically (the rest are counted as mismatches). The
+  vertical allowance matters on hilly maps: a lane's height is its road's reference-line
+  elevation (plus superelevation), and a junction connector whose reference line starts beside
+  the incoming lane's (CARLA's towns have no superelevation) meets it a few decimetres higher or
+  lower on a slope; such links are kept and counted as ``link_steps``. Left / right neighbours: adjacent driving lanes of the
   same section and side. Connector lanes carry ``junction`` = the junction's id as an int (the
   file's id when every junction id is an integer, else the position in sorted id order). Only the
   lanes on a cycle are kept (every strongly connected component of at least two lanes: no route
@@ -39,10 +43,11 @@ from carlaocc.stages.scenes.opendrive import geometry as od
 from carlaocc.stages.scenes.network import URBAN_SPEED_LIMIT, Lane, RoadNetwork, Walkway
 from carlaocc.stages.scenes.opendrive.surfaces import SECTION_MIN
 
-__all__ = ["build_opendrive_network", "LANE_STEP", "JOIN_TOL", "WALK_JOIN", "MIN_LANE_WIDTH"]
+__all__ = ["build_opendrive_network", "LANE_STEP", "JOIN_TOL", "JOIN_STEP", "WALK_JOIN", "MIN_LANE_WIDTH"]
 
 LANE_STEP = 1.0  # m: lane / walkway centre-line sampling along s
-JOIN_TOL = 0.1  # m: a lane's end and its successor's start must meet within this
+JOIN_TOL = 0.1  # m: a lane's end and its successor's start must meet within this horizontally
+JOIN_STEP = 0.5  # m: ... and within this vertically (a step on a slope, see the module docstring)
 WALK_JOIN = 1.0  # m: sidewalk ends closer than this share a walk-graph node
 MIN_LANE_WIDTH = 1.0  # m: driving lanes never reaching this width are not lanes
 MPH, KMH = 0.44704, 1 / 3.6
@@ -78,7 +83,9 @@ def _speed(road: Road, s: float) -> float:
 def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: str = "") -> tuple[RoadNetwork, dict]:
     """The lane and walk graphs of a parsed OpenDRIVE network (see the module docstring) and
     statistics: ``lanes_raw``, ``links``, ``link_mismatches`` (links whose ends do not meet
-    within :data:`JOIN_TOL`), ``link_missing`` (links naming an absent lane), ``scc_dropped``,
+    within :data:`JOIN_TOL` horizontally and :data:`JOIN_STEP` vertically; ``mismatch_max`` the
+    largest 3D gap among them), ``link_steps`` (links kept with a vertical step over
+    :data:`JOIN_TOL`; ``step_max`` the largest), ``link_missing`` (links naming an absent lane), ``scc_dropped``,
     ``walkways``, ``crosswalks``. Raises ``ValueError`` naming ``source`` when no driving lane
     exists or the lane graph has no cycle."""
     label = source or "OpenDRIVE network"
@@ -116,7 +123,8 @@ def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: s
 
     # 2. successors
     junction_by_id = {str(j.id): j for j in odr.junctions}
-    stats = {"lanes_raw": len(raw), "links": 0, "link_mismatches": 0, "link_missing": 0, "mismatch_max": 0.0}
+    stats = {"lanes_raw": len(raw), "links": 0, "link_mismatches": 0, "link_missing": 0, "mismatch_max": 0.0,
+             "link_steps": 0, "step_max": 0.0}  # fmt: skip
 
     def targets(key):
         rid, i, lid = key
@@ -154,12 +162,16 @@ def build_opendrive_network(odr: OpenDriveNetwork, curb_height: float, source: s
             if t not in raw:
                 stats["link_missing"] += 1
                 continue
-            gap = float(np.linalg.norm(raw[t]["points"][0] - end))
+            d = raw[t]["points"][0] - end
+            gap_xy, step = float(np.hypot(d[0], d[1])), abs(float(d[2]))
             stats["links"] += 1
-            if gap > JOIN_TOL:
+            if gap_xy > JOIN_TOL or step > JOIN_STEP:
                 stats["link_mismatches"] += 1
-                stats["mismatch_max"] = max(stats["mismatch_max"], gap)
+                stats["mismatch_max"] = max(stats["mismatch_max"], float(np.linalg.norm(d)))
                 continue
+            if step > JOIN_TOL:
+                stats["link_steps"] += 1
+                stats["step_max"] = max(stats["step_max"], step)
             if index[t] != n:
                 succ[n].append(index[t])
 
