@@ -10,7 +10,7 @@ import typer
 
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli.app import admesh_app, show_app
-from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, parse_voxel_sizes, open_store, write_png, fail,
+from carlaocc.pipeline.cli.common import (ConfigOpt, RootOpt, check_sequences, parse_voxel_sizes, open_store, write_png, fail,
                                          load_config)
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import DatasetConfig
@@ -97,6 +97,7 @@ def _occupancy_frame(store: Store, cfg: DatasetConfig, sequence: str, frame: int
 
     from carlaocc.schemas.grid import voxel_size_key
 
+    check_sequences(store, [sequence], "--seq")  # a mistyped id: did you mean, not "run ... first"
     occ = OccupancyStore(store)
     grid = occ.stored_grid(sequence, voxel_size)  # the grid it was built on, whatever the config says now
     if grid is None:

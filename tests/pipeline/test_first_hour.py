@@ -47,6 +47,8 @@ def _tree(store):
     (["run", "--sequences", "town00_hihg_seq000"], "no sequence 'town00_hihg_seq000' in"),
     (["export", "carlaocc-release", "--out", "{out}", "--sequence", "town00_hihg_seq000"],
      "did you mean town00_high_seq000"),
+    (["show", "occupancy", "--seq", "town00_hihg_seq000", "--frame", "0", "--res", "0.2", "--out", "{out}"],
+     "--seq town00_hihg_seq000: no such sequence in"),
     (["export", "carlaocc-release", "--out", "{out}", "--res", "0.2"],
      "build 0.1 m first (`carlaocc run --res 0.1 --root"),
 ])
