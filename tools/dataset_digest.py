@@ -2,8 +2,9 @@
 
 Every file under the root is hashed (SHA-256) except what records a run rather than its data:
 the lineage log (``catalog/runs/``, run ids, times, code versions), the report page
-(``metrics/report.html``, which embeds that lineage and the build's timings) and PNG plots
-(matplotlib stamps its version). Usage::
+(``metrics/report.html``, which embeds that lineage and the build's timings), PNG plots
+(matplotlib stamps its version), the remembered plan (``plan.yaml``: what was asked for, which a
+root built through the Python API has none of) and a writer's lock file. Usage::
 
     python tools/dataset_digest.py ROOT              # one line per file, then the total
     python tools/dataset_digest.py ROOT_A ROOT_B     # the files that differ; exit 1 if any
@@ -16,7 +17,8 @@ import sys
 from pathlib import Path
 
 SKIPPED_DIRS = ("catalog/runs/",)
-SKIPPED_FILES = ("metrics/report.html", ".carlaocc.lock")  # the lock file: empty, made by writers since issue 37
+# the report page; the lock file (empty, held by a writer); the remembered plan (what was asked, not built)
+SKIPPED_FILES = ("metrics/report.html", ".carlaocc.lock", "plan.yaml")
 SKIPPED_SUFFIXES = (".png",)
 
 
