@@ -144,6 +144,7 @@ STEPS = {
         ("carlaocc.stages.sensors.frame", "compact_mesh", "rectification"),
         ("carlaocc.stages.sensors.frame", "depth_normals", "D2NT normals"),
         ("carlaocc.stages.sensors.frame", "camera_ray_bundle", "camera rays"),
+        ("carlaocc.stages.sensors.frame", "rig_camera_rays", "camera rays"),
         ("carlaocc.stages.sensors.frame", "render_rgb", "RGB"),
         ("carlaocc.stages.sensors.frame", "face_normals", "RGB"),
         ("carlaocc.stages.sensors.frame", "lidar_scan", "LiDAR"),
