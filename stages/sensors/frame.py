@@ -23,7 +23,7 @@ from carlaocc.schemas.rig import CameraSpec, RigConfig
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors.artifacts import unlabelled_meshes
 from carlaocc.stages.sensors.normals import depth_normals
-from carlaocc.stages.sensors.raycast import (CameraMaps, RayScene, camera_ray_bundle, covered_pixels, lidar_scan,
+from carlaocc.stages.sensors.raycast import (CameraMaps, RayScene, covered_pixels, lidar_scan, rig_camera_rays,
                                              render_camera)
 from carlaocc.stages.sensors.rectify import Rectification, compact_mesh, rectify
 from carlaocc.stages.sensors.shading import base_colours, face_normals, render_rgb, sun_direction
@@ -143,7 +143,7 @@ def simulate_frame(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConfi
         normals = face_normals(mesh.vertices, mesh.faces)
         base = base_colours(mesh.color, mesh.semantic).astype(np.float32)
         for cam in cams:
-            origin, dirs = camera_ray_bundle(cam, poses[cam.name])
+            origin, dirs = rig_camera_rays(cam, poses[cam.name])  # cached per rig camera
             rgb[cam.name] = render_rgb(full, origin, dirs, clean[cam.name], raw[cam.name], sun, up, cfg.ambient,
                                        normals, base, nthreads)
     out = {}

@@ -156,6 +156,14 @@ def _camera_rays(camera: CameraSpec, pose_bytes: bytes) -> tuple[np.ndarray, np.
     return origin, dirs, rays
 
 
+def rig_camera_rays(camera: CameraSpec, camera_to_scene: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`camera_ray_bundle` of a rig camera, computed once per (camera, pose) in this
+    process and returned read-only: a rig's cameras see the same rays every frame (the scene is
+    in the LiDAR frame), and the (H*W, 3) rotation is a BLAS product not worth redoing per frame."""
+    origin, dirs, _ = _camera_rays(camera, np.ascontiguousarray(camera_to_scene, dtype=np.float64).tobytes())
+    return origin, dirs
+
+
 def covered_pixels(mesh: PanopticMesh, camera: CameraSpec, camera_to_scene: np.ndarray, near: float = 1e-3) -> np.ndarray:
     """Bool (H, W): pixels whose ray may meet a triangle of ``mesh`` (scene frame), a superset
     from each triangle's screen bounding box. Rays outside it miss the mesh for certain, so a

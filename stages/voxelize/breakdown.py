@@ -59,12 +59,16 @@ def fill_breakdown(meshes: Sequence[SceneMesh], grid: GridSpec, fill: str = "aut
     """Surface, filled and hole-handled voxel counts of ``meshes`` (grid frame, metres) on ``grid``
     under ``fill``. ``solid`` and ``surface`` may pass the semantic volumes of the voxelizations
     under ``fill`` and ``"surface"`` when the caller already has them (computed otherwise)."""
+    if surface is None and solid is not None and not any(fills(m.semantic_id, m.part, fill) for m in meshes):
+        surface = solid  # no mesh is filled: the surface-only voxelization is the same grid
     if surface is None:
         surface, _ = voxelize_scene(meshes, grid, fill="surface")
     if solid is None:
         solid, _ = voxelize_scene(meshes, grid, fill=fill)
     surf = surface > 0
     added = (solid > 0) & ~surf
+    if not added.any():  # nothing filled: no flood fill (a labelling of the whole grid) needed
+        return FillBreakdown(int(surf.sum()), 0, 0)
     # filled voxels a flood fill from the boundary reaches were reached through an opening
     from_holes = added & outside(surf)
     return FillBreakdown(int(surf.sum()), int(added.sum()), int(from_holes.sum()))

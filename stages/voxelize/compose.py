@@ -44,6 +44,7 @@ shift is exact, and check equality on random scenes).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -261,7 +262,7 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
         shape = (x1 - x0, Y, Z)
         n = shape[0] * Y * Z
         sem_flat = scratch("tile_semantic", n, np.uint8, zero=True)
-        inst_flat = scratch("tile_instance", n, np.uint32, zero=True)
+        inst_flat = _instance_buffer(n)
         offset[0] = x0
         things = []
         for t in tiled:
@@ -270,6 +271,7 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
                 continue
             if t.box is not None:
                 things.append(_tile_box(t.plan.instance_id, t.box, x0, shape))
+                _LOCAL.dirty.append((shape, things[-1][1:]))  # before painting: see _instance_buffer
             # the tile's voxel units: an integer shift, exact in float64
             P = t.P - offset
             p = t.plan
@@ -282,6 +284,31 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
             paint_surface(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
         yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape),
                    np.array(things, dtype=np.int64).reshape(-1, 7))
+
+
+# Per thread: the (tile shape, box) of every thing painted into the instance buffer since it was
+# last cleaned. Only things write nonzero instance ids (stuff writes 0) and a thing paints inside
+# its Tile.things box, so outside these boxes the buffer is zero.
+_LOCAL = threading.local()
+
+
+def _instance_buffer(n: int) -> np.ndarray:
+    """The thread's tile instance buffer (``n`` uint32, all zero): only the boxes things were
+    painted into since the last call are zeroed (1.6 GB of zeroing a 0.05 m frame otherwise; the
+    boxes are a few MB). The dirty list is kept per thread and filled before painting, so a tile
+    abandoned halfway is still cleaned by the next call."""
+    dirty = getattr(_LOCAL, "dirty", None)
+    buf = scratch("tile_instance", n, np.uint32)
+    full = buf if buf.base is None else buf.base  # (a reallocated buffer is fresh zeros)
+    if dirty is None:  # the thread's first tile: zero the whole buffer once
+        full[:] = 0
+    else:
+        for shape, (i0, i1, j0, j1, k0, k1) in dirty:
+            size = shape[0] * shape[1] * shape[2]
+            if size <= full.size:
+                full[:size].reshape(shape)[i0:i1, j0:j1, k0:k1] = 0
+    _LOCAL.dirty = []
+    return buf
 
 
 def _tile_box(instance_id: int, box: np.ndarray, x0: int, shape: tuple[int, int, int]) -> list[int]:

@@ -27,7 +27,9 @@ at 0.05 m, against 409 MB for a byte a voxel). A ray's voxels in one column are 
 one or two words, so marking them is a few word operations whatever their number, and the
 occupancy of a column is read once for every ray of a fan that crosses it. Masks are converted
 back to C-order bytes once, after every ray set: whole (:func:`_unpack_or`) or a block of columns
-at a time (:func:`_unpack_block`, a chunk of the store).
+at a time (:func:`_block_stream`, a chunk of the store). Both conversions go through a flat
+bit stream in C order (numpy's ``packbits`` one way, a 256-entry byte table the other), so they
+run at memory speed.
 
 Algorithm 1: 3D DDA (any rays; Amanatides & Woo 1987)
 -----------------------------------------------------
@@ -215,18 +217,34 @@ def _next_free(occ, cb, k, hi):
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _pack_columns(occ, ncol, nz, W, words):
-    """Column bits ``words`` (ncol * W) of the nonzero voxels of flat C-order ``occ`` (ncol * nz);
-    a column's nz bytes are contiguous in C order. Parallel over columns (disjoint words)."""
+def _columns_from_stream(stream, ncol, nz, W, words):
+    """Column bits ``words`` (ncol * W) from ``stream``: the voxels' bits in flat C order (bit
+    ``g % 64`` of word ``g // 64`` is voxel ``g = column * nz + k``, as ``np.packbits(...,
+    bitorder="little")`` lays them out, plus one word of padding). Column c's word q is the 64
+    bits from ``c * nz + 64 q``: two words of the stream shifted together, cut to the column's
+    last ``nz - 64 q`` bits. Parallel over columns."""
     for c in prange(ncol):
-        base = c * nz
         for q in range(W):
-            k0 = 64 * q
-            k1 = min(k0 + 64, nz)
-            w = np.uint64(0)
-            for k in range(k0, k1):
-                w |= np.uint64(occ[base + k] != 0) << np.uint64(k - k0)
+            s = c * nz + 64 * q
+            i = s >> 6
+            sh = s & 63
+            w = stream[i] >> np.uint64(sh)
+            if sh != 0:
+                w |= stream[i + 1] << np.uint64(64 - sh)
+            nb = nz - 64 * q
+            if nb < 64:
+                w &= (np.uint64(1) << np.uint64(nb)) - np.uint64(1)
             words[c * W + q] = w
+
+
+def _bit_stream(flat_u8: np.ndarray) -> np.ndarray:
+    """The bits of flat bytes (nonzero = 1) in order, little-endian within each byte, as uint64
+    words with one word of padding (numpy's packbits: memory speed)."""
+    packed = np.packbits(flat_u8, bitorder="little")
+    n = len(packed) // 8 + 2
+    stream = np.zeros(8 * n, np.uint8)
+    stream[:len(packed)] = packed
+    return stream.view(np.uint64)
 
 
 @njit(parallel=True, cache=True, nogil=True)
@@ -249,16 +267,17 @@ def _unpack_or(mask, ncol, nz, W, out):
                     out[base + k] |= np.uint8((w >> np.uint64(k - k0)) & np.uint64(1))
 
 
-# byte n of entry b is bit n of b: four voxels' bytes from four bits, as one uint32 store
-_NIBBLE_BYTES = np.array([sum(((b >> n) & 1) << (8 * n) for n in range(4)) for b in range(16)], dtype=np.uint32)
+# byte b of entry n is bit b of n: eight voxels' bytes from eight bits, as one uint64 store
+_BYTE_BYTES = np.array([sum(((n >> b) & 1) << (8 * b) for b in range(8)) for n in range(256)], dtype=np.uint64)
 
 
 @njit(cache=True, nogil=True)
-def _unpack_block(mask, ny, i0, j0, bx, by, nz, W, out, out32, use32):
-    """The columns (i0 .. i0 + bx) x (j0 .. j0 + by) of the column bits ``mask`` as C-order bytes
-    ``out`` (bx * by * nz, 1 = set), written whole; with ``use32`` (nz a multiple of 4, ``out32``
-    the same buffer as uint32) four voxels per store from a nibble table. Returns the number
-    of nonzero words read (0: the block is empty)."""
+def _block_stream(mask, ny, i0, j0, bx, by, nz, W, stream):
+    """The columns (i0 .. i0 + bx) x (j0 .. j0 + by) of the column bits ``mask`` as one flat bit
+    stream in C order (bit ``g % 64`` of ``stream[g // 64]`` is voxel ``g = (xi * by + yj) * nz +
+    k`` of the block), ORed into ``stream`` (zeroed, at least ``bx * by * nz / 64 + 1`` words):
+    each nonzero column word lands shifted across two stream words. Returns the number of
+    nonzero words read (0: the block is empty)."""
     nonzero = 0
     for xi in range(bx):
         for yj in range(by):
@@ -266,17 +285,27 @@ def _unpack_block(mask, ny, i0, j0, bx, by, nz, W, out, out32, use32):
             base = (xi * by + yj) * nz
             for q in range(W):
                 w = mask[src + q]
-                nonzero += w != 0
-                k0 = 64 * q
-                nb = min(64, nz - k0)
-                if use32:
-                    b32 = (base + k0) >> 2
-                    for n in range(nb >> 2):
-                        out32[b32 + n] = _NIBBLE_BYTES[(w >> np.uint64(4 * n)) & np.uint64(15)]
-                else:
-                    for k in range(nb):
-                        out[base + k0 + k] = np.uint8((w >> np.uint64(k)) & np.uint64(1))
+                if w == 0:
+                    continue
+                nb = nz - 64 * q
+                if nb < 64:  # (a mask never sets bits above the grid; cut them anyway)
+                    w &= (np.uint64(1) << np.uint64(nb)) - np.uint64(1)
+                nonzero += 1
+                s = base + 64 * q
+                i = s >> 6
+                sh = s & 63
+                stream[i] |= w << np.uint64(sh)
+                if sh != 0:
+                    stream[i + 1] |= w >> np.uint64(64 - sh)
     return nonzero
+
+
+@njit(cache=True, nogil=True)
+def _stream_bytes(stream8, n8, out64):
+    """Bytes (0/1) of the first ``8 * n8`` bits of a bit stream (``stream8``: its bytes): eight
+    voxels per uint64 store from the 256-entry table."""
+    for i in range(n8):
+        out64[i] = _BYTE_BYTES[stream8[i]]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -820,7 +849,10 @@ class _Volume:
             raise ValueError(f"an x-slab at {x0} of shape {np.shape(occupied)} does not fit the grid {self.shape}")
         c0 = x0 * ny
         n = len(occupied) * ny
-        _pack_columns(_as_flat_u8(occupied), n, nz, self.W, self.words[c0 * self.W:(c0 + n) * self.W])
+        # 1. the slab's bytes -> a flat bit stream (numpy's packbits); 2. the stream's bits ->
+        #    column words (two words shifted together per column word)
+        stream = _bit_stream(_as_flat_u8(occupied))
+        _columns_from_stream(stream, n, nz, self.W, self.words[c0 * self.W:(c0 + n) * self.W])
 
     def _to_voxels(self, origins: np.ndarray, max_range: float) -> tuple[np.ndarray, float]:
         t_range = float(max_range) / self.grid.voxel_size
@@ -871,10 +903,17 @@ class _Volume:
         nx, ny, nz = self.shape
         if not (0 <= i0 and 0 <= j0 and bx >= 0 and by >= 0 and i0 + bx <= nx and j0 + by <= ny):
             raise ValueError(f"block [{i0}, {i0 + bx}) x [{j0}, {j0 + by}) outside the grid's {nx} x {ny} columns")
-        flat = scratch(name, -(-bx * by * nz // 4) * 4, np.uint8)
-        out = flat[:bx * by * nz]
-        use32 = nz % 4 == 0
-        nonzero = _unpack_block(mask, ny, i0, j0, bx, by, nz, self.W, out, flat.view(np.uint32), use32)
+        n = bx * by * nz
+        # 1. the block's bits as one C-order bit stream; 2. the stream's bytes -> eight voxel bytes
+        #    each (whole uint64 stores into a buffer rounded up to 8 voxels)
+        stream = scratch(name + ".bits", n // 64 + 2, np.uint64, zero=True)
+        nonzero = _block_stream(mask, ny, i0, j0, bx, by, nz, self.W, stream)
+        if not nonzero:
+            return None
+        n8 = -(-n // 8)
+        flat = scratch(name, 8 * n8, np.uint8)
+        _stream_bytes(stream.view(np.uint8), n8, flat.view(np.uint64))
+        out = flat[:n]
         return out.reshape(bx, by, nz) if nonzero else None
 
 

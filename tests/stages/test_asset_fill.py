@@ -164,6 +164,34 @@ def test_thin_and_open_classes_record_surface_and_nothing_filled(category, subcl
     assert fill_breakdown(meshes, grid, "solid").filled > 0  # the rule, not the geometry, leaves it hollow
 
 
+def test_breakdown_of_an_unfilled_voxelization_reuses_it(monkeypatch):
+    """Nothing filled under the mode (``surface``, or only classes ``auto`` leaves hollow): the
+    voxelization passed as ``solid`` is the surface one, so the counts come without a second
+    voxelization or a flood fill -- the same counts as computed from scratch."""
+    import carlaocc.stages.voxelize.breakdown as breakdown
+    from carlaocc.schemas.grid import GridSpec
+    from carlaocc.schemas.meshes import SceneMesh
+    from carlaocc.schemas.taxonomy import by_name
+    from carlaocc.stages.voxelize import voxelize_scene
+
+    V, F = _box((2.0, 1.0, 1.0))
+    grid = GridSpec(region_min=(-1.5, -1.0, -1.0), region_max=(1.5, 1.0, 1.0), voxel_size=0.1)
+    cases = [([SceneMesh(V, F, by_name("Building").id, 0, True, closed=True)], "surface"),
+             ([SceneMesh(V, F, by_name("Fence").id, 0, True, closed=True)], "auto")]
+    for meshes, fill in cases:
+        solid, _ = voxelize_scene(meshes, grid, fill=fill)
+        want = fill_breakdown(meshes, grid, fill)
+        assert want.surface == int((solid > 0).sum()) > 0 and want.filled == 0 and want.from_holes == 0
+        with monkeypatch.context() as m:
+            m.setattr(breakdown, "voxelize_scene", lambda *a, **k: pytest.fail("voxelized again"))
+            m.setattr(breakdown, "outside", lambda *a, **k: pytest.fail("flood-filled"))
+            assert fill_breakdown(meshes, grid, fill, solid=solid) == want
+    # a filled mesh still gets both voxelizations (its surface is not the solid)
+    meshes = [SceneMesh(V, F, by_name("Building").id, 0, True, closed=True)]
+    solid, _ = voxelize_scene(meshes, grid, fill="auto")
+    assert fill_breakdown(meshes, grid, "auto", solid=solid).filled > 0
+
+
 # -- the library in SQL ---------------------------------------------------------------------------
 def test_an_ingested_library_answers_fill_queries_and_old_tables_still_load(tmp_path):
     root = tmp_path / "data"

@@ -76,6 +76,24 @@ def test_camera_rays_give_planar_depth_of_a_wall():
     assert np.allclose((d @ pose[:3, :3])[:, 2], 1.0)
 
 
+def test_rig_camera_rays_are_the_bundle_computed_once():
+    from carlaocc.stages.sensors.raycast import rig_camera_rays
+
+    rig = front_rig()
+    cam = rig.cameras[0]
+    pose = camera_poses(rig)[cam.name]
+    origin, d = rig_camera_rays(cam, pose)
+    want_origin, want_d = camera_ray_bundle(cam, pose)
+    np.testing.assert_array_equal(origin, want_origin)
+    np.testing.assert_array_equal(d, want_d)
+    # the same read-only arrays frame after frame; another pose gets its own
+    again = rig_camera_rays(cam, pose.copy())
+    assert again[1] is d and not d.flags.writeable
+    moved = pose.copy()
+    moved[0, 3] += 1.0
+    np.testing.assert_array_equal(rig_camera_rays(cam, moved)[0], want_origin + [1.0, 0.0, 0.0])
+
+
 def test_miss_is_sky_with_zero_depth_and_max_depth_cuts():
     rig = front_rig()
     cam = rig.cameras[0]

@@ -509,3 +509,50 @@ def test_blocks_of_a_mask_equal_the_whole_and_say_when_empty():
                 assert b is None
         with pytest.raises(ValueError, match="outside"):
             packed.block(mask, 15, 0, 6, 1)
+
+
+def _brute_words(occ: np.ndarray) -> np.ndarray:
+    """Column bits of a (nx, ny, nz) volume, bit by bit: word (i * ny + j) * W + k // 64, bit k % 64."""
+    nx, ny, nz = occ.shape
+    W = (nz + 63) // 64
+    words = np.zeros(nx * ny * W, np.uint64)
+    for (i, j, k) in np.argwhere(occ != 0):
+        words[(i * ny + j) * W + k // 64] |= np.uint64(1) << np.uint64(k % 64)
+    return words
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 5), st.integers(1, 5), st.integers(1, 200), st.integers(0, 2**32 - 1), st.integers(1, 5))
+def test_packing_through_the_bit_stream_equals_bit_by_bit(nx, ny, nz, seed, slab):
+    # any nz (column starts at any bit of the stream), labels other than 1, packed whole or by slabs
+    rng = np.random.default_rng(seed)
+    occ = (rng.random((nx, ny, nz)) < rng.random()) * rng.integers(1, 256, (nx, ny, nz))
+    occ = occ.astype(np.uint8)
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(nx, ny, nz), voxel_size=1.0)
+    want = _brute_words(occ)
+    np.testing.assert_array_equal(vis.pack_occupancy(occ, grid).words, want)
+    parts = vis.pack_occupancy(None, grid)
+    for x0 in range(0, nx, slab):
+        parts.pack_slab(x0, occ[x0:x0 + slab])
+    np.testing.assert_array_equal(parts.words, want)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 6), st.integers(1, 6), st.integers(1, 200), st.integers(0, 2**32 - 1),
+       st.tuples(st.integers(0, 5), st.integers(0, 5), st.integers(0, 6), st.integers(0, 6)))
+def test_blocks_through_the_bit_stream_equal_bit_by_bit(nx, ny, nz, seed, box):
+    # a random mask (sparse, dense or empty) read back a block at a time against its bits one by one
+    rng = np.random.default_rng(seed)
+    want = rng.random((nx, ny, nz)) < rng.choice([0.0, 0.001, 0.3, 1.0])
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(nx, ny, nz), voxel_size=1.0)
+    packed = vis.pack_occupancy(None, grid)
+    mask = _brute_words(want)
+    i0, j0 = min(box[0], nx - 1), min(box[1], ny - 1)
+    bx, by = min(box[2], nx - i0), min(box[3], ny - j0)
+    got = packed.block(mask, i0, j0, bx, by)
+    part = want[i0:i0 + bx, j0:j0 + by]
+    if part.any():
+        assert got.dtype == np.uint8 and got.shape == part.shape
+        np.testing.assert_array_equal(got, part.astype(np.uint8))
+    else:
+        assert got is None

@@ -661,6 +661,31 @@ def test_tile_thing_boxes_hold_every_voxel_of_their_instance(seed, tile):
         assert (covered == (t.instance != 0)).all()
 
 
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**31 - 1), tile=st.integers(1, 40))
+def test_tile_instance_buffer_is_clean_scene_after_scene(seed, tile):
+    # the thread's instance buffer is zeroed only inside the boxes things were painted into: scene
+    # after scene (one abandoned after its first tile), the same grids as in a fresh thread
+    from concurrent.futures import ThreadPoolExecutor
+
+    from carlaocc.stages.voxelize import voxelize_tiles
+
+    rng = np.random.default_rng(seed)
+    grid = GridSpec(region_min=(-4.0, -4.0, -1.0), region_max=(4.0, 4.0, 3.0), voxel_size=0.2)
+    scenes = [_random_scene(rng, n_things=6) for _ in range(3)]
+
+    def fresh(meshes):
+        with ThreadPoolExecutor(1) as ex:
+            return ex.submit(voxelize_scene, meshes, grid, "auto", tile).result()
+
+    want = [fresh(m) for m in scenes]
+    next(iter(voxelize_tiles(scenes[0], grid, tile)))
+    for meshes, (sem, inst) in zip(scenes[::-1], want[::-1]):
+        got_sem, got_inst = voxelize_scene(meshes, grid, "auto", tile)
+        np.testing.assert_array_equal(got_sem, sem)
+        np.testing.assert_array_equal(got_inst, inst)
+
+
 def test_elevation_order_follows_the_worlds_up_in_a_tilted_grid():
     # world: a road at z = 0 over x in [-20, 15], a car standing beyond it at x in [18, 20]
     Vr, Fr = _plane(0.0, half=1.0)
