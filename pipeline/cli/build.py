@@ -73,16 +73,19 @@ def run(
     except PlanError as exc:  # refused before any task ran
         progress.close()
         fail(str(exc))
-    except (StoreError, OSError) as exc:  # a failure during work
+    except (StoreError, OSError) as exc:  # a failure during work (the plan was kept if a stage started)
         progress.close()
-        keep_plan()
         fail(f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename and exc.strerror
              else exc, code=1)
     except BaseException:  # the error path reports it; the bar must not stay on screen
         progress.close()
         raise
     progress.close()
-    keep_plan()
+    if not kept:  # nothing started (all up to date): remembered now, as a writer of the root
+        from carlaocc.catalog.lock import root_lock
+
+        with root_lock(store):
+            keep_plan()
     failed = [f for o in outcomes for f in o.failed]
     if failed:
         for f in failed[:10]:
