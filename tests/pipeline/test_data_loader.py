@@ -1,8 +1,8 @@
 """carlaocc.data.CarlaOccDataset on a built root (the embedded default at 0.1 m, two frames a
 sequence, camera_00): the sample index and splits, sparse occupancy equal to the stored frame and
 gathered from that frame's chunks only, crops, boxes that hold their instance's voxels and land on
-their instance's pixels, clear errors, a real torch DataLoader with two workers, and the README
-snippet as written."""
+their instance's pixels, clear errors, a real torch DataLoader with two workers, and the snippet
+of the tutorial docs/tutorials/train.md as written."""
 
 from __future__ import annotations
 
@@ -175,9 +175,9 @@ def test_torch_dataloader_with_two_workers(default_01):
     assert seen == ds.samples and len(seen) == 2
 
 
-def test_readme_snippet_runs_as_written(default_01, tmp_path):
-    text = (ROOT / "README.md").read_text()
-    section = text.split("## Train a model on it", 1)[1]
+def test_tutorial_snippet_runs_as_written(default_01, tmp_path):
+    text = (ROOT / "docs" / "tutorials" / "train.md").read_text()
+    section = text.split("# Train a model on it", 1)[1]
     snippet = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     assert len(snippet.strip().splitlines()) <= 6
     (tmp_path / "data").symlink_to(default_01.root)
