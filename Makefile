@@ -94,7 +94,7 @@ bench: venv-test ## speed benchmarks against the libraries a user would otherwis
 	$(BIN)/python -m benchmarks
 
 docs: venv-docs ## build the manual into site/ (warnings are errors; open site/index.html)
-	$(BIN)/mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 clean-venv:
 	rm -rf $(VENV)

@@ -32,7 +32,7 @@ def _cell(text: object) -> str:
     return " ".join(str(text).split()).replace("|", "\\|")
 
 
-def _subcommands(cmd) -> list[tuple[str, object]]:  # noqa: ANN001  (Typer's vendored click)
+def _subcommands(cmd) -> list[tuple[str, object]]:
     """A group's visible commands in the order ``--help`` lists them; [] for a command."""
     if not hasattr(cmd, "list_commands"):
         return []
@@ -40,14 +40,14 @@ def _subcommands(cmd) -> list[tuple[str, object]]:  # noqa: ANN001  (Typer's ven
     return [(n, c) for n in cmd.list_commands(ctx) if (c := cmd.get_command(ctx, n)) is not None and not c.hidden]
 
 
-def _commands(cmd, path: list[str]) -> typing.Iterator[tuple[list[str], object]]:  # noqa: ANN001
+def _commands(cmd, path: list[str]) -> typing.Iterator[tuple[list[str], object]]:
     """Depth first: (words after ``carlaocc``, command)."""
     yield path, cmd
     for name, sub in _subcommands(cmd):
         yield from _commands(sub, [*path, name])
 
 
-def _param_type(p) -> str:  # noqa: ANN001
+def _param_type(p) -> str:
     """What a parameter takes: Typer keeps the annotation (its vendored click no ``type``)."""
     td = getattr(p, "type_descriptor", None)
     if td is not None:
@@ -56,7 +56,7 @@ def _param_type(p) -> str:  # noqa: ANN001
     return getattr(t, "name", str(t))
 
 
-def _param_row(p) -> str:  # noqa: ANN001  (a click parameter)
+def _param_row(p) -> str:
     # the option's spellings (an argument: its name), then what it takes and its default
     option = p.param_type_name == "option"
     if option:
@@ -73,14 +73,13 @@ def _param_row(p) -> str:  # noqa: ANN001  (a click parameter)
 def cli_reference() -> str:
     """Markdown of every ``carlaocc`` command (from the Typer app, as ``carlaocc --help`` sees it)."""
     import typer
-
     from carlaocc.pipeline.cli import app
 
     root = typer.main.get_command(app)
     out = ["# CLI reference", "",
-           "Generated from the Typer application at every site build (`tools/docs_hooks.py`); "
-           "`carlaocc <command> --help` prints the same text. Exit codes: 0 ok, 1 a task or "
-           "work failed, 2 a usage or input error (one line, nothing in the root touched).", ""]
+           ("Generated from the Typer application at every site build (`tools/docs_hooks.py`); "
+            "`carlaocc <command> --help` prints the same text. Exit codes: 0 ok, 1 a task or "
+            "work failed, 2 a usage or input error (one line, nothing in the root touched)."), ""]
     for path, cmd in _commands(root, []):
         title = " ".join(["carlaocc", *path])
         out += [f"## `{title}`", ""]
@@ -149,10 +148,10 @@ def config_reference() -> str:
     from carlaocc.schemas.configs import DatasetConfig, SourceIngestConfig, TownSpec
 
     out = ["# Configuration keys", "",
-           "Generated from the pydantic models at every site build (`tools/docs_hooks.py`). "
-           "A dataset config is YAML or JSON (`carlaocc config` prints the effective one, "
-           "`carlaocc run --config cfg.yaml` uses it); a key left out keeps its default, an "
-           "unknown key is refused with exit 2.", ""]
+           ("Generated from the pydantic models at every site build (`tools/docs_hooks.py`). "
+            "A dataset config is YAML or JSON (`carlaocc config` prints the effective one, "
+            "`carlaocc run --config cfg.yaml` uses it); a key left out keeps its default, an "
+            "unknown key is refused with exit 2."), ""]
     for title, model, prefix in (("Dataset config", DatasetConfig, ""),
                                  ("A town (`scenes.towns[i]`)", TownSpec, "scenes.towns[i]."),
                                  ("An ingest source (`carlaocc ingest`)", SourceIngestConfig, "")):
@@ -180,7 +179,7 @@ def front_page(readme: str) -> str:
     return re.sub(r"(!\[[^\]]*\])\(docs/", r"\1(", text)
 
 
-def on_files(files, config):  # noqa: ANN001  (mkdocs hook)
+def on_files(files, config):
     """mkdocs hook: add the front page (README.md) and the generated reference pages to the site."""
     from pathlib import Path
 
