@@ -60,6 +60,8 @@ def test_cli_reference_names_every_command_and_option():
             for opt in getattr(p, "opts", [])[:1] if p.param_type_name == "option" and not p.hidden else []:
                 assert f"`{opt}`" in section, f"{' '.join(path)}: {opt} missing"
     assert "| `--voxel-size`, `--res` | str |" in page
+    # help text is words: "<root>/plan.yaml" must not become an HTML tag
+    assert "&lt;root&gt;/plan.yaml" in page and "<root>" not in page
 
 
 def _leaves(d: dict, prefix: str = ""):

@@ -27,9 +27,14 @@ CLI_PAGE = "reference/cli.md"
 CONFIG_PAGE = "reference/config.md"
 
 
+def _text(text: object) -> str:
+    """Help text as markdown: ``<root>`` and the like are words, not HTML tags."""
+    return str(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
 def _cell(text: object) -> str:
-    """One markdown table cell: no newline, no bare pipe."""
-    return " ".join(str(text).split()).replace("|", "\\|")
+    """One markdown table cell: no newline, no bare pipe, no HTML."""
+    return _text(" ".join(str(text).split())).replace("|", "\\|")
 
 
 def _subcommands(cmd) -> list[tuple[str, object]]:
@@ -84,7 +89,7 @@ def cli_reference() -> str:
         title = " ".join(["carlaocc", *path])
         out += [f"## `{title}`", ""]
         if cmd.help:
-            out += [cmd.help.strip().replace("\b\n", ""), ""]
+            out += [_text(cmd.help.strip().replace("\b\n", "")), ""]
         params = [p for p in cmd.params if not getattr(p, "hidden", False) and p.name != "help"]
         if params:
             out += ["| argument / option | takes | default | meaning |", "|---|---|---|---|"]
