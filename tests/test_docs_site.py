@@ -95,7 +95,7 @@ def test_site_builds_strict(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     index = (site / "index.html").read_text()
     assert "carlaocc builds instance-centric panoptic occupancy datasets" in index
-    assert 'src="rgb_sheet.png"' in index and (site / "rgb_sheet.png").is_file()
+    assert 'src="front.png"' in index and (site / "front.png").is_file()
     assert 'href="tutorials/first-dataset.html"' in index
     assert "make dataset FRAMES=2" in (site / "tutorials" / "first-dataset.html").read_text()
     sensors = (site / "concepts" / "sensors.html").read_text()
