@@ -9,11 +9,14 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
@@ -87,19 +90,48 @@ def test_config_reference_has_every_key_with_its_default():
             assert rows[key] == repr(value).replace("|", "\\|"), (key, rows[key], value)
 
 
-@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs toolchain (carlaocc[docs]) is not installed")
-def test_site_builds_strict(tmp_path):
-    site = tmp_path / "site"
+NO_MKDOCS = importlib.util.find_spec("mkdocs") is None
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+# the Terrain colour of docs/front.png's 3D view: large flat areas keep it when the browser scales
+TERRAIN = np.array([140, 231, 140])
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Path:
+    """The site, built with warnings as errors (broken internal links and anchors included)."""
+    site = tmp_path_factory.mktemp("docs") / "site"
     r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)], check=False,
                        cwd=ROOT, capture_output=True, text=True, timeout=300, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
     assert r.returncode == 0, r.stderr[-3000:]
+    return site
+
+
+@pytest.mark.skipif(NO_MKDOCS, reason="the docs toolchain (carlaocc[docs]) is not installed")
+def test_site_builds_strict(site):
     index = (site / "index.html").read_text()
     assert "carlaocc builds instance-centric panoptic occupancy datasets" in index
     assert 'src="front.png"' in index and (site / "front.png").is_file()
     assert 'href="tutorials/first-dataset.html"' in index
-    assert "make dataset FRAMES=2" in (site / "tutorials" / "first-dataset.html").read_text()
+    first = (site / "tutorials" / "first-dataset.html").read_text()
+    assert "make dataset FRAMES=2" in first and 'src="../front.png"' in first
+    # the tutorials' not-runnable marks stay HTML comments: in the page's source, not on screen
+    assert "<!-- not-runnable:" in first and "&lt;!-- not-runnable" not in first
     sensors = (site / "concepts" / "sensors.html").read_text()
     assert 'src="../rgb_sheet.png"' in sensors and 'src="../rgb_textured.png"' in sensors
     cli = (site / "reference" / "cli.html").read_text()
     assert "carlaocc run" in cli and "--voxel-size" in cli
     assert "GridSpec" in (site / "reference" / "api.html").read_text()
+
+
+@pytest.mark.skipif(NO_MKDOCS or CHROMIUM is None, reason="needs the docs toolchain and a headless Chromium")
+@pytest.mark.parametrize("page", ["index.html", "tutorials/first-dataset.html"])
+def test_page_shows_its_picture_in_a_browser(site, page, tmp_path):
+    # a screenshot in headless Chromium: the page's picture loaded and drawn (its flat terrain
+    # colour covers thousands of pixels; a missing image would draw none)
+    shot = tmp_path / "shot.png"
+    r = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                        "--window-size=1280,3000", f"--screenshot={shot}", (site / page).as_uri()],
+                       check=False, capture_output=True, text=True, timeout=120)
+    assert shot.is_file(), r.stderr[-2000:]
+    pixels = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert (np.abs(pixels - TERRAIN).max(axis=-1) <= 3).sum() > 2000, f"{page}: its picture is not drawn"
