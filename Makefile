@@ -21,7 +21,7 @@ PLAN_ARGS := $(if $(RES),--res $(RES),) $(if $(FRAMES),--limit-frames $(FRAMES),
 RUN_ARGS  := $(PLAN_ARGS) $(if $(WORKERS),--workers $(WORKERS),) $(SCHED_ARG)
 
 .DEFAULT_GOAL := help
-.PHONY: help venv venv-test dataset stage query status info test test-all bench clean-venv syslibs
+.PHONY: help venv venv-test venv-docs dataset stage query status info test test-all bench docs clean-venv syslibs
 
 help: ## list the targets
 	@echo "carlaocc make targets"
@@ -58,9 +58,16 @@ $(BIN)/.installed-test: pyproject.toml $(BIN)/.installed
 	$(BIN)/pip install -q --no-deps --target $(VENV)/nuscenes-devkit nuscenes-devkit==1.2.0 pyquaternion==0.9.9
 	@touch $@
 
+# the docs extra (mkdocs-material, mkdocstrings) only for `make docs`
+$(BIN)/.installed-docs: pyproject.toml $(BIN)/.installed
+	$(BIN)/pip install -q -e '.[docs]'
+	@touch $@
+
 venv: syslibs $(BIN)/.installed ## create .venv with what building needs (no test packages)
 
 venv-test: venv $(BIN)/.installed-test ## add the test extra to .venv (make test does it)
+
+venv-docs: venv $(BIN)/.installed-docs ## add the docs extra to .venv (make docs does it)
 
 dataset: venv ## build the dataset on the remembered plan: make dataset FRAMES=2 RES=0.2 ROOT=data
 	$(BIN)/carlaocc run --root $(ROOT) $(RUN_ARGS)
@@ -85,6 +92,9 @@ test-all: venv-test ## every test, the slow 0.05 m end-to-end included
 
 bench: venv-test ## speed benchmarks against the libraries a user would otherwise use
 	$(BIN)/python -m benchmarks
+
+docs: venv-docs ## build the manual into site/ (warnings are errors; open site/index.html)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 clean-venv:
 	rm -rf $(VENV)

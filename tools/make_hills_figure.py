@@ -1,4 +1,4 @@
-"""The README's picture of full poses: cars pitched on the crest and rolled on a banked curve of
+"""The picture of full poses in docs/concepts/scenes.md: cars pitched on the crest and rolled on a banked curve of
 the builtin hills town (``catalog/towns/hills.xodr``).
 
 Builds, in memory and with the pipeline's own code, the procedural ADMesh library, the hills town

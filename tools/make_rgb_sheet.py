@@ -1,4 +1,4 @@
-"""The README's six-camera RGB sheet: one frame of a built dataset's rendered (or recorded) RGB,
+"""The six-camera RGB sheet of docs/concepts/sensors.md: one frame of a built dataset's rendered (or recorded) RGB,
 the rig's cameras in two rows of three (``camera_00`` .. ``camera_05``: front stereo pair, left,
 right, rear stereo pair; docs/architecture.md "Reference rig"), each halved in size, titled with
 its name and the direction it faces (the root's rig).

@@ -1,5 +1,5 @@
 #!/bin/bash
-# The README's set-up figures: a fresh clone of this repository under a scratch directory, its
+# The set-up figures of docs/tutorials/first-dataset.md: a fresh clone of this repository under a scratch directory, its
 # own .venv from the package index (no pip cache), then `make dataset FRAMES=2`. Prints the
 # seconds from the clone to the end of `make venv`, the .venv's size, any test-only package that
 # slipped in (none expected), and the seconds from the clone to the build's last line; the

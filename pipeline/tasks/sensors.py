@@ -111,7 +111,7 @@ def _recorded_raw(sensors, seq_id: str, frame_index: int, cam) -> "CameraMaps":
         if required:
             raise StoreError(f"sensors.source is 'recorded' but sensors.zarr/{sensors.array_path(seq_id, cam.name, name)} "
                              f"has no frame {frame_index}: a recorder must write depth_raw and semantic_raw "
-                             f"(see README, 'Recorded sensor input')")
+                             f"(see docs/concepts/sensors.md, 'Recorded sensor input')")
         return None
 
     return CameraMaps(read("depth_raw", True).astype(np.float32, copy=False),
