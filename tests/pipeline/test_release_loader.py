@@ -6,6 +6,7 @@ equal arrays (to the precision of the layout's text and PNG encodings) where it 
 from __future__ import annotations
 
 import json
+import pickle
 import shutil
 
 import numpy as np
@@ -112,7 +113,11 @@ def test_dense_crop_and_coarse_grids(default_01, release_01):
     s = c[1]
     np.testing.assert_array_equal(s["grid_shape"], (128, 128, 16))
     np.testing.assert_allclose(s["grid_origin"], (-25.6, -25.6, -2.4))
-    assert len(s["occ"]) and s["occ"][:, :3].max(axis=0).tolist() < [128, 128, 16]
+    assert len(s["occ"]) and (s["occ"][:, :3].max(axis=0) < (128, 128, 16)).all()
+    # it pickles to DataLoader workers as a release dataset
+    c2 = pickle.loads(pickle.dumps(c))
+    assert type(c2) is CarlaOccReleaseDataset and c2.samples == c.samples
+    np.testing.assert_array_equal(c2[1]["occ"], s["occ"])
 
 
 def test_splits_and_refusals(default_01, release_01, tmp_path):
