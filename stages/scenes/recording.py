@@ -9,7 +9,8 @@ World frame: the recording's right-handed world (x forward, y left, z up, metres
   numbered 1.. in actor order). No road network: the traffic is recorded, not simulated.
 * **Frames**: the LiDAR pose per frame is the recording's; the ego is the LiDAR pose moved down
   by the rig's LiDAR mount; camera and LiDAR sensor poses follow from the rig (built from the
-  recording's calibration by the caller). Timestamps are the recorded frame numbers over the
+  recording's calibration by the caller). The ego's recorded velocity and acceleration (world
+  frame) are kept as they are (``ego_states`` rows; a frame without them has none). Timestamps are the recorded frame numbers over the
   rate (10 Hz); frames are renumbered 0.. in order (a recording may skip frames).
 * **Actors**: a stable instance id per CARLA actor id (numbered above the town's instances in id
   order). Vehicles: the blueprint's model (an ADMesh asset) placed at ``actor pose @ T(offset)``
