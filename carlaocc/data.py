@@ -52,6 +52,12 @@ kept), the sequence's frames and actors tables and the cameras' calibration. Spa
 frame (409 M voxels) never exists dense in memory; ``occupancy="dense"`` is refused above
 ``dense_limit`` voxels with the advice to use sparse or a crop.
 
+A release: ``root`` a folder in the official CarlaOcc release's layout (the authors' download, or
+``carlaocc export carlaocc-release``'s output) is read by :class:`CarlaOccReleaseDataset` with
+the same options and keys, where the layout holds them (:mod:`carlaocc.catalog.release_samples`
+says which: no occupancy flow or masks, no point labels, no boxes, no camera instance maps;
+``voxel_size`` 0.1, 0.2 or 0.4 picks the release's grid).
+
 Workers: the dataset holds the root's URL and an index of (sequence, frame) pairs; stores are
 opened lazily in each process, so a ``torch.utils.data.DataLoader`` with workers (fork or spawn)
 works on a directory or object-store root. A ``memory://`` root lives in one process: workers
@@ -65,10 +71,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from carlaocc.catalog.release_samples import ReleaseSamples, is_release
 from carlaocc.catalog.samples import CAMERA_MAPS, DENSE_LIMIT, OCCUPANCY_MODES, DatasetError, FrameSamples
 from carlaocc.stages.geometry import BOX_KEYS, boxes_in_frame
 
-__all__ = ["CarlaOccDataset", "DatasetError", "collate", "OCCUPANCY_MODES", "DENSE_LIMIT", "CAMERA_MAPS"]
+__all__ = ["CarlaOccDataset", "CarlaOccReleaseDataset", "DatasetError", "collate", "OCCUPANCY_MODES", "DENSE_LIMIT", "CAMERA_MAPS"]
 
 
 class CarlaOccDataset(FrameSamples):
@@ -85,7 +92,14 @@ class CarlaOccDataset(FrameSamples):
     No two parts of a sample share a key (:meth:`key_plan`); options under which they would are
     refused with a :class:`DatasetError`.
 
-    The store reading is :class:`carlaocc.catalog.samples.FrameSamples`; this adds the boxes."""
+    The store reading is :class:`carlaocc.catalog.samples.FrameSamples`; this adds the boxes. A
+    ``root`` in the release's layout gives a :class:`CarlaOccReleaseDataset` instead."""
+
+    def __new__(cls, *args, **kwargs):
+        root = args[0] if args else kwargs.get("root")
+        if cls is CarlaOccDataset and root is not None and is_release(root):
+            return super().__new__(CarlaOccReleaseDataset)
+        return super().__new__(cls)
 
     def key_plan(self) -> dict[str, frozenset[str]]:
         plan = super().key_plan()
@@ -98,6 +112,13 @@ class CarlaOccDataset(FrameSamples):
         if self.boxes:
             out.update(boxes_in_frame(self.actor_rows(index), np.linalg.inv(out["lidar_pose"])))
         return out
+
+
+class CarlaOccReleaseDataset(ReleaseSamples, CarlaOccDataset):
+    """Frames of a folder in the official CarlaOcc release's layout as samples, with
+    :class:`CarlaOccDataset`'s options and keys where the layout holds them (the reading and what
+    it cannot hold: :class:`carlaocc.catalog.release_samples.ReleaseSamples`). ``boxes`` is
+    accepted and gives nothing: the layout holds no boxes."""
 
 
 def collate(batch: Sequence[dict]) -> dict:

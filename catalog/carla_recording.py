@@ -95,9 +95,9 @@ class Calib:
 class EgoState:
     id: int
     type: str
-    velocity: np.ndarray  # m/s, world
-    acceleration: np.ndarray
-    angular_velocity: np.ndarray  # as recorded (CARLA deg/s, only y negated by the saver)
+    velocity: np.ndarray | None  # m/s, world (right-handed: the saver negated y); None: not recorded
+    acceleration: np.ndarray | None  # m/s2, world; None: not recorded
+    angular_velocity: np.ndarray | None  # as recorded (CARLA deg/s, only y negated by the saver)
 
 
 @dataclass(frozen=True)
@@ -218,12 +218,13 @@ def _yaml(path: Path):
 
 
 def _matrix(value, where: str, shape=(4, 4)) -> np.ndarray:
+    what = f"{shape[0]}x{shape[1]} matrix" if len(shape) == 2 else f"{shape[0]}-vector"
     try:
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise RecordingError(f"{where}: not a {shape[0]}x{shape[1]} matrix of numbers") from None
+        raise RecordingError(f"{where}: not a {what} of numbers") from None
     if a.shape != shape:
-        raise RecordingError(f"{where}: expected a {shape[0]}x{shape[1]} matrix, got shape {a.shape}")
+        raise RecordingError(f"{where}: expected a {what}, got shape {a.shape}")
     if not np.isfinite(a).all():
         raise RecordingError(f"{where}: non-finite values")
     return a
@@ -351,12 +352,11 @@ def read_traffic(path) -> TrafficFrame:
     if not isinstance(data, dict) or "ego_vehicles" not in data:
         raise RecordingError(f"{path}: expected a mapping with ego_vehicles, vehicles and pedestrians")
     e = data["ego_vehicles"] or {}
+    # the ego's motion as recorded; a malformed one is named (RecordingError), an absent one None
+    vec = {k: None if e.get(k) is None else _vector(e[k], f"{path}: ego_vehicles.{k}")
+           for k in ("velocity", "acceleration", "angular_velocity")}
     try:
-        ego = EgoState(id=int(e["id"]), type=str(e["type"]),
-                       velocity=_vector(e.get("velocity", [0, 0, 0]), f"{path}: ego_vehicles.velocity"),
-                       acceleration=_vector(e.get("acceleration", [0, 0, 0]), f"{path}: ego_vehicles.acceleration"),
-                       angular_velocity=_vector(e.get("angular_velocity", [0, 0, 0]),
-                                                f"{path}: ego_vehicles.angular_velocity"))  # fmt: skip
+        ego = EgoState(id=int(e["id"]), type=str(e["type"]), **vec)
     except (KeyError, TypeError, ValueError):
         raise RecordingError(f"{path}: ego_vehicles needs an id and a type") from None
     def vehicle(item, where: str, ident: int, kind: str, T: np.ndarray) -> VehicleState:

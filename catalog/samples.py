@@ -37,6 +37,35 @@ class DatasetError(ValueError):
     """The root, split, voxel size or an option cannot give the asked samples; the message says why."""
 
 
+def check_options(occupancy: str, crop, camera_maps: Sequence[str], split: str | None, voxel_size,
+                  sequences) -> list[str] | None:
+    """The sample options every reader takes, checked (:class:`DatasetError` saying what is wrong);
+    returns ``sequences`` as a list (one id may be given as a str)."""
+    if occupancy not in OCCUPANCY_MODES:
+        raise DatasetError(f"occupancy={occupancy!r}: one of {', '.join(OCCUPANCY_MODES)}")
+    if (occupancy == "crop") != (crop is not None):
+        raise DatasetError("occupancy='crop' takes crop=((x0, y0, z0), (x1, y1, z1)) in metres, and crop "
+                           "needs occupancy='crop'")
+    bad = [m for m in camera_maps if m not in CAMERA_MAPS]
+    if bad:
+        raise DatasetError(f"camera_maps {bad}: known maps are {', '.join(CAMERA_MAPS)}")
+    if split is not None and split not in SPLIT_NAMES:
+        raise DatasetError(f"split={split!r}: one of {', '.join(SPLIT_NAMES)} (or None for all)")
+    if voxel_size is not None and not (isinstance(voxel_size, (int, float)) and voxel_size > 0):
+        raise DatasetError(f"voxel_size={voxel_size!r}: a positive size in metres (or None for the finest built)")
+    if isinstance(sequences, str):
+        sequences = [sequences]
+    if crop is not None:
+        try:
+            lo_, hi_ = (np.asarray(c, dtype=float) for c in crop)
+            ok = lo_.shape == hi_.shape == (3,) and bool(np.all(np.isfinite(lo_) & np.isfinite(hi_) & (hi_ > lo_)))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise DatasetError(f"crop={crop!r}: ((x0, y0, z0), (x1, y1, z1)) in metres with x1 > x0, y1 > y0, z1 > z0")
+    return None if sequences is None else list(sequences)
+
+
 class FrameSamples:
     """Frames of a built carlaocc root as samples, read from the store: the index of (sequence,
     frame) pairs at one voxel size, and one frame's arrays on demand. The options and the keys are
@@ -48,28 +77,7 @@ class FrameSamples:
                  camera_maps: Sequence[str] = (), lidar: bool = True, boxes: bool = True,
                  sequences: Sequence[str] | None = None, dense_limit: int = DENSE_LIMIT) -> None:
 
-        if occupancy not in OCCUPANCY_MODES:
-            raise DatasetError(f"occupancy={occupancy!r}: one of {', '.join(OCCUPANCY_MODES)}")
-        if (occupancy == "crop") != (crop is not None):
-            raise DatasetError("occupancy='crop' takes crop=((x0, y0, z0), (x1, y1, z1)) in metres, and crop "
-                               "needs occupancy='crop'")
-        bad = [m for m in camera_maps if m not in CAMERA_MAPS]
-        if bad:
-            raise DatasetError(f"camera_maps {bad}: known maps are {', '.join(CAMERA_MAPS)}")
-        if split is not None and split not in SPLIT_NAMES:
-            raise DatasetError(f"split={split!r}: one of {', '.join(SPLIT_NAMES)} (or None for all)")
-        if voxel_size is not None and not (isinstance(voxel_size, (int, float)) and voxel_size > 0):
-            raise DatasetError(f"voxel_size={voxel_size!r}: a positive size in metres (or None for the finest built)")
-        if isinstance(sequences, str):
-            sequences = [sequences]
-        if crop is not None:
-            try:
-                lo_, hi_ = (np.asarray(c, dtype=float) for c in crop)
-                ok = lo_.shape == hi_.shape == (3,) and bool(np.all(np.isfinite(lo_) & np.isfinite(hi_) & (hi_ > lo_)))
-            except (TypeError, ValueError):
-                ok = False
-            if not ok:
-                raise DatasetError(f"crop={crop!r}: ((x0, y0, z0), (x1, y1, z1)) in metres with x1 > x0, y1 > y0, z1 > z0")
+        sequences = check_options(occupancy, crop, camera_maps, split, voxel_size, sequences)
         self.root = str(root)
         self.occupancy, self.cameras, self.lidar, self.boxes = occupancy, bool(cameras), bool(lidar), bool(boxes)
         self.camera_maps = tuple(camera_maps)

@@ -30,6 +30,7 @@ TABLE_DIRS: dict[str, str] = {
     "sensor_poses": "scenes/sensor_poses",
     "actors": "scenes/actors",
     "skeletons": "scenes/skeletons",
+    "ego_states": "scenes/ego_states",
     "quality": "metrics/quality",
     "rectification": "metrics/rectification",
     "quality_classes": "metrics/quality_classes",

@@ -206,6 +206,18 @@ class ActorStateRecord(Record):
     phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
 
 
+class EgoStateRecord(Record):
+    """The ego's motion in one frame of a recorded sequence, as the recording holds it (CARLA's
+    own values in ``traffic_info``, not differences of poses): world frame (right-handed, x
+    forward, y left, z up). Simulated sequences have none (their ego follows its poses)."""
+
+    TABLE: ClassVar[str] = "ego_states"
+    sequence_id: str
+    frame_index: int
+    velocity: Vec3  # m/s, world frame, at the ego origin
+    acceleration: Vec3  # m/s2, world frame
+
+
 class SkeletonRecord(Record):
     """One joint of a walker in one frame: the gait cycle's bones as posed for the frame (the
     canonical phase the Skeletal Motion Analyzer matched, or the rest pose), in the world frame
@@ -367,6 +379,7 @@ PERSISTED: tuple[type[Record], ...] = (
     SensorPoseRecord,
     ActorStateRecord,
     SkeletonRecord,
+    EgoStateRecord,
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,

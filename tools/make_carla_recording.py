@@ -341,7 +341,7 @@ def make(out: Path, frames: int = 6, size=(176, 48)) -> None:
                 fh.write(pose_line(f, M))
         # traffic_info: CARLA's left-handed transforms converted with diag(1,-1,1,1) M diag(1,-1,1,1)
         # (our poses are right-handed already: the conversion has been applied)
-        info = {"ego_vehicles": {"id": 231, "type": "vehicle.taxi.ford", "velocity": [5.0, 0.0, 0.0],
+        info = {"ego_vehicles": {"id": 231, "type": "vehicle.taxi.ford", "velocity": [5.0, 0.05, 0.0],
                                  "acceleration": [0.0, 0.0, 0.0], "angular_velocity": [0.0, 0.0, 0.0]},
                 "vehicles": [], "pedestrians": []}
         for cid, (bp, T, vel) in cars.items():

@@ -58,6 +58,8 @@ __all__ = [
     "load_carlaocc_npz",
     "npz_bytes",
     "pack_ids",
+    "CarlaOccRows",
+    "load_carlaocc_rows",
     "save_carlaocc_npz",
     "unpack_ids",
 ]
@@ -186,9 +188,24 @@ def npz_bytes(arrays: Mapping[str, np.ndarray], level: int = 1) -> bytes:
     return buf.getvalue()
 
 
-def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
-    """Read a CarlaOcc ``.npz`` and rebuild the dense ``semantic`` (uint8) / ``instance`` (uint32),
-    decoding its labels as its ``label_encoding`` key says (``bits`` without one).
+@dataclass(frozen=True)
+class CarlaOccRows:
+    """One frame, sparse, as a CarlaOcc ``.npz`` holds it: ``index`` (N, 3) int64 voxel indices
+    ``i, j, k`` (C order over ``volume_size``), ``semantic`` (N,) uint8 (never 0) and ``instance``
+    (N,) uint32; ``voxel_size`` m, ``voxel_origin`` the minimum corner of voxel (0, 0, 0) (m, LiDAR
+    frame), ``volume_size`` voxels (x, y, z)."""
+
+    index: np.ndarray
+    semantic: np.ndarray
+    instance: np.ndarray
+    voxel_size: float
+    voxel_origin: tuple[float, float, float]
+    volume_size: tuple[int, int, int]
+
+
+def load_carlaocc_rows(path: PathLike) -> CarlaOccRows:
+    """Read a CarlaOcc ``.npz`` without densifying it: its occupied voxels in C order, labels
+    decoded as its ``label_encoding`` key says (``bits`` without one).
 
     ``FormatError`` naming the file for a missing key, a wrong shape/dtype, an index outside
     ``volume_size``, a row with semantic 0, a voxel listed twice, an unknown encoding, or a
@@ -221,14 +238,26 @@ def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
     if (sem == 0).any():
         raise FormatError(f"{p}: {int((sem == 0).sum())} occupancy rows have semantic 0 (free)")
     flat = np.ravel_multi_index(tuple(occ[:, :3].T.astype(np.intp)), dims)
-    if len(np.unique(flat)) != len(flat):
+    # C order over the volume (the file may list its rows in any order); a repeat is adjacent then
+    order = np.argsort(flat, kind="stable")
+    flat = flat[order]
+    if len(flat) > 1 and (np.diff(flat) == 0).any():
         raise FormatError(f"{p}: occupancy lists some voxel more than once")
-    semantic = np.zeros(dims, dtype=np.uint8)
-    instance = np.zeros(dims, dtype=np.uint32)
-    semantic.reshape(-1)[flat] = sem
-    instance.reshape(-1)[flat] = inst
     origin = tuple(float(v) for v in vo)
-    return CarlaOccFrame(semantic, instance, float(voxel_size.reshape(())), origin)  # type: ignore[arg-type]
+    return CarlaOccRows(occ[order, :3].astype(np.int64), sem[order], inst[order], float(voxel_size.reshape(())),
+                        origin, dims)  # type: ignore[arg-type]
+
+
+def load_carlaocc_npz(path: PathLike) -> CarlaOccFrame:
+    """Read a CarlaOcc ``.npz`` and rebuild the dense ``semantic`` (uint8) / ``instance`` (uint32)
+    (:func:`load_carlaocc_rows`, whose ``FormatError`` it raises)."""
+    rows = load_carlaocc_rows(path)
+    semantic = np.zeros(rows.volume_size, dtype=np.uint8)
+    instance = np.zeros(rows.volume_size, dtype=np.uint32)
+    flat = np.ravel_multi_index(tuple(rows.index.T), rows.volume_size)
+    semantic.reshape(-1)[flat] = rows.semantic
+    instance.reshape(-1)[flat] = rows.instance
+    return CarlaOccFrame(semantic, instance, rows.voxel_size, rows.voxel_origin)
 
 
 def load_carlaocc_grid(path: Path) -> LabelGrid:

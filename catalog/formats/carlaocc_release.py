@@ -39,9 +39,10 @@ import numpy as np
 import yaml
 
 from carlaocc.catalog.formats.carlaocc_npz import LABEL_LIMITS, check_encoding
+from carlaocc.schemas.grid import GridSpec
 
 __all__ = [
-    "ATTENUATION", "DEPTH_RANGE", "RELEASE_GRIDS", "RELEASE_PRIORITY", "ReleaseGrid", "encode_depth",
+    "ATTENUATION", "DEPTH_RANGE", "RELEASE_GRIDS", "RELEASE_PRIORITY", "ReleaseGrid", "release_grid_spec", "encode_depth",
     "instance_lookup", "remap_instances", "encode_normals", "encode_semantics", "release_instance_ids",
     "sequence_folder", "town_numbers", "calib_yaml", "pose_lines", "ply_text", "split_lines",
 ]  # fmt: skip
@@ -78,6 +79,15 @@ RELEASE_GRIDS: tuple[ReleaseGrid, ...] = (
 )
 """``docs/source/occ_generation.rst``, "Occupancy grid configurations": the raw 0.1 m grid, the
 SSCBench-KITTI-360-like forward view and the Occ3D-nuScenes-like surround view."""
+
+
+def release_grid_spec(g: ReleaseGrid) -> GridSpec:
+    """A release grid as a :class:`GridSpec` (LiDAR frame, metres)."""
+    hi = tuple(o + n * g.voxel_size for o, n in zip(g.voxel_origin, g.volume_size))
+    spec = GridSpec(region_min=g.voxel_origin, region_max=hi, voxel_size=g.voxel_size)
+    if spec.shape != g.volume_size:  # pragma: no cover - the table's numbers are whole voxels
+        raise ValueError(f"{g.name}: {spec.shape} voxels, not {g.volume_size}")
+    return spec
 
 
 # ------------------------------------------------------------------ names

@@ -20,7 +20,8 @@ from carlaocc.pipeline.tasks.recording import recorded_scenes, recording_files
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.configs import ScenesConfig, TownSpec
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, QuarantineRecord,
-                                      SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
+                                      SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord,
+                                      EgoStateRecord)
 from carlaocc.stages.scenes import build_town, simulate_town
 from carlaocc.stages.scenes.people.pedestrians import match_walker_phases
 from carlaocc.stages.scenes.people.skeletons import skeleton_rows
@@ -107,7 +108,7 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         recorded = recorded_scenes(store, cfg, spec, index, town_key(index))
         town = recorded.town
         assets = ParquetTable(store, AssetRecord).load()
-        results = [(r.sequence, r.frames, r.sensor_poses, r.actors, r.skeletons) for r in recorded.sequences]
+        results = [(r.sequence, r.frames, r.sensor_poses, r.actors, r.skeletons, r.ego_states) for r in recorded.sequences]
         # what had to be left out, queryable: SELECT * FROM quarantine WHERE stage = 'scenes'
         rows = [QuarantineRecord(stage="scenes", source="carla-recording", source_path=where, reason=why[:200],
                                  hint=why) for where, why in recorded.skipped]  # fmt: skip
@@ -146,17 +147,21 @@ def scenes_task(store: Store, cfg: ScenesConfig, part: Partition) -> dict[str, s
         "sensor_poses": ParquetTable(store, SensorPoseRecord),
         "actors": ParquetTable(store, ActorStateRecord),
         "skeletons": ParquetTable(store, SkeletonRecord),
+        "ego_states": ParquetTable(store, EgoStateRecord),
     }
     written = set()
     if results is None:
-        results = [(seq.sequence, seq.frames, seq.sensor_poses, seq.actors, sequence_skeletons(store, seq.actors, seq.frames))
-                   for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases)]  # fmt: skip
-    for sequence, frames, sensor_poses, actors, skeletons in results:
+        results = [(seq.sequence, seq.frames, seq.sensor_poses, seq.actors, sequence_skeletons(store, seq.actors, seq.frames),
+                    None) for seq in simulate_town(cfg, spec, town, assets, match_phases=match_walker_phases)]  # fmt: skip
+    for sequence, frames, sensor_poses, actors, skeletons, ego_states in results:
         sid = sequence.sequence_id
         written.add(sid)
         rows = {"sequence": [sequence], "frames": frames, "sensor_poses": sensor_poses, "actors": actors,
-                "skeletons": skeletons}
+                "skeletons": skeletons, "ego_states": ego_states}
         for name, table in tables.items():
+            if rows[name] is None:  # a simulated ego has no recorded motion: no file (an old one goes)
+                store.remove(table.path(sid))
+                continue
             outputs[table.path(sid)] = table.save(sid, rows[name])
     # sequences this town no longer has (fewer levels or sequences) are removed, not left stale
     for table in tables.values():
@@ -182,7 +187,7 @@ SPEC = StageSpec(
     upstream=("ingest",),
     reads=("admesh/assets/", "admesh/parts/", "admesh/meshes/"),
     writes=("scenes/meshes/", "scenes/placements/", "scenes/towns/", "scenes/sequences/", "scenes/frames/",
-            "scenes/sensor_poses/", "scenes/actors/", "scenes/skeletons/",
+            "scenes/sensor_poses/", "scenes/actors/", "scenes/skeletons/", "scenes/ego_states/ (recorded sequences)",
             "admesh/quarantine/scenes-<town>.parquet (recorded towns: what was left out)"),
     partitions=scenes_partitions,
     task=scenes_task,

@@ -9,7 +9,8 @@ World frame: the recording's right-handed world (x forward, y left, z up, metres
   numbered 1.. in actor order). No road network: the traffic is recorded, not simulated.
 * **Frames**: the LiDAR pose per frame is the recording's; the ego is the LiDAR pose moved down
   by the rig's LiDAR mount; camera and LiDAR sensor poses follow from the rig (built from the
-  recording's calibration by the caller). Timestamps are the recorded frame numbers over the
+  recording's calibration by the caller). The ego's recorded velocity and acceleration (world
+  frame) are kept as they are (``ego_states`` rows; a frame without them has none). Timestamps are the recorded frame numbers over the
   rate (10 Hz); frames are renumbered 0.. in order (a recording may skip frames).
 * **Actors**: a stable instance id per CARLA actor id (numbered above the town's instances in id
   order). Vehicles: the blueprint's model (an ADMesh asset) placed at ``actor pose @ T(offset)``
@@ -38,7 +39,7 @@ import numpy as np
 
 from carlaocc.schemas.meshes import AssetGeometry, MeshPart
 from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord,
-                                      SkeletonRecord)
+                                      SkeletonRecord, EgoStateRecord)
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.stages.geometry import (angular_velocity, box_center, invert_pose, is_watertight, pose_to_list,
                                       transform_points, yaw_pitch_roll)
@@ -84,6 +85,7 @@ class RecordedSequence:
     sensor_poses: list[SensorPoseRecord]
     actors: list[ActorStateRecord]
     skeletons: list[SkeletonRecord]
+    ego_states: list[EgoStateRecord] = field(default_factory=list)  # the frames whose ego motion is recorded
     skipped: list[tuple[int, int, str]] = field(default_factory=list)  # (frame, actor id, reason)
     phase_frames: dict[int, list[int]] = field(default_factory=dict)  # walker id -> matched walk frame per frame
 
@@ -239,6 +241,11 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
         world_to_lidar = invert_pose(lidar)
         out.frames.append(FrameRecord(sequence_id=sequence_id, frame_index=k, timestamp=float(times[k]),
                                       ego_pose=pose_to_list(ego), lidar_pose=pose_to_list(lidar)))  # fmt: skip
+        e = f.traffic.ego
+        if e.velocity is not None and e.acceleration is not None:  # the recording's own values, kept
+            out.ego_states.append(EgoStateRecord(sequence_id=sequence_id, frame_index=k,
+                                                 velocity=[float(c) for c in e.velocity],
+                                                 acceleration=[float(c) for c in e.acceleration]))  # fmt: skip
         for name, T in cams:
             out.sensor_poses.append(SensorPoseRecord(sequence_id=sequence_id, frame_index=k, sensor=name,
                                                      pose=pose_to_list(ego @ T)))  # fmt: skip

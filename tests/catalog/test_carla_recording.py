@@ -80,7 +80,7 @@ def test_poses_and_the_odd_lines(copy):
 
 def test_traffic_left_stays_left_and_bad_actors_are_skipped(copy):
     tf = cr.read_traffic(copy / SEQ / "traffic_info" / "0000.yaml")
-    assert tf.ego.id == 231 and tf.ego.velocity == pytest.approx([5, 0, 0])
+    assert tf.ego.id == 231 and tf.ego.velocity == pytest.approx([5, 0.05, 0])
     cars = {v.id: v for v in tf.vehicles}
     # car 246 comes the other way in the left lane: y > 0, heading -x
     assert cars[246].transform[1, 3] == pytest.approx(1.75) and cars[246].transform[0, 0] == pytest.approx(-1, abs=0.01)

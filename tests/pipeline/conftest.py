@@ -50,3 +50,13 @@ def openocc_01(default_01, tmp_path_factory):
                                  "--sequence", "town00_high_seq000"])
     assert r.exit_code == 0, r.output
     return out
+
+
+@pytest.fixture(scope="session")
+def release_01(default_01, tmp_path_factory, default_01_config):
+    """``carlaocc export carlaocc-release`` of :func:`default_01` at 0.1 m (read-only)."""
+    out = tmp_path_factory.mktemp("release_01") / "CarlaOcc"
+    r = CliRunner().invoke(app, ["export", "carlaocc-release", "--root", default_01.url, "--out", str(out),
+                                 "--config", default_01_config])
+    assert r.exit_code == 0, r.output
+    return out

@@ -172,6 +172,40 @@ def test_rotations_are_the_recorded_ones(built, recording):
     assert {round(y, 2) for _, _, y, _, _ in rows} >= {0.05, round(np.pi - 0.08, 2), 0.03}
 
 
+def test_the_ego_keeps_its_recorded_velocity(built, recording):
+    """Issue 38: the ego's velocity and acceleration as traffic_info records them (world frame),
+    one row per frame, agreeing with the ego's own poses (central differences of its origin)."""
+    seq = f"town00_{SEQ}"
+    _, rows = query(built, f"SELECT frame_index, velocity, acceleration FROM ego_states WHERE sequence_id = '{seq}' "
+                           f"ORDER BY frame_index")
+    _, frames = query(built, f"SELECT frame_index, timestamp, ego_pose FROM frames WHERE sequence_id = '{seq}' "
+                             f"ORDER BY frame_index")
+    assert [r[0] for r in rows] == [f[0] for f in frames] and len(rows) >= 3
+    for f, vel, acc in rows:
+        tf = cr.read_traffic(recording / SEQ / "traffic_info" / f"{f:04d}.yaml")
+        np.testing.assert_allclose(vel, tf.ego.velocity, atol=1e-12)
+        np.testing.assert_allclose(acc, tf.ego.acceleration, atol=1e-12)
+    # the recorded velocity is the motion of the ego origin our poses hold
+    t = np.array([ts for _, ts, _ in frames])
+    pos = np.array([np.asarray(e).reshape(4, 4)[:3, 3] for _, _, e in frames])
+    np.testing.assert_allclose(np.gradient(pos, t, axis=0), np.array([v for _, v, _ in rows]), atol=1e-4)
+    # a simulated sequence has no recorded ego motion: no rows, not zeros
+    _, other = query(built, f"SELECT count(*) FROM ego_states WHERE sequence_id <> '{seq}'")
+    assert other[0][0] == 0
+
+
+def test_ego_motion_absent_or_malformed(recording, tmp_path):
+    path = recording / SEQ / "traffic_info" / "0000.yaml"
+    doc = yaml.safe_load(path.read_text())
+    del doc["ego_vehicles"]["velocity"]
+    (tmp_path / "a.yaml").write_text(yaml.safe_dump(doc))
+    assert cr.read_traffic(tmp_path / "a.yaml").ego.velocity is None  # absent: none kept, never 0
+    doc["ego_vehicles"]["acceleration"] = [1.0, "x"]
+    (tmp_path / "b.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(cr.RecordingError, match=r"b\.yaml: ego_vehicles\.acceleration"):
+        cr.read_traffic(tmp_path / "b.yaml")
+
+
 def test_show_skeletons_draws_the_recorded_knees(built, tmp_path):
     out = tmp_path / "sk.png"
     r = cli.invoke(app, ["show", "sensors", "--root", built.root, "--seq", f"town00_{SEQ}", "--frame", "2",

@@ -36,11 +36,8 @@ def built(default_01) -> Store:
 
 
 @pytest.fixture(scope="module")
-def exported(built, tmp_path_factory, config_file) -> Path:
-    out = tmp_path_factory.mktemp("release_out") / "CarlaOcc"
-    r = cli.invoke(app, ["export", "carlaocc-release", "--root", built.url, "--out", str(out), "--config", config_file])
-    assert r.exit_code == 0, r.output
-    return out
+def exported(release_01) -> Path:
+    return release_01
 
 
 # -- an independent reader of the release layout ------------------------------------------------

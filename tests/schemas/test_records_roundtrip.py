@@ -61,6 +61,10 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
         R.SkeletonRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", joint_index=10,
                          joint="r_hand", world=[10.2, 1.7, 0.8], lidar=[3.7, -1.55, -0.95]),
     ],
+    R.EgoStateRecord: [
+        R.EgoStateRecord(sequence_id="s", frame_index=0, velocity=[5.0, 0.05, 0.0], acceleration=[0.1, 0.0, -0.02]),
+        R.EgoStateRecord(sequence_id="s", frame_index=1, velocity=[5.1, 0.05, 0.0], acceleration=[0.0, 0.0, 0.0]),
+    ],
     R.QualityRecord: [
         R.QualityRecord(sequence_id="s", voxel_size=0.2, frame_index=0, metric="spatial_continuity",
                         value=0.99, occupied=100, isolated=1),

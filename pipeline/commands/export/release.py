@@ -46,6 +46,7 @@ from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.sensors import LidarStore, SensorStore
 from carlaocc.catalog.splits import SPLIT_NAMES
 from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.formats.carlaocc_release import release_grid_spec
 from carlaocc.pipeline.commands.export.spec import (ExportFormat, ExportJob, actor_ids, one_label_table,
                                                     sequence_release_ids, sequence_splits, voxelized_or_refuse)
 from carlaocc.schemas import taxonomy
@@ -57,15 +58,6 @@ from carlaocc.stages.sensors import camera_poses
 from carlaocc.stages.voxelize.pooling import pool_window
 
 LEVEL_ORDER = {"none": 0, "low": 1, "medium": 2, "high": 3}
-
-
-def release_grid_spec(g: rel.ReleaseGrid) -> GridSpec:
-    """A release grid as a :class:`GridSpec` (LiDAR frame, metres)."""
-    hi = tuple(o + n * g.voxel_size for o, n in zip(g.voxel_origin, g.volume_size))
-    spec = GridSpec(region_min=g.voxel_origin, region_max=hi, voxel_size=g.voxel_size)
-    if spec.shape != g.volume_size:  # pragma: no cover - the table's numbers are whole voxels
-        raise ValueError(f"{g.name}: {spec.shape} voxels, not {g.volume_size}")
-    return spec
 
 
 def folder_names(seqs: list[SequenceRecord]) -> tuple[dict[str, int], dict[str, tuple[int, int]]]:
