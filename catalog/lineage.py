@@ -107,6 +107,8 @@ class LineageLog:
                 continue
         if len(merged) < 2:
             return None
+        # a merge cut short leaves its output beside its sources: one record per (run, partition)
+        records = list({(r.run_id, r.partition): r for r in records}.values())
         records.sort(key=lambda r: (r.run_id, r.partition))
         # a stage's merged file is named after the newest run it holds (the file names themselves
         # may be earlier merges')

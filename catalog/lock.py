@@ -10,19 +10,21 @@ write. A second writer waits for it, saying once who holds it (``--no-wait`` ref
 2, touching nothing). Two ``run``\\ s at once therefore run one after the other, and the second finds
 the first one's work done: nothing is computed twice, nothing is lost.
 
-Readers take no lock (``status``, ``verify``, ``catalog query``, ``export``, ``show``, the
-loader): every file appears whole under its final name (written aside, then renamed), and a
+Readers take no lock (``status``, ``catalog query``, ``export``, ``show``, the loader; ``verify``
+takes it only to record the signatures it found, over records still the latest): every file appears whole under its final name (written aside, then renamed), and a
 lineage listing that meets a file a compaction merged away lists again. What they read while a
 writer works is a consistent file set, but possibly of a run half done: ``status`` says so.
 
 Local roots (and NFSv4, where Linux maps ``flock`` onto POSIX byte-range locks the server keeps):
 an exclusive ``flock`` on the lock file. The kernel releases it when the holding process ends,
 however it ends (``kill -9``, a crash, a lost node's lease on NFS), so a lock is never left stale.
-The empty file exists while a command holds the lock: the command that made it removes it when
-it lets go, and one that waited on it checks, once it has it, that the file it locked is still the
-root's lock file (else it opens the new one and waits again), so removing it races with no one.
-Nothing else is written: a root at rest holds no lock file (one killed holder may leave an empty,
-unlocked one behind, harmless), and a run with nothing to do leaves the root as it was. Who holds it is read from the kernel's
+The empty file exists while a command holds the lock: its holder removes it when it lets go, and
+one that waited on it checks, once it has it, that the file it locked is still the root's lock
+file (else it opens the new one and waits again), so removing it races with no one. Nothing else
+is written: a root at rest holds no lock file (a killed holder leaves an empty, unlocked one,
+which the next holder removes), and a run with nothing to do leaves the root as it was. Another
+user's lock file is opened read-only (``flock`` needs no write permission), so a root shared by
+a group takes the lock whoever made the file. Who holds it is read from the kernel's
 table of locks (``/proc/locks``: the holder's pid, then its command line), on this host; a holder
 on another host (NFS) is "another process". A refusal on a root that did not exist removes the
 folders it made too.
@@ -76,7 +78,7 @@ def _lock_holder_pid(path: str) -> int | None:
     want = (os.major(st.st_dev), os.minor(st.st_dev), st.st_ino)
     for line in lines:
         f = line.split()
-        if len(f) < 6 or f[1] != "FLOCK" or "->" in f:
+        if len(f) < 6 or f[1] not in ("FLOCK", "POSIX") or "->" in f:  # NFS emulates flock with POSIX locks
             continue
         try:
             major, minor, ino = f[5].split(":")
@@ -156,16 +158,25 @@ def root_lock(store: Store, wait: bool = True, on_wait: Callable[[str], None] = 
     import fcntl
 
     made = _missing_dirs(store.root)  # removed again when the command leaves nothing in them
-    told = False
+    told, spins = False, 0
     while True:
         try:
             os.makedirs(store.root, exist_ok=True)
-            try:  # made by this call: removed when it lets go, so a root at rest holds no lock file
-                fd, created = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666), True
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
             except FileExistsError:
-                fd, created = os.open(path, os.O_RDWR | os.O_CLOEXEC), False
+                try:
+                    fd = os.open(path, os.O_RDWR | os.O_CLOEXEC)
+                except PermissionError:  # another user's lock file (umask 022): flock needs no write
+                    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
         except FileNotFoundError:
-            continue  # removed between the two opens by the holder letting go: again
+            # removed between the two opens by the holder letting go: again (a dangling symbolic
+            # link named like the lock file would do this for ever: refused after a few turns)
+            spins += 1
+            if spins > 100:
+                raise StoreError(f"cannot take the root lock {path}: it cannot be created nor opened (a dangling "
+                                 "symbolic link?); remove it") from None
+            continue
         except OSError as exc:
             raise StoreError(f"cannot take the root lock {path}: {exc.strerror or exc} (a root is written by one "
                              "command at a time; its lock file must be writable)") from None
@@ -205,11 +216,11 @@ def root_lock(store: Store, wait: bool = True, on_wait: Callable[[str], None] = 
             with _HELD_GUARD:
                 del _HELD[me]
     finally:
-        # the lock file goes with the lock (whoever waits on it opens it anew: see above), and so
+        # the lock file goes with the lock (whoever waits on it opens it anew: see above; one left
+        # by a killed holder or a refused maker goes with the next holder's), and so
         # does a root this command made and wrote nothing into (a refusal): no trace is left
         with contextlib.suppress(OSError):
-            if created:
-                os.unlink(path)
+            os.unlink(path)  # the current lock file (checked when taken): only its holder removes it
             if made and not os.listdir(store.root):
                 for d in made:
                     os.rmdir(d)

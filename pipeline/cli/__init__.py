@@ -40,7 +40,7 @@ from carlaocc.pipeline.cli.evaluate import eval_app
 
 app.add_typer(eval_app, name="eval")
 
-__all__ = ["Stopped", "app", "main"]
+__all__ = ["Stopped", "app", "install_stop_handlers", "main"]
 
 # the signals that stop a command: each becomes an exception in the main thread, so the work in
 # flight is wound down (a LocalCluster's workers closed, their semaphores released, lineage of the
@@ -56,10 +56,24 @@ class Stopped(BaseException):
         self.signum = signum
 
 
-def _on_stop_signal(signum, frame) -> None:
-    # once: a second signal while winding down ends the process as it would by default
+_STOPPED: list[int] = []  # the stop signals received so far
+
+
+def install_stop_handlers() -> None:
+    """Each stop signal becomes :class:`Stopped`, unless it is ignored (``nohup``, a script's
+    background job): what the caller chose to ignore stays ignored."""
     for sig in STOP_SIGNALS:
-        signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, _on_stop_signal)
+
+
+def _on_stop_signal(signum, frame) -> None:
+    # once: a second signal while winding down (the last lineage flush, the cluster closing)
+    # ends the process as it would by default, and the closing line says what that may cost
+    _STOPPED.append(signum)
+    for sig in STOP_SIGNALS:
+        if signal.getsignal(sig) is _on_stop_signal:
+            signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
     raise Stopped(signum)
 
 
@@ -68,8 +82,7 @@ def main() -> None:
     outside any command (or in the error path itself) is one line and exit 1; the process then
     leaves with that code whatever native threads are still alive (:mod:`.exit`)."""
     os.environ.setdefault("PYTHONWARNINGS", "ignore::DeprecationWarning")
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, _on_stop_signal)
+    install_stop_handlers()
     try:
         app()
         code = 0
@@ -77,8 +90,12 @@ def main() -> None:
         code = exit_code(exc)
     except (Stopped, KeyboardInterrupt) as exc:
         signum = exc.signum if isinstance(exc, Stopped) else signal.SIGINT
-        print(f"error: stopped by {signal.Signals(signum).name}: what finished is recorded; the same command "
-              "resumes from there", file=sys.stderr)
+        if isinstance(exc, KeyboardInterrupt) and _STOPPED:  # a second Ctrl-C cut the winding down short
+            print("error: stopped by a second SIGINT while winding down: the tasks finished in the last seconds "
+                  "may not be recorded and run again; the same command resumes", file=sys.stderr)
+        else:
+            print(f"error: stopped by {signal.Signals(signum).name}: what finished is recorded; the same command "
+                  "resumes from there", file=sys.stderr)
         code = 128 + signum
     except BaseException as exc:  # noqa: BLE001 -- the last net: one line, never a traceback
         if debug_enabled() or "--debug" in sys.argv[1:]:

@@ -42,64 +42,74 @@ def run(
     keys changed). --default-plan goes back to the default plan."""
     from carlaocc.pipeline.engine.runner import PlanError, resolve_scheduler, run as run_pipeline, stage_order
 
+    from carlaocc.catalog.lock import RootBusy, root_lock
+
     store = open_store(root, writable=True)
-    plan, remembered = resolve_plan(store, root, config=config, preset=preset, maps=maps, limit_frames=limit_frames,
-                                    sequences=sequences, taxonomy=taxonomy, voxel_size=voxel_size,
-                                    default_plan=default_plan)
-    cfg, voxel_sizes = plan.effective_config(), plan.voxel_sizes
-    check_towns(cfg)
-    names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
-    check_stage_names(names)
-    check_sequence_ids(store, plan, remembered, sequences is not None)
+
+    def build() -> None:
+        plan, remembered = resolve_plan(store, root, config=config, preset=preset, maps=maps, limit_frames=limit_frames,
+                                        sequences=sequences, taxonomy=taxonomy, voxel_size=voxel_size,
+                                        default_plan=default_plan)
+        cfg, voxel_sizes = plan.effective_config(), plan.voxel_sizes
+        check_towns(cfg)
+        names = [s.strip() for s in stages.split(",") if s.strip()] if stages else None
+        check_stage_names(names)
+        check_sequence_ids(store, plan, remembered, sequences is not None)
+        try:
+            stage_order(names)
+            resolve_scheduler(scheduler, probe=True)
+        except PlanError as exc:
+            fail(str(exc))
+        # the plan is remembered once work starts (a refused run touches nothing), or once the run ends
+        kept: list[bool] = []
+
+        def keep_plan() -> None:
+            if not kept:
+                kept.append(True)
+                remember_plan(store, plan, remembered)
+
+        progress = RichProgress(on_start=keep_plan)
+        t0 = time.perf_counter()
+        try:
+            outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
+                                    log=lambda s: typer.echo(s, err=True), sequences=plan.slice.sequences,
+                                    wait=not no_wait)
+        except PlanError as exc:  # refused before any task ran
+            progress.close()
+            fail(str(exc))
+        except (StoreError, OSError) as exc:  # a failure during work (the plan was kept if a stage started)
+            progress.close()
+            fail(f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename and exc.strerror
+                 else exc, code=1)
+        except BaseException:  # the error path reports it; the bar must not stay on screen
+            progress.close()
+            raise
+        progress.close()
+        keep_plan()
+        failed = [f for o in outcomes for f in o.failed]
+        if failed:
+            for f in failed[:10]:
+                typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
+            if len(failed) > 10:
+                typer.echo(f"... and {len(failed) - 10} more failed tasks (see the runs table)", err=True)
+            raise typer.Exit(1)
+        ran = sum(o.ran for o in outcomes)
+        total = sum(o.total for o in outcomes)
+        if ran == 0:
+            typer.echo(f"nothing to do: all {total} tasks up to date in {store.url} (use --force to re-run)")
+        else:
+            typer.echo(f"done: ran {ran} of {total} tasks in {time.perf_counter() - t0:.1f} s")
+        typer.echo(closing_line(store, root))
+
+    # one writer at a time, from reading the remembered plan to remembering the new one: a run
+    # that waited for another finds that one's plan and work (the engine's own lock is the same)
     try:
-        stage_order(names)
-        resolve_scheduler(scheduler, probe=True)
-    except PlanError as exc:
+        with root_lock(store, wait=not no_wait, on_wait=lambda s: typer.echo(s, err=True)):
+            build()
+    except RootBusy as exc:
         fail(str(exc))
-    # the plan is remembered once work starts (a refused run touches nothing), or once the run ends
-    kept: list[bool] = []
-
-    def keep_plan() -> None:
-        if not kept:
-            kept.append(True)
-            remember_plan(store, plan, remembered)
-
-    progress = RichProgress(on_start=keep_plan)
-    t0 = time.perf_counter()
-    try:
-        outcomes = run_pipeline(store, cfg, voxel_sizes, names, scheduler, force, progress, workers,
-                                log=lambda s: typer.echo(s, err=True), sequences=plan.slice.sequences,
-                                wait=not no_wait)
-    except PlanError as exc:  # refused before any task ran
-        progress.close()
-        fail(str(exc))
-    except (StoreError, OSError) as exc:  # a failure during work (the plan was kept if a stage started)
-        progress.close()
-        fail(f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) and exc.filename and exc.strerror
-             else exc, code=1)
-    except BaseException:  # the error path reports it; the bar must not stay on screen
-        progress.close()
-        raise
-    progress.close()
-    if not kept:  # nothing started (all up to date): remembered now, as a writer of the root
-        from carlaocc.catalog.lock import root_lock
-
-        with root_lock(store):
-            keep_plan()
-    failed = [f for o in outcomes for f in o.failed]
-    if failed:
-        for f in failed[:10]:
-            typer.echo(f"task failed: {f.stage} {f.partition}: {f.error}", err=True)
-        if len(failed) > 10:
-            typer.echo(f"... and {len(failed) - 10} more failed tasks (see the runs table)", err=True)
-        raise typer.Exit(1)
-    ran = sum(o.ran for o in outcomes)
-    total = sum(o.total for o in outcomes)
-    if ran == 0:
-        typer.echo(f"nothing to do: all {total} tasks up to date in {store.url} (use --force to re-run)")
-    else:
-        typer.echo(f"done: ran {ran} of {total} tasks in {time.perf_counter() - t0:.1f} s")
-    typer.echo(closing_line(store, root))
+    except StoreError as exc:  # the lock file cannot be made (a read-only root was refused before)
+        fail(str(exc), code=1)
 
 
 def check_stage_names(names: list[str] | None) -> None:
@@ -215,6 +225,9 @@ def ingest(
     except (IngestError, PlanError) as exc:
         progress.close()
         fail(str(exc))
+    except StoreError as exc:  # a failure during work (a lineage write, the lock file)
+        progress.close()
+        fail(str(exc), code=1)
     except BaseException:  # the error path reports it; the bar must not stay on screen
         progress.close()
         raise

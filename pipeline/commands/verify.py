@@ -22,6 +22,7 @@ from datetime import datetime, timezone
 from typing import Callable
 
 from carlaocc.catalog.lineage import LineageLog
+from carlaocc.catalog.lock import root_lock
 from carlaocc.catalog.signatures import output_signatures
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.engine.runner import outputs_problem
@@ -52,7 +53,7 @@ def verify(store: Store, stages: tuple[str, ...] = (), record: bool = True,
         found = StageVerification(stage)
         out.append(found)
         latest = [r for r in lineage.latest(stage).values() if r.status == "completed"]
-        resigned = []
+        resigned = []  # (the record verified, its re-signed copy)
         checked: dict[str, str | None] = {}
         for rec in sorted(latest, key=lambda r: r.partition):
             outputs = json.loads(rec.output_fingerprints)
@@ -65,16 +66,23 @@ def verify(store: Store, stages: tuple[str, ...] = (), record: bool = True,
                 found.problems[rec.partition] = problem
                 if record and rec.output_signatures:
                     # its signatures are trusted no more: status and run re-hash it and rebuild
-                    resigned.append(rec.model_copy(update={"run_id": rec.run_id + "~" + run_id,
-                                                           "output_signatures": ""}))
+                    resigned.append((rec, rec.model_copy(update={"run_id": rec.run_id + "~" + run_id,
+                                                                 "output_signatures": ""})))
                 continue
             now = json.dumps(output_signatures(store, outputs), sort_keys=True)
             if record and now != rec.output_signatures:
                 # a record later than the one it copies (lineage orders by run id): "verify-" sorts
                 # after the driver's timestamps, so keep the run id and sort by a suffix instead
-                resigned.append(rec.model_copy(update={"run_id": rec.run_id + "~" + run_id,
-                                                       "output_signatures": now}))
+                resigned.append((rec, rec.model_copy(update={"run_id": rec.run_id + "~" + run_id,
+                                                             "output_signatures": now})))
                 found.resigned += 1
         if resigned:
-            lineage.append(stage, run_id, resigned)
+            # written as a writer of the root, and only over records still the latest (a run may
+            # have rebuilt or retired a partition while it was being verified)
+            with root_lock(store):
+                now_latest = lineage.latest(stage)
+                keep = [new for rec, new in resigned
+                        if (cur := now_latest.get(rec.partition)) is not None and cur.run_id == rec.run_id]
+                if keep:
+                    lineage.append(stage, run_id, keep)
     return out

@@ -390,3 +390,68 @@ def test_an_unreadable_chunk_is_named_by_export_not_the_output_folder(default_01
     (line,) = [ln for ln in r.output.splitlines() if ln.startswith("error:")]
     assert line.startswith(f"error: cannot read {default_01.root}/occupancy.zarr/") and "Permission denied" in line
     assert "--out" not in line and not out.exists()
+
+
+# -- what an independent review of the above found -------------------------------------------------
+def test_an_ignored_stop_signal_stays_ignored():
+    """`nohup carlaocc run ... &` (SIGHUP ignored) must not be stopped by a hang-up."""
+    from carlaocc.pipeline.cli import install_stop_handlers
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGHUP, signal.SIGTERM, signal.SIGINT)}
+    try:
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        install_stop_handlers()
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+        assert signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+
+def test_a_lock_file_left_behind_goes_with_the_next_holder(tmp_path):
+    root = tmp_path / "data"
+    root.mkdir()
+    (root / LOCK_FILE).write_bytes(b"")  # a killed holder's, or a refused maker's
+    with root_lock(Store(str(root)), wait=False):
+        pass
+    assert not (root / LOCK_FILE).exists() and root.exists()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to act as another user")
+def test_another_users_lock_file_is_taken_read_only():
+    """A group-shared root: the lock file another user made (0644 under umask 022) still locks."""
+    import tempfile
+
+    base = Path(tempfile.mkdtemp(prefix="carlaocc-shared-"))  # pytest's own folders are 0700
+    os.chmod(base, 0o777)
+    root = base / "data"
+    root.mkdir()
+    os.chmod(root, 0o777)
+    lock = root / LOCK_FILE
+    lock.write_bytes(b"")
+    os.chmod(lock, 0o644)
+    # imports first: the interpreter's own files may not be readable by the other user
+    code = ("import os, fcntl, socket\n"
+            "from carlaocc.catalog.store import Store; from carlaocc.catalog.lock import root_lock\n"
+            f"store = Store({str(root)!r}); store.root\n"
+            "os.setgid(65534); os.setuid(65534)\n"
+            "with root_lock(store, wait=False):\n    print('held')\n")
+    try:
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
+    assert r.returncode == 0 and r.stdout.strip() == "held", r.stderr[-1500:]
+
+
+def test_a_compaction_cut_short_leaves_no_record_twice(tmp_path):
+    from carlaocc.schemas.records import RunRecord
+
+    t = datetime(2026, 1, 1, tzinfo=timezone.utc)
+    rec = RunRecord(run_id="r00000001-x", stage="scenes", partition="p0", code_version="c", config_hash="h",
+                    cache_key="k", input_fingerprints="{}", output_fingerprints="{}", status="completed",
+                    started_at=t, ended_at=t, host="w")
+    log = LineageLog(Store(str(tmp_path)))
+    log.append("scenes", "r00000001-x-0000", [rec])
+    log.append("scenes", "compacted-r00000001-x", [rec])  # the merged file, its source not yet removed
+    assert log.compact("scenes", max_files=1)
+    assert len(log.load("scenes")) == 1
