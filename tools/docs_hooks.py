@@ -195,3 +195,16 @@ def on_files(files, config):
     for page, text in ((CLI_PAGE, cli_reference()), (CONFIG_PAGE, config_reference())):
         files.append(File.generated(config, page, content=text))
     return files
+
+
+# the docstrings are written for Sphinx: their cross-reference roles (:class:`Store`) and literal
+# block markers ("as follows::") come out of mkdocstrings' Markdown as text; shown as code and ":"
+_ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|exc|obj|py:\w+):(<code>)")
+_LITERAL_MARK = re.compile(r"::(</p>)")
+
+
+def on_page_content(html, page, config, files):
+    """Sphinx roles and literal-block markers in the generated API page, as a reader expects them."""
+    if not page.file.src_uri.startswith("reference/"):
+        return html
+    return _LITERAL_MARK.sub(r":\1", _ROLE.sub(r"\1", html))
