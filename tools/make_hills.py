@@ -48,8 +48,10 @@ def bank_profile(length: float, bank: float, ramp: float) -> list[tuple[float, f
     return [(0.0, 0.0, 0.0, c, d), (ramp, bank, 0.0, 0.0, 0.0), (length - ramp, bank, 0.0, -c, -d)]
 
 
-def polys(tag: str, records) -> str:
-    return "".join(f'<{tag} s="{num(s)}" a="{num(a)}" b="{num(b)}" c="{num(c)}" d="{num(d)}"/>'
+def polys(tag: str, records, s_name: str = "s") -> str:
+    """OpenDRIVE cubic records ``<tag s=.. a=.. b=.. c=.. d=..>`` (``s_name``: ``sOffset`` for
+    lane widths) from (s, a, b, c, d) tuples."""
+    return "".join(f'<{tag} {s_name}="{num(s)}" a="{num(a)}" b="{num(b)}" c="{num(c)}" d="{num(d)}"/>'
                    for s, a, b, c, d in records)  # fmt: skip
 
 

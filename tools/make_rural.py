@@ -17,17 +17,18 @@ Usage: ``python tools/make_rural.py OUT.xodr`` or :func:`rural_xodr` (determinis
 from __future__ import annotations
 
 import math
+import os
 import sys
+
+# the number and cubic-record writers of the other test map's generator (tools/ is not a package)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from make_hills import num, polys  # noqa: E402
 
 LINE1, ARC, LINE2 = 110.0, 90.0, 100.0  # m: planView pieces
 RADIUS = 70.0  # m: the arc's radius (left turn)
 GRADE = 0.15  # the climb's steepest grade
 BANK = -0.08  # rad: superelevation on the arc (outside, right of +s, higher)
 SECTION2 = 150.0  # m: start of the second lane section
-
-
-def num(v: float) -> str:
-    return repr(float(v))
 
 
 def ramp(s0: float, length: float, v0: float, v1: float) -> tuple[float, float, float, float, float]:
@@ -54,11 +55,6 @@ def elevation_records() -> list[tuple[float, float, float, float, float]]:
     z += c2 * e * e
     recs.append((180.0, z, g2, 0.0, 0.0))
     return recs
-
-
-def polys(tag: str, records, s_name: str = "s") -> str:
-    return "".join(f'<{tag} {s_name}="{num(s)}" a="{num(a)}" b="{num(b)}" c="{num(c)}" d="{num(d)}"/>'
-                   for s, a, b, c, d in records)  # fmt: skip
 
 
 def lane(lid: int, kind: str, widths, mark: str = "none") -> str:

@@ -277,7 +277,9 @@ class Progress:
 
 def _os_reason(exc: BaseException) -> str:
     """An OSError's reason in words (``No space left on device``), else the exception's line."""
-    return (getattr(exc, "strerror", None) or str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    if getattr(exc, "strerror", None):
+        return exc.strerror
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
 def _lineage_write_error(store: Store, failure: tuple[str, BaseException], unrecorded: int,
