@@ -245,6 +245,25 @@ class SensorPoseRecord(Record):
     pose: Pose  # sensor-to-world, 4x4 row-major
 
 
+class LidarAgreementRecord(Record):
+    """How a recorded frame's LiDAR scan agrees with our scene from the same pose: each recorded
+    point's beam (its direction from the sensor) cast through the frame's scene mesh, our range
+    against the recorded one. Static points are those neither scene nor recording labels a road
+    user on (:func:`carlaocc.schemas.taxonomy.dynamic_ids`); a beam our scene does not hit within
+    range counts as a disagreement."""
+
+    TABLE: ClassVar[str] = "lidar_agreement"
+    sequence_id: str
+    frame_index: int
+    points: int  # recorded points (both scans of the frame: lidar/ and semantic_lidar/)
+    static_points: int
+    missed: int  # static points whose beam hits nothing of our scene within the recorded range + tolerance
+    median_m: float  # median |our range - recorded range| over static points, m (-1: no static point)
+    p95_m: float  # its 95th percentile, m (inf when over 5 % of our beams miss; -1: no static point)
+    within: float  # fraction of static points whose ranges agree within `tolerance_m`
+    tolerance_m: float
+
+
 class RectificationRecord(Record):
     """What the instance-guided rectification did to one camera image (pixel counts) and, for
     ray-cast frames, how far its output is from the clean ray-cast maps (-1: not measured, the
@@ -380,6 +399,7 @@ PERSISTED: tuple[type[Record], ...] = (
     ActorStateRecord,
     SkeletonRecord,
     EgoStateRecord,
+    LidarAgreementRecord,
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,

@@ -85,6 +85,12 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
                               transparency=0, omission=0, relabelled=0, depth_changed=0, raw_semantic_wrong=-1,
                               semantic_mismatch=-1, instance_mismatch=-1, depth_mismatch=-1),
     ],
+    R.LidarAgreementRecord: [
+        R.LidarAgreementRecord(sequence_id="s", frame_index=3, points=5760, static_points=5000, missed=2,
+                               median_m=0.0001, p95_m=0.02, within=0.998, tolerance_m=0.1),
+        R.LidarAgreementRecord(sequence_id="s", frame_index=4, points=0, static_points=0, missed=0, median_m=-1.0,
+                               p95_m=-1.0, within=0.0, tolerance_m=0.1),
+    ],
     R.FrameStatisticsRecord: [R.FrameStatisticsRecord(sequence_id="s", voxel_size=0.05, frame_index=3, semantic_id=14,
                                                       voxels=2345, instance_ids=[7, 12, 4294967295]),
                               R.FrameStatisticsRecord(sequence_id="s", voxel_size=0.05, frame_index=3, semantic_id=0,
