@@ -204,6 +204,9 @@ class ActorStateRecord(Record):
     angular_velocity: Vec3  # world frame, rad/s
     gait_phase: float | None = None  # walkers only: simulated phase of the gait cycle, [0, 1)
     phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
+    # uniform scale of the asset about its origin, applied before ``pose`` (which stays rigid): 1 but
+    # for recorded walkers, whose walk cycle is scaled to their recorded height
+    scale: float = 1.0
 
 
 class EgoStateRecord(Record):

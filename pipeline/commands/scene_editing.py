@@ -208,6 +208,7 @@ def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequenc
             new_actors.append(a.model_copy(update={
                 "sequence_id": new_id, "asset_id": new.asset_id, "semantic_id": new.category_id,
                 "box_size": [l, w, h], "box_center": box_center(pose_from_list(a.pose), h),
+                "scale": 1.0,  # the new asset at its own size (a recorded walker's scale was its cycle's)
             }))  # fmt: skip
         update = {"sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}"}
         inputs = {t.path(parent.sequence_id): store.fingerprint(t.path(parent.sequence_id))

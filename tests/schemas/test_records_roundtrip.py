@@ -53,7 +53,7 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
         R.ActorStateRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", semantic_id=12,
                            pose=POSE, box_center=[1, 2, 0.9], box_size=[0.5, 0.5, 1.8], yaw=-1.0,
                            velocity=[1.2, 0.0, 0.0], angular_velocity=[0.0, 0.0, 0.0], gait_phase=0.25,
-                           phase_index=8),
+                           phase_index=8, scale=0.8889),
     ],
     R.SkeletonRecord: [
         R.SkeletonRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", joint_index=0, joint="pelvis",
