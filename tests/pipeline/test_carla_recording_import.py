@@ -221,6 +221,26 @@ def test_recorded_lidar_is_kept_and_agrees_with_our_scene(built, recording):
         assert static > 0.95 * n and missed == 0 and median < 1e-3 and p95 < 1e-3 and within == 1.0
 
 
+@pytest.mark.slow  # 26 s (the export pools every grid); tests/pipeline/test_release_export.py covers it fast
+def test_the_recorded_scan_goes_back_out_in_the_release_layout(built, recording, tmp_path):
+    """The release export writes a recorded frame's own LiDAR scan (CARLA's ray_cast: points and
+    intensities as recorded) as lidar/<frame>.ply, and the release loader reads it back."""
+    from carlaocc.data import CarlaOccDataset
+
+    out = tmp_path / "CarlaOcc"
+    r = cli.invoke(app, ["export", "carlaocc-release", "--root", built.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    (folder,) = [p for p in out.iterdir() if p.is_dir() and "_Seq" in p.name]
+    for f in (0, 4):
+        mine, theirs = cr.read_ply(folder / "lidar" / f"{f:04d}.ply"), cr.read_ply(recording / SEQ / "lidar" / f"{f:04d}.ply")
+        assert list(mine) == list(theirs) == ["x", "y", "z", "I"]
+        for c in theirs:
+            np.testing.assert_allclose(mine[c], theirs[c], atol=1e-4, err_msg=c)
+    sample = CarlaOccDataset(str(out), cameras=False)[4]
+    np.testing.assert_allclose(sample["points"][:, :3], np.column_stack([theirs["x"], theirs["y"], theirs["z"]]),
+                               atol=1e-4)
+
+
 def test_ego_motion_absent_or_malformed(recording, tmp_path):
     path = recording / SEQ / "traffic_info" / "0000.yaml"
     doc = yaml.safe_load(path.read_text())
