@@ -273,8 +273,12 @@ def recorded_frames(store, scenes: ScenesConfig, seq) -> list[dict] | None:
     image files of each rig camera (``{"depth": path, "semantic": path, "rgb": path}``, the raw
     ``depth_carla``/``semantics_carla`` preferred over the release's rectified ``depth``/
     ``semantics``; files that do not exist left out) and its LiDAR scans (``{"lidar": path,
-    "semantic_lidar": path}``, those that exist). None for simulated sequences."""
+    "semantic_lidar": path}``, those that exist). None for simulated sequences, and for an edited
+    copy of a recorded one (``scenes swap``): the recording shows the original actors, so the
+    copy's maps and LiDAR are cast like a simulated sequence's."""
 
+    if seq.parent_sequence_id is not None:
+        return None
     spec = next((t for i, t in enumerate(scenes.towns) if town_key(i) == seq.town and t.style == "carla-recording"), None)
     if spec is None:
         return None

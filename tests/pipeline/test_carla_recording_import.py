@@ -407,3 +407,33 @@ def test_intrinsics_disagreeing_with_the_fov_are_refused(recording, tmp_path):
     assert "calib.yaml: cam_settings.intrinsics" in r.output and "fov 90 deg" in r.output
     assert len(r.output.strip().splitlines()) == 1
     assert not root.exists() or not any(root.iterdir())
+
+
+def test_a_swapped_copy_of_a_recorded_sequence_is_cast_not_read(built, tmp_path):
+    """An edited copy of a recorded sequence (``scenes swap``; the fixture's actors have no
+    compatible other asset, so the copy's record is written as swap writes it): the recording
+    shows the original actors, so the copy's sensors are cast like a simulated sequence's (they
+    used to fail: the copy's name is not a folder of the recording); the original still reads its
+    recorded files."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.pipeline.commands.scene_editing import swap_id
+    from carlaocc.pipeline.engine.spec import Context
+    from carlaocc.pipeline.tasks.sensors import sensors_partitions
+    from carlaocc.schemas.records import FrameRecord, SequenceRecord
+
+    root = tmp_path / "data"
+    shutil.copytree(built.root, root)
+    store = Store(str(root))
+    parent_id = f"town00_{SEQ}"
+    child_id = swap_id(parent_id, "Car", 1)
+    for model in (SequenceRecord, FrameRecord):
+        t = ParquetTable(store, model)
+        t.save(child_id, [r.model_copy(update={"sequence_id": child_id} | (
+            {"parent_sequence_id": parent_id, "edit": "swap Car seed=1"} if model is SequenceRecord else {}))
+            for r in t.load([parent_id])])
+    cfg = DatasetConfig.model_validate(yaml.safe_load((root / "dataset.yaml").read_text()))
+    by_seq = {}
+    for p in sensors_partitions(Context(store=store, config=cfg, voxel_sizes=(VOXEL_SIZE,))):
+        by_seq.setdefault(p.key.split("/")[0], []).append(p)
+    assert by_seq[parent_id] and all("recorded" in p.params and p.files for p in by_seq[parent_id])
+    assert by_seq[child_id] and not any("recorded" in p.params or p.files for p in by_seq[child_id])
