@@ -62,6 +62,7 @@ __all__ = [
     "SequenceDir", "Recording", "LIDAR_HEIGHT", "DEPTH_RANGE", "MESH_TO_WORLD", "OPTICAL_FROM_BODY",
     "discover", "model_key", "read_calib", "read_poses", "read_traffic", "read_actor_info", "read_mesh", "read_ply",
     "decode_depth", "decode_semantics", "palette_lookup", "INTRINSICS_TOL", "pinhole", "check_intrinsics",
+    "read_scans", "NOT_RECORDED",
 ]  # fmt: skip
 
 LIDAR_HEIGHT = 1.73  # m: the LiDAR above the ego's origin (the authors' sensor config)
@@ -477,6 +478,49 @@ def read_ply(path) -> dict[str, np.ndarray]:
     if values.shape != (count, len(names)):
         raise RecordingError(f"{path}: header says {count} points of {len(names)} values, found {values.shape}")
     return {n: values[:, i] for i, n in enumerate(names)}
+
+
+NOT_RECORDED = 255  # the semantic tag of a point of the plain scan (it carries none)
+
+
+def read_scans(lidar_ply=None, semantic_ply=None) -> dict[str, np.ndarray]:
+    """A frame's two recorded LiDAR scans as one set of points, in our LiDAR frame (x forward,
+    y left, z up, metres: the saver's y-negated sensor frame is ours): CARLA's ``ray_cast`` scan
+    (``lidar/<frame>.ply``: x, y, z, I) with ``scan`` 0 and its ``ray_cast_semantic`` scan
+    (``semantic_lidar/<frame>.ply``: x, y, z, CosAngle, ObjIdx, ObjTag) with ``scan`` 1; a missing
+    argument (None) gives no points. Columns x, y, z, distance, scan, intensity (NaN in scan 1),
+    cos_angle (NaN in scan 0), object_index (-1 in scan 0), semantic (:data:`NOT_RECORDED` in scan 0).
+    :class:`RecordingError` names a file without x, y, z, with non-finite points or a tag outside 0-254."""
+    parts = []
+    for scan, path, need in ((0, lidar_ply, ()), (1, semantic_ply, ("CosAngle", "ObjIdx", "ObjTag"))):
+        if path is None:
+            continue
+        cols = read_ply(path)
+        missing = [c for c in ("x", "y", "z", *need) if c not in cols]
+        if missing:
+            raise RecordingError(f"{path}: no property {', '.join(missing)} (the saver writes x y z "
+                                 f"{'CosAngle ObjIdx ObjTag' if scan else 'I'})")  # fmt: skip
+        xyz = np.column_stack([cols["x"], cols["y"], cols["z"]])
+        if not np.isfinite(xyz).all():
+            raise RecordingError(f"{path}: non-finite point coordinates")
+        n = len(xyz)
+        if scan:
+            tag = cols["ObjTag"]
+            if n and (tag.min() < 0 or tag.max() >= NOT_RECORDED or (tag != np.round(tag)).any()):
+                raise RecordingError(f"{path}: ObjTag values outside the integer tags 0-254")
+            extra = {"intensity": np.full(n, np.nan), "cos_angle": cols["CosAngle"],
+                     "object_index": cols["ObjIdx"].astype(np.int64), "semantic": tag.astype(np.uint8)}
+        else:
+            extra = {"intensity": cols.get("I", np.full(n, np.nan)), "cos_angle": np.full(n, np.nan),
+                     "object_index": np.full(n, -1, dtype=np.int64), "semantic": np.full(n, NOT_RECORDED, np.uint8)}
+        parts.append({"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], "distance": np.linalg.norm(xyz, axis=1),
+                      "scan": np.full(n, scan, dtype=np.uint8), **extra})
+    names = ("x", "y", "z", "distance", "scan", "intensity", "cos_angle", "object_index", "semantic")
+    if not parts:
+        return {"x": np.zeros(0), "y": np.zeros(0), "z": np.zeros(0), "distance": np.zeros(0),
+                "scan": np.zeros(0, np.uint8), "intensity": np.zeros(0), "cos_angle": np.zeros(0),
+                "object_index": np.zeros(0, np.int64), "semantic": np.zeros(0, np.uint8)}  # fmt: skip
+    return {c: np.concatenate([p[c] for p in parts]) for c in names}
 
 
 # ------------------------------------------------------------------ maps

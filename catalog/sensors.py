@@ -12,7 +12,8 @@ hierarchy (:class:`carlaocc.catalog.zarrstore.FrameArrayStore`); images are read
 zarr-python, so a recorder may write its ``*_raw`` arrays with any codec.
 
 A LiDAR frame is one Parquet file of points in the LiDAR frame (x forward, y left, z up, metres),
-written atomically with :meth:`Store.write_bytes`.
+written atomically with :meth:`Store.write_bytes`: our ray-cast scans in ``lidar/``
+(:class:`LidarStore`), a recording's own scans in ``lidar_recorded/`` (:class:`RecordedLidarStore`).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import pyarrow.parquet as pq
 import zarr
 
 from carlaocc.catalog.parquet import table_bytes
-from carlaocc.catalog.store import LIDAR_DIR, SENSORS_ZARR, Store, StoreError
+from carlaocc.catalog.store import LIDAR_DIR, LIDAR_RECORDED_DIR, SENSORS_ZARR, Store, StoreError
 from carlaocc.catalog.zarrstore import FrameArrayStore
 from carlaocc.schemas.taxonomy import TAXONOMY_VERSION
 
@@ -61,6 +62,22 @@ LIDAR_COLUMNS: dict[str, tuple[str, str]] = {
     "semantic": ("uint8", "semantic class id of the hit surface, CarlaOcc 30-class taxonomy"),
     "instance": ("uint32", "instance id of the hit surface (0 = stuff)"),
     "channel": ("uint8", "beam index, 0 = top beam"),
+}
+# a recording's scans (CARLA's ray_cast and ray_cast_semantic LiDARs as the CarlaOcc saver writes
+# them, lidar/ and semantic_lidar/ PLY) and our range along each recorded beam
+_RECORDED = "as recorded; NaN / the not-recorded value in the other scan"
+RECORDED_LIDAR_COLUMNS: dict[str, tuple[str, str]] = {
+    "x": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
+    "y": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
+    "z": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
+    "distance": ("float32", "metres from the LiDAR origin"),
+    "scan": ("uint8", "0: the recording's lidar/ scan (CARLA ray_cast), 1: its semantic_lidar/ scan (ray_cast_semantic)"),
+    "intensity": ("float32", "CARLA's intensity (scan 0); " + _RECORDED),
+    "cos_angle": ("float32", "cosine of the incidence angle (scan 1); " + _RECORDED),
+    "object_index": ("int64", "CARLA actor id of the hit object (scan 1; 0 = none); -1 in scan 0"),
+    "semantic": ("uint8", "CARLA's semantic tag of the hit (scan 1; the CarlaOcc 30-class ids); 255 in scan 0"),
+    "raycast_distance": ("float32", "ours: the range along this point's beam through the frame's scene mesh, "
+                                    "metres; inf where our scene has nothing along the beam"),
 }
 LIDAR_FRAME_AXES = "lidar: x forward, y left, z up"
 _FINITE = ("x", "y", "z", "distance")
@@ -176,33 +193,36 @@ class LidarStore:
     """``lidar/<seq>/<frame:06d>.parquet``: one file per frame, points in the LiDAR frame
     (x forward, y left, z up, metres), columns :data:`LIDAR_COLUMNS`."""
 
+    DIR = LIDAR_DIR
+    COLUMNS = LIDAR_COLUMNS
+
     def __init__(self, store: Store):
         self.store = store
 
-    @staticmethod
-    def path(sequence_id: str, frame: int) -> str:
-        return f"{LIDAR_DIR}/{sequence_id}/{frame:06d}.parquet"
+    @classmethod
+    def path(cls, sequence_id: str, frame: int) -> str:
+        return f"{cls.DIR}/{sequence_id}/{frame:06d}.parquet"
 
-    @staticmethod
-    def _schema(metadata: dict) -> pa.Schema:
+    @classmethod
+    def _schema(cls, metadata: dict) -> pa.Schema:
         """Arrow schema of a frame's file: each field's description in its field metadata, the
         frame's metadata as JSON in the schema metadata."""
         fields = [pa.field(c, pa.from_numpy_dtype(np.dtype(d)), nullable=False,
-                           metadata={b"description": desc.encode()}) for c, (d, desc) in LIDAR_COLUMNS.items()]
+                           metadata={b"description": desc.encode()}) for c, (d, desc) in cls.COLUMNS.items()]
         return pa.schema(fields, metadata={_LIDAR_META: json.dumps(metadata, sort_keys=True).encode()})
 
     def save(self, sequence_id: str, frame: int, points: dict[str, np.ndarray],
              metadata: dict | None = None) -> str:
         """Atomically write one frame's points; returns the file's fingerprint. ``points`` holds
-        exactly the :data:`LIDAR_COLUMNS`, 1-D and of equal length, finite x, y, z, distance;
+        exactly the store's ``COLUMNS`` (:data:`LIDAR_COLUMNS`, :data:`RECORDED_LIDAR_COLUMNS`), 1-D and of equal length, finite x, y, z, distance;
         ``metadata`` (JSON-serialisable) is added to the file's schema metadata."""
         what = f"lidar {sequence_id} frame {frame}"
-        missing, extra = set(LIDAR_COLUMNS) - set(points), set(points) - set(LIDAR_COLUMNS)
+        missing, extra = set(self.COLUMNS) - set(points), set(points) - set(self.COLUMNS)
         if missing or extra:
             raise ValueError(f"{what}: missing columns {sorted(missing)}, unknown columns {sorted(extra)}; "
-                             f"expected {', '.join(LIDAR_COLUMNS)}")
+                             f"expected {', '.join(self.COLUMNS)}")
         columns, n = {}, None
-        for c, (dtype, _) in LIDAR_COLUMNS.items():
+        for c, (dtype, _) in self.COLUMNS.items():
             values = np.asarray(points[c])
             if values.ndim != 1:
                 raise ValueError(f"{what}: column {c} has shape {values.shape}, expected 1-D")
@@ -226,10 +246,10 @@ class LidarStore:
         """One frame's points: column -> numpy array of the column's dtype. StoreError naming the
         file when it is missing or lacks a column."""
         table = pq.read_table(self._file(sequence_id, frame))
-        missing = [c for c in LIDAR_COLUMNS if c not in table.column_names]
+        missing = [c for c in self.COLUMNS if c not in table.column_names]
         if missing:
             raise StoreError(f"{self.store.url}: {self.path(sequence_id, frame)} lacks columns {missing}")
-        return {c: table.column(c).to_numpy().astype(d, copy=False) for c, (d, _) in LIDAR_COLUMNS.items()}
+        return {c: table.column(c).to_numpy().astype(d, copy=False) for c, (d, _) in self.COLUMNS.items()}
 
     def metadata(self, sequence_id: str, frame: int) -> dict:
         """The frame's metadata (sequence_id, frame, frame_axes and what the writer added)."""
@@ -242,8 +262,17 @@ class LidarStore:
     def frames(self, sequence_id: str) -> list[int]:
         """Frame indices stored for a sequence, sorted."""
         out = []
-        for p in self.store.glob(f"{LIDAR_DIR}/{sequence_id}", ".parquet"):
+        for p in self.store.glob(f"{self.DIR}/{sequence_id}", ".parquet"):
             head, stem = p.rsplit("/", 1)
-            if head == f"{LIDAR_DIR}/{sequence_id}" and stem[:-len(".parquet")].isdigit():
+            if head == f"{self.DIR}/{sequence_id}" and stem[:-len(".parquet")].isdigit():
                 out.append(int(stem[:-len(".parquet")]))
         return sorted(out)
+
+
+class RecordedLidarStore(LidarStore):
+    """``lidar_recorded/<seq>/<frame:06d>.parquet``: a recorded frame's own LiDAR scans (both of
+    the recording's scans, told apart by ``scan``), points in the LiDAR frame (x forward, y left,
+    z up, metres), with our range along each point's beam; columns :data:`RECORDED_LIDAR_COLUMNS`."""
+
+    DIR = LIDAR_RECORDED_DIR
+    COLUMNS = RECORDED_LIDAR_COLUMNS

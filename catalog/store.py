@@ -33,6 +33,7 @@ TABLE_DIRS: dict[str, str] = {
     "ego_states": "scenes/ego_states",
     "quality": "metrics/quality",
     "rectification": "metrics/rectification",
+    "lidar_agreement": "metrics/lidar_agreement",
     "quality_classes": "metrics/quality_classes",
     "statistics_frames": "metrics/statistics_frames",
     "statistics_classes": "metrics/statistics_classes",
@@ -42,6 +43,7 @@ TABLE_DIRS: dict[str, str] = {
 OCCUPANCY_ZARR = "occupancy.zarr"
 SENSORS_ZARR = "sensors.zarr"
 LIDAR_DIR = "lidar"
+LIDAR_RECORDED_DIR = "lidar_recorded"  # a recording's own LiDAR scans (catalog/sensors.py RecordedLidarStore)
 ADMESH_MESHES = "admesh/meshes"
 ADMESH_TEXTURES = "admesh/textures"
 SCENE_MESHES = "scenes/meshes"

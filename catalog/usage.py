@@ -6,10 +6,11 @@ import os
 import posixpath
 from dataclasses import dataclass
 
-from carlaocc.catalog.store import LIDAR_DIR, OCCUPANCY_ZARR, SENSORS_ZARR, Store
+from carlaocc.catalog.store import LIDAR_DIR, LIDAR_RECORDED_DIR, OCCUPANCY_ZARR, SENSORS_ZARR, Store
 
 # the top-level parts of the layout (docs/architecture.md "Store layout"), in the order a report lists them
-STORE_PARTS: tuple[str, ...] = ("admesh", "scenes", OCCUPANCY_ZARR, SENSORS_ZARR, LIDAR_DIR, "metrics", "catalog")
+STORE_PARTS: tuple[str, ...] = ("admesh", "scenes", OCCUPANCY_ZARR, SENSORS_ZARR, LIDAR_DIR, LIDAR_RECORDED_DIR, "metrics",
+                                 "catalog")
 OTHER = "other"
 
 

@@ -204,6 +204,9 @@ class ActorStateRecord(Record):
     angular_velocity: Vec3  # world frame, rad/s
     gait_phase: float | None = None  # walkers only: simulated phase of the gait cycle, [0, 1)
     phase_index: int | None = None  # walkers only: canonical phase matched by the Skeletal Motion Analyzer
+    # uniform scale of the asset about its origin, applied before ``pose`` (which stays rigid): 1 but
+    # for recorded walkers, whose walk cycle is scaled to their recorded height
+    scale: float = 1.0
 
 
 class EgoStateRecord(Record):
@@ -243,6 +246,25 @@ class SensorPoseRecord(Record):
     frame_index: int
     sensor: str
     pose: Pose  # sensor-to-world, 4x4 row-major
+
+
+class LidarAgreementRecord(Record):
+    """How a recorded frame's LiDAR scan agrees with our scene from the same pose: each recorded
+    point's beam (its direction from the sensor) cast through the frame's scene mesh, our range
+    against the recorded one. Static points are those neither scene nor recording labels a road
+    user on (:func:`carlaocc.schemas.taxonomy.dynamic_ids`); a beam our scene does not hit within
+    range counts as a disagreement."""
+
+    TABLE: ClassVar[str] = "lidar_agreement"
+    sequence_id: str
+    frame_index: int
+    points: int  # recorded points (both scans of the frame: lidar/ and semantic_lidar/)
+    static_points: int
+    missed: int  # static points whose beam hits nothing of our scene within the recorded range + tolerance
+    median_m: float  # median |our range - recorded range| over static points, m (-1: no static point)
+    p95_m: float  # its 95th percentile, m (inf when over 5 % of our beams miss; -1: no static point)
+    within: float  # fraction of static points whose ranges agree within `tolerance_m`
+    tolerance_m: float
 
 
 class RectificationRecord(Record):
@@ -380,6 +402,7 @@ PERSISTED: tuple[type[Record], ...] = (
     ActorStateRecord,
     SkeletonRecord,
     EgoStateRecord,
+    LidarAgreementRecord,
     QualityRecord,
     ClassQualityRecord,
     RectificationRecord,

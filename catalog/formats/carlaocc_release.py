@@ -246,11 +246,15 @@ def encode_normals(normal: np.ndarray) -> np.ndarray:
     return (np.clip((1.0 - n) * 0.5, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def ply_text(points: np.ndarray) -> str:
-    """``lidar/<frame>.ply``: ASCII PLY of x y z (LiDAR frame, metres) and CARLA's intensity
-    ``I = exp(-0.004 * distance)``."""
+def ply_text(points: np.ndarray, intensity: np.ndarray | None = None) -> str:
+    """``lidar/<frame>.ply``: ASCII PLY of x y z (LiDAR frame, metres) and the intensity: the
+    given one (a recorded scan's), else CARLA's model ``I = exp(-0.004 * distance)``."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    intensity = np.exp(-ATTENUATION * np.linalg.norm(p, axis=1))
+    if intensity is None:
+        intensity = np.exp(-ATTENUATION * np.linalg.norm(p, axis=1))
+    intensity = np.asarray(intensity, dtype=np.float64).reshape(-1)
+    if len(intensity) != len(p):
+        raise ValueError(f"lidar PLY: {len(intensity)} intensities for {len(p)} points")
     head = ["ply", "format ascii 1.0", f"element vertex {len(p)}", "property float32 x", "property float32 y",
             "property float32 z", "property float32 I", "end_header"]  # fmt: skip
     buf = io.StringIO()

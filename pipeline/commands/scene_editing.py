@@ -23,8 +23,8 @@ from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.tasks.frame import frame_scene, load_geometry
 from carlaocc.pipeline.tasks.scenes import is_edited, sequence_skeletons
 from carlaocc.schemas import taxonomy
-from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, FrameRecord, PlacementRecord, RunRecord,
-                                      SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, EgoStateRecord, FrameRecord, PlacementRecord,
+                                      RunRecord, SensorPoseRecord, SequenceRecord, SkeletonRecord, TownRecord)
 from carlaocc.stages.geometry import box_center, pose_from_list
 from carlaocc.stages.scenes.assembly import flatten, town_mesh
 from carlaocc.stages.scenes.placing import box_corners_aabb
@@ -140,7 +140,8 @@ def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequenc
     """For every original sequence (or the given ones), write a new sequence in which every
     actor and every static placement (buildings, props, poles...) of ``category`` uses another
     asset of a compatible footprint, drawn per instance / placement from ``seed``; trajectories,
-    rig poses, timing and lots are unchanged, boxes take the new extent. Swapped placements go to
+    rig poses, timing, lots and a recorded ego's motion (``ego_states``) are unchanged, boxes take
+    the new extent. Swapped placements go to
     the new sequence's own copy of the placements (``SequenceRecord.placements``). A sequence with
     nothing to swap gets no edit; when no sequence has anything to swap, nothing is written and
     StoreError says why. The new sequence's ``parent_sequence_id`` names the original and a
@@ -172,6 +173,7 @@ def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequenc
     }
     t_place = ParquetTable(store, PlacementRecord)
     t_skel = ParquetTable(store, SkeletonRecord)
+    t_ego = ParquetTable(store, EgoStateRecord)  # a recorded sequence's ego motion: the same ego, copied
     # 1. plan every edit before writing anything: nothing is written when nothing can be swapped
     plans = []
     for parent in targets:
@@ -206,6 +208,7 @@ def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequenc
             new_actors.append(a.model_copy(update={
                 "sequence_id": new_id, "asset_id": new.asset_id, "semantic_id": new.category_id,
                 "box_size": [l, w, h], "box_center": box_center(pose_from_list(a.pose), h),
+                "scale": 1.0,  # the new asset at its own size (a recorded walker's scale was its cycle's)
             }))  # fmt: skip
         update = {"sequence_id": new_id, "parent_sequence_id": parent.sequence_id, "edit": f"swap {cls.name} seed={seed}"}
         inputs = {t.path(parent.sequence_id): store.fingerprint(t.path(parent.sequence_id))
@@ -230,6 +233,10 @@ def swap_class_locked(store: Store, category: str, seed: int, sequences: Sequenc
         elif t_skel.exists(parent.sequence_id):
             outputs[t_skel.path(new_id)] = t_skel.save(new_id, [
                 r.model_copy(update={"sequence_id": new_id}) for r in t_skel.load([parent.sequence_id])])
+        if t_ego.exists(parent.sequence_id):
+            inputs[t_ego.path(parent.sequence_id)] = store.fingerprint(t_ego.path(parent.sequence_id))
+            outputs[t_ego.path(new_id)] = t_ego.save(new_id, [
+                r.model_copy(update={"sequence_id": new_id}) for r in t_ego.load([parent.sequence_id])])
         results.append(SwapResult(new_id, parent.sequence_id, len(choice), kept, len(statics), kept_static))
         runs.append(RunRecord(
             run_id=run_id, stage=SWAP_STAGE, partition=new_id, code_version="", config_hash=f"{cls.name}:{seed}",

@@ -16,7 +16,7 @@ from PIL import Image
 
 from carlaocc.catalog.carla_recording import (DEPTH_RANGE, RecordingError, decode_depth, decode_semantics, discover,
                                               model_key, read_actor_info, read_calib, read_mesh, read_poses,
-                                              read_traffic)
+                                              read_scans, read_traffic)
 from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.sources.carla_recording import WALK_CYCLE, model_offset
 from carlaocc.catalog.store import StoreError
@@ -28,7 +28,8 @@ from carlaocc.schemas.taxonomy import thing_ids
 from carlaocc.stages.scenes.recording import RecordedAsset, RecordedFrame, WalkFrame, recorded_sequence, recorded_town
 from carlaocc.stages.sensors import CameraMaps
 
-__all__ = ["RecordedTown", "recorded_scenes", "recording_files", "rig_from_calib"]
+__all__ = ["RecordedTown", "recorded_scenes", "recording_files", "rig_from_calib", "recorded_frames", "read_frame_images",
+           "read_frame_lidar"]
 
 
 @dataclass
@@ -263,6 +264,7 @@ def recording_config(recording: str, existing=None):
 
 # ------------------------------------------------------------------ camera images of recorded frames
 
+LIDAR_DIRS = ("lidar", "semantic_lidar")  # a recorded frame's scans, <dir>/<frame>.ply
 IMAGE_DIRS = {"depth": ("depth_carla", "depth"), "semantic": ("semantics_carla", "semantics"), "rgb": ("rgb",)}
 
 
@@ -270,8 +272,13 @@ def recorded_frames(store, scenes: ScenesConfig, seq) -> list[dict] | None:
     """For a sequence of a recorded town: per frame (in order) its recorded frame number and the
     image files of each rig camera (``{"depth": path, "semantic": path, "rgb": path}``, the raw
     ``depth_carla``/``semantics_carla`` preferred over the release's rectified ``depth``/
-    ``semantics``; files that do not exist left out). None for simulated sequences."""
+    ``semantics``; files that do not exist left out) and its LiDAR scans (``{"lidar": path,
+    "semantic_lidar": path}``, those that exist). None for simulated sequences, and for an edited
+    copy of a recorded one (``scenes swap``): the recording shows the original actors, so the
+    copy's maps and LiDAR are cast like a simulated sequence's."""
 
+    if seq.parent_sequence_id is not None:
+        return None
     spec = next((t for i, t in enumerate(scenes.towns) if town_key(i) == seq.town and t.style == "carla-recording"), None)
     if spec is None:
         return None
@@ -298,8 +305,20 @@ def recorded_frames(store, scenes: ScenesConfig, seq) -> list[dict] | None:
                         files[kind] = str(path)
                         break
             images[cam.name] = files
-        out.append({"number": number, "images": images})
+        # the frame's LiDAR scans (the recording's ray_cast and ray_cast_semantic sensors)
+        scans = {d: str(folder / d / f"{number:04d}.ply") for d in LIDAR_DIRS if (folder / d / f"{number:04d}.ply").is_file()}
+        out.append({"number": number, "images": images, "lidar": scans})
     return out
+
+
+def read_frame_lidar(files: dict) -> dict:
+    """A recorded frame's LiDAR points (:func:`carlaocc.catalog.carla_recording.read_scans`) from
+    its scan files (``{"lidar": path, "semantic_lidar": path}``, either may be absent);
+    StoreError naming a malformed file."""
+    try:
+        return read_scans(files.get("lidar"), files.get("semantic_lidar"))
+    except RecordingError as exc:
+        raise StoreError(f"recorded LiDAR: {exc}") from None
 
 
 def read_frame_images(files: dict, cam):

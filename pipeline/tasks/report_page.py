@@ -17,7 +17,7 @@ import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from carlaocc.catalog.store import LIDAR_DIR
+from carlaocc.catalog.store import LIDAR_DIR, LIDAR_RECORDED_DIR
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import AssetStatisticsRecord, QualityRecord, RunRecord, SequenceRecord
@@ -48,14 +48,15 @@ class StageLineage:
 
 
 def _kind(path: str) -> str:
-    """An output's kind for the collapsed view: ``occupancy.zarr/<array>``, ``lidar``, or the
+    """An output's kind for the collapsed view: ``occupancy.zarr/<array>``, ``lidar`` (and
+    ``lidar_recorded``), or the
     directory of a file (``admesh/meshes``, ``metrics/quality``...)."""
     if path.endswith("]") and ".zarr/" in path:  # a frame of a Zarr array
         root, rest = path.split("/", 1)
         return f"{root}/{rest.rsplit('[', 1)[0].rsplit('/', 1)[-1]}"
     parts = path.split("/")
-    if parts[0] == LIDAR_DIR:  # lidar/<seq>/<frame>.parquet
-        return LIDAR_DIR
+    if parts[0] in (LIDAR_DIR, LIDAR_RECORDED_DIR):  # lidar[_recorded]/<seq>/<frame>.parquet
+        return parts[0]
     return "/".join(parts[:2]) if len(parts) > 2 else parts[0]
 
 

@@ -12,16 +12,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.catalog.sensors import CAMERA_MAPS, LidarStore, SensorStore
+from carlaocc.catalog.carla_recording import NOT_RECORDED
+from carlaocc.catalog.sensors import CAMERA_MAPS, LidarStore, RecordedLidarStore, SensorStore
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.engine.spec import Context, Partition, StageSpec
 from carlaocc.pipeline.tasks.frame import frame_inputs
 from carlaocc.pipeline.tasks.partitions import INGEST_PARTITION, sequences
-from carlaocc.pipeline.tasks.recording import read_frame_images, recorded_frames
+from carlaocc.pipeline.tasks.recording import read_frame_images, read_frame_lidar, recorded_frames
 from carlaocc.schemas.configs import DatasetConfig, SensorsConfig
-from carlaocc.schemas.records import RectificationRecord
+from carlaocc.schemas.records import LidarAgreementRecord, RectificationRecord
 from carlaocc.schemas.rig import RigConfig
-from carlaocc.stages.sensors import CameraMaps, camera_poses, recorded_stats, rectify_cameras, simulate_frame
+from carlaocc.stages.scenes.assembly import flatten
+from carlaocc.stages.sensors import CameraMaps, RayScene, camera_poses, recorded_stats, rectify_cameras, simulate_frame
+from carlaocc.stages.sensors.recorded_lidar import lidar_agreement
 from carlaocc.stages.threads import kernel_threads
 
 if TYPE_CHECKING:
@@ -38,7 +41,7 @@ RECORDED_ARRAYS = ("depth_raw", "semantic_raw", "rgb")  # what a recorded sequen
 
 def sensors_partitions(ctx: Context) -> list[Partition]:
     """One per (sequence, frame). A frame of a recorded town (``carla-recording``) also names the
-    recording's image files of that frame (fingerprinted: a changed image re-runs the frame)."""
+    recording's image and LiDAR files of that frame (fingerprinted: a changed file re-runs the frame)."""
 
     out = []
     for seq in sequences(ctx):
@@ -49,6 +52,7 @@ def sensors_partitions(ctx: Context) -> list[Partition]:
             if recorded is not None:
                 params["recorded"] = recorded[t]
                 files = tuple(f for f in recorded[t]["images"].values() for f in f.values())
+                files += tuple(recorded[t]["lidar"].values())
             out.append(Partition(f"{seq.sequence_id}/{t:04d}", params, files=files,
                                  needs=(("ingest", INGEST_PARTITION), ("scenes", seq.town))))
     return out
@@ -181,7 +185,28 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     table = ParquetTable(store, RectificationRecord)
     key = f"{seq_id}/{frame_index:04d}"
     outputs[table.path(key)] = table.save(key, records)
+    if recorded is not None and recorded.get("lidar"):
+        outputs.update(_recorded_lidar(store, seq_id, frame_index, inputs, recorded))
     return outputs
+
+
+def _recorded_lidar(store: Store, seq_id: str, frame_index: int, inputs, recorded: dict) -> dict[str, str]:
+    """A recorded frame's LiDAR scans into lidar_recorded/ with our range along each beam through
+    the frame's scene (cut to ``sensors.scene_range``, 120 m by default: past the recording's
+    80 m LiDAR range) and their agreement into metrics/lidar_agreement/."""
+    points = read_frame_lidar(recorded["lidar"])
+    xyz = np.column_stack([points["x"], points["y"], points["z"]])
+    scene = RayScene(flatten(inputs.scene), nthreads=kernel_threads())
+    ours, summary = lidar_agreement(scene, xyz, points["semantic"], NOT_RECORDED, nthreads=kernel_threads())
+    lidar = RecordedLidarStore(store)
+    meta = {"lidar_to_world": inputs.frame.lidar_pose, "timestamp": inputs.frame.timestamp,
+            "recorded_frame": recorded["number"], "files": sorted(recorded["lidar"])}
+    out = {lidar.path(seq_id, frame_index): lidar.save(seq_id, frame_index, {**points, "raycast_distance": ours}, meta)}
+    table = ParquetTable(store, LidarAgreementRecord)
+    key = f"{seq_id}/{frame_index:04d}"
+    out[table.path(key)] = table.save(key, [LidarAgreementRecord(sequence_id=seq_id, frame_index=frame_index,
+                                                                 **dataclasses.asdict(summary))])
+    return out
 
 
 SPEC = StageSpec(
@@ -189,10 +214,10 @@ SPEC = StageSpec(
     description="ray-cast camera maps and LiDAR, simulator artifacts, instance-guided rectification, normals",
     upstream=("ingest", "scenes"),
     reads=("admesh/", "scenes/", "sensors.zarr/<seq>/<cam>/*_raw (recorded source)",
-           "a recorded town's camera PNGs (depth_carla, semantics_carla, rgb)"),
+           "a recorded town's camera PNGs (depth_carla, semantics_carla, rgb) and LiDAR PLYs (lidar, semantic_lidar)"),
     writes=("sensors.zarr/<seq>/<cam>/{depth,semantic,instance,normal}[_raw]", "sensors.zarr/<seq>/<cam>/rgb",
-            "lidar/<seq>/",
-            "metrics/rectification/"),
+            "lidar/<seq>/", "lidar_recorded/<seq>/ (recorded towns)",
+            "metrics/rectification/", "metrics/lidar_agreement/ (recorded towns)"),
     partitions=sensors_partitions,
     task=sensors_task,
     prepare=_sensors_prepare,

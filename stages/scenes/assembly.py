@@ -10,7 +10,9 @@ Implements the selection of the paper's "Mesh-Based Scene Reconstruction" for on
 2. **Add actors.** This frame's rigid actors use their asset's geometry (``geometry[asset_id]``);
    pedestrians (``phase_index`` not None) use ``pedestrian_geometry(asset_id, phase_index)``
    when given -- the mesh of the gait phase the Skeletal Motion Analyzer matched -- else their
-   rest geometry. The **ego vehicle is never part of the scene**: an actor standing exactly at
+   rest geometry. An actor whose ``scale`` is not 1 (a recorded walker scaled to its recorded
+   height) uses that geometry scaled about the asset origin (:func:`scaled_geometry`); its pose
+   stays rigid. The **ego vehicle is never part of the scene**: an actor standing exactly at
    the frame's ego pose (1 cm, 1e-3 rad; and, when ``ego_asset_id`` is given, using that asset)
    is dropped.
 3. **Move into the LiDAR frame** with ``inverse(lidar_pose) @ object_pose`` and emit one
@@ -45,6 +47,7 @@ frame, stuff whole, as one :class:`PanopticMesh` with per-face semantic and inst
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -58,6 +61,7 @@ from carlaocc.stages.geometry import invert_pose, pose_from_list, transform_poin
 from carlaocc.stages.voxelize.fill import fills
 
 __all__ = [
+    "scaled_geometry",
     "PanopticMesh",
     "PlacementIndex",
     "assemble_frame",
@@ -312,6 +316,24 @@ def _is_ego(actor: ActorStateRecord, ego_pose: np.ndarray, ego_asset_id: str | N
     return bool(same_place and np.allclose(P[:3, :3], ego_pose[:3, :3], atol=1e-3))
 
 
+_SCALED: dict[tuple[int, float], tuple[AssetGeometry, AssetGeometry]] = {}  # (id(geom), scale) -> (geom, scaled)
+
+
+def scaled_geometry(geom: AssetGeometry, scale: float) -> AssetGeometry:
+    """``geom`` scaled uniformly by ``scale`` about the asset origin (the bottom centre of its
+    bounds, so it keeps standing on it); asset frame, metres. Cached while the same geometry
+    object is passed (a walker's frames reuse their cycle frame's copy)."""
+    hit = _SCALED.get((id(geom), scale))
+    if hit is not None and hit[0] is geom:
+        return hit[1]
+    if len(_SCALED) > 256:
+        _SCALED.clear()
+    parts = tuple(dataclasses.replace(p, vertices=p.vertices * scale) for p in geom.parts)
+    out = AssetGeometry(asset_id=geom.asset_id, parts=parts, part_closed=geom.part_closed)
+    _SCALED[(id(geom), scale)] = (geom, out)
+    return out
+
+
 def _actor_geometry(
     actor: ActorStateRecord,
     geometry: Mapping[str, AssetGeometry],
@@ -320,6 +342,11 @@ def _actor_geometry(
     """``(cache key, geometry)`` an actor shows in this frame: its matched gait phase for
     pedestrians (when a phase source is given), else its asset's rest geometry."""
     who = f"actor {actor.instance_id}"
+    if actor.scale != 1.0:
+        if not (np.isfinite(actor.scale) and actor.scale > 0):
+            raise ValueError(f"{who} has scale {actor.scale}: a scale is a positive number")
+        key, geom = _actor_geometry(actor.model_copy(update={"scale": 1.0}), geometry, pedestrian_geometry)
+        return (key, actor.scale), scaled_geometry(geom, actor.scale)
     if actor.phase_index is not None and pedestrian_geometry is not None:
         try:
             return (actor.asset_id, int(actor.phase_index)), pedestrian_geometry(actor.asset_id, int(actor.phase_index))

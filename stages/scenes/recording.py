@@ -18,15 +18,17 @@ World frame: the recording's right-handed world (x forward, y left, z up, metres
   (centre ``actor @ box``, size twice the half extents), yaw / pitch / roll of the actor's
   rotation, the recorded velocity (moved to the pose origin). Walkers: the walk-cycle frame
   matched from the gait signal (how far the left knee is ahead of the right, from the recorded
-  lower-leg bones; :func:`match_walk_frames`) placed at ``actor pose @ T(offset - (0, 0, half
-  height))``; box centred on the actor origin; velocity by central differences of its positions
+  lower-leg bones; :func:`match_walk_frames`), scaled to the recorded box's height
+  (``scale`` = box height / the cycle's height, :func:`walker_scale`; the feet stay at the
+  box's bottom, the head reaches its top) and placed at ``actor pose @ T(scale * offset - (0, 0,
+  half height))``; box centred on the actor origin; velocity by central differences of its positions
   (the recording has none). Angular velocities from the angles' central differences
   (:func:`carlaocc.stages.geometry.angular_velocity`).
 * **Skeletons**: the recorded lower-leg bones' origins (the knees: CARLA's ``crl_leg__L/R`` are
   socket transforms in the walker's actor frame), in the world and the LiDAR frame.
 
-Not done: walkers are not scaled to their recorded height (the walk cycle's own size is used);
-actors whose blueprint has no model are left out and counted (``skipped``).
+Not done: actors whose blueprint has no model are left out and counted (``skipped``); a walker's
+proportions are the walk cycle's (one uniform scale: CARLA records no bone lengths but the legs').
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from carlaocc.stages.scenes.network import RoadNetwork, Town
 from carlaocc.stages.scenes.placing import Placer
 
 __all__ = ["RecordedAsset", "WalkFrame", "RecordedFrame", "RecordedSequence", "recorded_town", "recorded_sequence",
-           "traffic_level_of", "match_walk_frames", "translation"]  # fmt: skip
+           "traffic_level_of", "match_walk_frames", "translation", "cycle_height", "walker_scale"]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -177,6 +179,21 @@ def match_walk_frames(stride: np.ndarray, times: np.ndarray, cycle: Sequence[flo
     return out
 
 
+SCALE_DECIMALS = 4  # walker scales are rounded to this many decimals (a cycle as tall as the box: exactly 1)
+
+
+def cycle_height(cycle: Sequence[WalkFrame]) -> float:
+    """The walk cycle's height (m): the highest top of its frames above the feet (the frames'
+    origins in the actor frame with the feet at z = 0, plus their assets' heights)."""
+    return max(float(w.offset[2]) + float(w.asset.extent[2]) for w in cycle)
+
+
+def walker_scale(height: float, cycle: Sequence[WalkFrame]) -> float:
+    """The uniform scale that makes the walk cycle ``height`` metres tall (a recorded walker's box
+    height), rounded to :data:`SCALE_DECIMALS` decimals."""
+    return round(height / cycle_height(cycle), SCALE_DECIMALS)
+
+
 def _at(velocity: np.ndarray, omega: np.ndarray, actor: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """The velocity of the pose origin (flow turns a body about it) from the actor origin's:
     ``v + omega x (p_pose - p_actor)``."""
@@ -272,10 +289,16 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
             if not cycle:
                 out.skipped.append((f.number, p.id, "no walk cycle to pose the walker with"))
                 continue
+            if not p.extent[2] > 0:
+                out.skipped.append((f.number, p.id, f"box height {2 * p.extent[2]:g} m: cannot scale the walker to it"))
+                continue
             j = int(phase[(p.id, k)])
             out.phase_frames.setdefault(p.id, []).append(j)
-            # the asset's axes are the actor's: its origin sits at the offset, the feet a half height down
-            off = cycle[j].offset
+            # the walk cycle scaled about the feet to the recorded box's height (CARLA's walker
+            # box stands on the feet); the asset's axes are the actor's: its origin sits at the
+            # scaled offset, the feet a half height below the actor origin
+            scale = walker_scale(2 * float(p.extent[2]), cycle)
+            off = cycle[j].offset * scale
             pose = p.transform @ translation(off[0], off[1], off[2] - p.extent[2])
             yaw, pitch, roll = yaw_pitch_roll(p.transform)
             vel, omega = rates[(p.id, k)]
@@ -284,7 +307,7 @@ def recorded_sequence(sequence_id: str, town: Town, index: int, frames: Sequence
                 semantic_id=cycle[j].asset.category_id, pose=pose_to_list(pose),
                 box_center=[float(c) for c in p.transform[:3, 3]], box_size=[float(2 * e) for e in p.extent],
                 yaw=yaw, pitch=pitch, roll=roll, velocity=[float(c) for c in _at(vel, omega, p.transform, pose)],
-                angular_velocity=[float(c) for c in omega], gait_phase=j / len(cycle),
+                angular_velocity=[float(c) for c in omega], gait_phase=j / len(cycle), scale=scale,
             ))  # fmt: skip
             # the recorded bones: socket transforms in the actor frame; their origins the knees
             for b, name in enumerate(sorted(p.bones)):

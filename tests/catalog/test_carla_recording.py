@@ -170,6 +170,42 @@ def test_lidar_points_in_the_sensor_frame(recording):
         cr.read_ply(bad)
 
 
+def test_both_scans_round_trip_through_the_recorded_lidar_store(recording, tmp_path):
+    """read_scans joins a frame's two scans (scan 0: lidar/, scan 1: semantic_lidar/, each
+    point kept with its own columns); RecordedLidarStore writes them to
+    lidar_recorded/<seq>/<frame>.parquet and reads the same values back."""
+    from carlaocc.catalog.sensors import RECORDED_LIDAR_COLUMNS, RecordedLidarStore
+    from carlaocc.catalog.store import Store
+
+    seq = recording / SEQ
+    plain, sem = cr.read_ply(seq / "lidar" / "0002.ply"), cr.read_ply(seq / "semantic_lidar" / "0002.ply")
+    pts = cr.read_scans(seq / "lidar" / "0002.ply", seq / "semantic_lidar" / "0002.ply")
+    n0 = len(plain["x"])
+    assert len(pts["x"]) == n0 + len(sem["x"]) and (pts["scan"][:n0] == 0).all() and (pts["scan"][n0:] == 1).all()
+    np.testing.assert_array_equal(pts["y"][:n0], plain["y"])  # the saver's y-negated frame is ours: kept
+    np.testing.assert_array_equal(pts["intensity"][:n0], plain["I"])
+    np.testing.assert_array_equal(pts["semantic"][n0:], sem["ObjTag"])
+    assert (pts["semantic"][:n0] == cr.NOT_RECORDED).all() and np.isnan(pts["cos_angle"][:n0]).all()
+    np.testing.assert_allclose(pts["distance"], np.linalg.norm(np.column_stack([pts["x"], pts["y"], pts["z"]]), axis=1))
+    assert len(cr.read_scans(None, seq / "semantic_lidar" / "0002.ply")["x"]) == len(sem["x"])
+    assert len(cr.read_scans()["x"]) == 0
+    store = Store(str(tmp_path / "data"))
+    lidar = RecordedLidarStore(store)
+    ours = np.full(len(pts["x"]), np.inf, np.float32)
+    lidar.save("s", 2, {**pts, "raycast_distance": ours}, {"recorded_frame": 2})
+    assert lidar.path("s", 2) == "lidar_recorded/s/000002.parquet" and lidar.frames("s") == [2]
+    back = lidar.load("s", 2)
+    assert list(back) == list(RECORDED_LIDAR_COLUMNS)
+    for c in pts:
+        np.testing.assert_array_equal(back[c], pts[c].astype(RECORDED_LIDAR_COLUMNS[c][0]), err_msg=c)
+    assert lidar.metadata("s", 2)["recorded_frame"] == 2
+    # a semantic scan without its tags is named
+    bad = tmp_path / "0002.ply"
+    bad.write_text((seq / "semantic_lidar" / "0002.ply").read_text().replace("ObjTag", "Tag"))
+    with pytest.raises(cr.RecordingError, match="0002.ply: no property ObjTag"):
+        cr.read_scans(None, bad)
+
+
 def test_intrinsics_must_match_size_and_fov(copy):
     """The rig is built from the image size and fov; intrinsics saying otherwise are refused
     with one line naming the file and both sides (CARLA's pinhole: f = (W/2) / tan(fov/2))."""

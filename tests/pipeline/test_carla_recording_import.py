@@ -194,6 +194,53 @@ def test_the_ego_keeps_its_recorded_velocity(built, recording):
     assert other[0][0] == 0
 
 
+def test_recorded_lidar_is_kept_and_agrees_with_our_scene(built, recording):
+    """Issue 38: both recorded scans of every frame in lidar_recorded/ (the PLYs' points, our
+    axes), our range along each recorded beam beside them, and the agreement in
+    metrics/lidar_agreement: the static scene's ranges agree (the fixture's scans were cast
+    through the same meshes: what is measured is the chain of poses, frames and axes)."""
+    from carlaocc.catalog.sensors import RecordedLidarStore
+
+    seq = f"town00_{SEQ}"
+    lidar = RecordedLidarStore(built)
+    assert lidar.frames(seq) == list(range(6))
+    for f in (0, 5):
+        pts = lidar.load(seq, f)
+        plain, sem = (cr.read_ply(recording / SEQ / d / f"{f:04d}.ply") for d in ("lidar", "semantic_lidar"))
+        assert (pts["scan"] == 0).sum() == len(plain["x"]) and (pts["scan"] == 1).sum() == len(sem["x"])
+        np.testing.assert_allclose(pts["y"][pts["scan"] == 1], sem["y"], atol=1e-6)
+        assert lidar.metadata(seq, f)["recorded_frame"] == f
+        # the building's returns: on the left, and our ray along those beams hits it at the same range
+        building = (pts["semantic"] == 3)
+        assert building.sum() > 20 and (pts["y"][building] > 0).all()
+        np.testing.assert_allclose(pts["raycast_distance"][building], pts["distance"][building], atol=1e-3)
+    _, rows = query(built, f"SELECT frame_index, points, static_points, missed, median_m, p95_m, within "
+                           f"FROM lidar_agreement WHERE sequence_id = '{seq}' ORDER BY 1")  # fmt: skip
+    assert [r[0] for r in rows] == list(range(6))
+    for _, n, static, missed, median, p95, within in rows:
+        assert static > 0.95 * n and missed == 0 and median < 1e-3 and p95 < 1e-3 and within == 1.0
+
+
+@pytest.mark.slow  # 26 s (the export pools every grid); tests/pipeline/test_release_export.py covers it fast
+def test_the_recorded_scan_goes_back_out_in_the_release_layout(built, recording, tmp_path):
+    """The release export writes a recorded frame's own LiDAR scan (CARLA's ray_cast: points and
+    intensities as recorded) as lidar/<frame>.ply, and the release loader reads it back."""
+    from carlaocc.data import CarlaOccDataset
+
+    out = tmp_path / "CarlaOcc"
+    r = cli.invoke(app, ["export", "carlaocc-release", "--root", built.url, "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    (folder,) = [p for p in out.iterdir() if p.is_dir() and "_Seq" in p.name]
+    for f in (0, 4):
+        mine, theirs = cr.read_ply(folder / "lidar" / f"{f:04d}.ply"), cr.read_ply(recording / SEQ / "lidar" / f"{f:04d}.ply")
+        assert list(mine) == list(theirs) == ["x", "y", "z", "I"]
+        for c in theirs:
+            np.testing.assert_allclose(mine[c], theirs[c], atol=1e-4, err_msg=c)
+    sample = CarlaOccDataset(str(out), cameras=False)[4]
+    np.testing.assert_allclose(sample["points"][:, :3], np.column_stack([theirs["x"], theirs["y"], theirs["z"]]),
+                               atol=1e-4)
+
+
 def test_ego_motion_absent_or_malformed(recording, tmp_path):
     path = recording / SEQ / "traffic_info" / "0000.yaml"
     doc = yaml.safe_load(path.read_text())
@@ -360,3 +407,33 @@ def test_intrinsics_disagreeing_with_the_fov_are_refused(recording, tmp_path):
     assert "calib.yaml: cam_settings.intrinsics" in r.output and "fov 90 deg" in r.output
     assert len(r.output.strip().splitlines()) == 1
     assert not root.exists() or not any(root.iterdir())
+
+
+def test_a_swapped_copy_of_a_recorded_sequence_is_cast_not_read(built, tmp_path):
+    """An edited copy of a recorded sequence (``scenes swap``; the fixture's actors have no
+    compatible other asset, so the copy's record is written as swap writes it): the recording
+    shows the original actors, so the copy's sensors are cast like a simulated sequence's (they
+    used to fail: the copy's name is not a folder of the recording); the original still reads its
+    recorded files."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.pipeline.commands.scene_editing import swap_id
+    from carlaocc.pipeline.engine.spec import Context
+    from carlaocc.pipeline.tasks.sensors import sensors_partitions
+    from carlaocc.schemas.records import FrameRecord, SequenceRecord
+
+    root = tmp_path / "data"
+    shutil.copytree(built.root, root)
+    store = Store(str(root))
+    parent_id = f"town00_{SEQ}"
+    child_id = swap_id(parent_id, "Car", 1)
+    for model in (SequenceRecord, FrameRecord):
+        t = ParquetTable(store, model)
+        t.save(child_id, [r.model_copy(update={"sequence_id": child_id} | (
+            {"parent_sequence_id": parent_id, "edit": "swap Car seed=1"} if model is SequenceRecord else {}))
+            for r in t.load([parent_id])])
+    cfg = DatasetConfig.model_validate(yaml.safe_load((root / "dataset.yaml").read_text()))
+    by_seq = {}
+    for p in sensors_partitions(Context(store=store, config=cfg, voxel_sizes=(VOXEL_SIZE,))):
+        by_seq.setdefault(p.key.split("/")[0], []).append(p)
+    assert by_seq[parent_id] and all("recorded" in p.params and p.files for p in by_seq[parent_id])
+    assert by_seq[child_id] and not any("recorded" in p.params or p.files for p in by_seq[child_id])

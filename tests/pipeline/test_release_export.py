@@ -287,3 +287,34 @@ def test_a_frame_without_a_pose_is_refused(built, tmp_path):
     # the release's reader would fail on the frame: refused, naming it, before any file is written
     assert r.exit_code == 2 and f"{seq}: no LiDAR pose for frame 1" in r.output
     assert not out.exists() or not any(out.rglob("*.npz"))
+
+
+def test_a_recorded_frame_exports_its_own_lidar_scan(tmp_path):
+    """A recorded frame has no ray-cast sweep: the release's lidar/<frame>.ply is the recording's
+    own ray_cast scan (scan 0 of lidar_recorded/, its intensities), never the semantic one; our
+    sweep wins where both exist; a frame with neither gets no file."""
+    from carlaocc.catalog.carla_recording import read_ply
+    from carlaocc.catalog.sensors import LIDAR_COLUMNS, LidarStore, RecordedLidarStore
+    from carlaocc.pipeline.commands.export.release import write_lidar
+
+    store = Store(str(tmp_path / "data"))
+    rng = np.random.default_rng(5)
+    n = 40
+    xyz = rng.uniform(-30, 30, (n, 3))
+    scan = (np.arange(n) >= 25).astype(np.uint8)  # 25 points of scan 0, 15 of scan 1
+    pts = {"x": xyz[:, 0], "y": xyz[:, 1], "z": xyz[:, 2], "distance": np.linalg.norm(xyz, axis=1), "scan": scan,
+           "intensity": np.where(scan == 0, rng.uniform(0.5, 1.0, n), np.nan),
+           "cos_angle": np.where(scan == 1, 0.5, np.nan), "object_index": np.where(scan == 1, 7, -1),
+           "semantic": np.where(scan == 1, 3, 255).astype(np.uint8), "raycast_distance": np.linalg.norm(xyz, axis=1)}
+    RecordedLidarStore(store).save("s", 0, pts)
+    assert write_lidar(store, "s", 0, tmp_path / "out") == 1
+    got = read_ply(tmp_path / "out" / "lidar" / "0000.ply")
+    np.testing.assert_allclose(np.column_stack([got["x"], got["y"], got["z"]]), xyz[:25], atol=1e-4)
+    np.testing.assert_allclose(got["I"], pts["intensity"][:25], atol=1e-4)
+    # our own sweep of the frame, where there is one, is the one exported
+    ours = {c: np.zeros(3, dtype=d) for c, (d, _) in LIDAR_COLUMNS.items()}
+    ours["x"] = np.array([1.0, 2.0, 3.0], np.float32)
+    LidarStore(store).save("s", 0, ours)
+    write_lidar(store, "s", 0, tmp_path / "out")
+    assert read_ply(tmp_path / "out" / "lidar" / "0000.ply")["x"].tolist() == [1.0, 2.0, 3.0]
+    assert write_lidar(store, "s", 1, tmp_path / "out") == 0

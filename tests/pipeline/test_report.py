@@ -210,6 +210,12 @@ def test_stage_lineage_collapses_partitions():
     assert (L.stage, L.partitions, L.completed, L.run_ids) == ("voxelize", 2, 1, ["r1", "r2"])
     assert L.inputs == {"scenes": 1} and L.outputs == {"occupancy.zarr/semantic": 1}
     assert L.task_seconds == pytest.approx(4.0)
+    # a recorded frame's outputs: both LiDAR folders collapse to one kind each, whatever the sequence
+    recs = [_run("sensors", f"{seq}/0000", {f"lidar_recorded/{seq}/000000.parquet": "a", f"lidar/{seq}/000000.parquet": "b",
+                                           f"metrics/lidar_agreement/{seq}/0000.parquet": "c"}, {}, run_id="r1")
+            for seq in ("s1", "s2")]  # fmt: skip
+    (L,) = stage_lineage(recs)
+    assert L.outputs == {"lidar_recorded": 2, "lidar": 2, "metrics/lidar_agreement": 2}
 
 
 def test_store_usage_counts_parts(tmp_path):

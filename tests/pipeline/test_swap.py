@@ -13,7 +13,8 @@ from carlaocc.catalog.parquet import ParquetTable
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.pipeline.cli import app
 from carlaocc.pipeline.commands.scene_editing import SWAP_STAGE, compatible, swap_class
-from carlaocc.schemas.records import ActorStateRecord, AssetRecord, FrameRecord, SensorPoseRecord, SequenceRecord
+from carlaocc.schemas.records import (ActorStateRecord, AssetRecord, EgoStateRecord, FrameRecord, SensorPoseRecord,
+                                      SequenceRecord)
 from carlaocc.stages.geometry import pose_matrix, pose_to_list
 
 POSE = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
@@ -99,6 +100,27 @@ def test_swap_writes_a_child_sequence_with_lineage(store):
     assert [r.sequence_id for r in again] == [new]
     assert {(a.frame_index, a.instance_id): a.asset_id for a in ParquetTable(store, ActorStateRecord).load([new])} == {
         k: a.asset_id for k, a in got.items()}
+
+
+def test_swap_copies_a_recorded_ego_motion(store):
+    """A recorded sequence's ego velocities (``ego_states``) go with the swapped copy, named in its
+    lineage; a sequence without them gets none."""
+    sid, t_ego = "town00_low_seq000", ParquetTable(store, EgoStateRecord)
+    rows = [EgoStateRecord(sequence_id=sid, frame_index=f, velocity=[5.0, 0.05 * f, 0.0], acceleration=[0.1, 0, 0])
+            for f in range(2)]
+    t_ego.save(sid, rows)
+    (res,) = swap_class(store, "Car", seed=3)
+    got = sorted(t_ego.load([res.sequence_id]), key=lambda r: r.frame_index)
+    assert [r.model_copy(update={"sequence_id": sid}) for r in got] == rows
+    assert all(r.sequence_id == res.sequence_id for r in got)
+    (run,) = LineageLog(store).load(SWAP_STAGE)
+    assert t_ego.path(sid) in json.loads(run.input_fingerprints)
+    assert t_ego.path(res.sequence_id) in json.loads(run.output_fingerprints)
+
+
+def test_swap_without_ego_states_writes_none(store):
+    (res,) = swap_class(store, "Car", seed=3)
+    assert not ParquetTable(store, EgoStateRecord).exists(res.sequence_id)
 
 
 def test_swap_errors(store):

@@ -53,7 +53,7 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
         R.ActorStateRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", semantic_id=12,
                            pose=POSE, box_center=[1, 2, 0.9], box_size=[0.5, 0.5, 1.8], yaw=-1.0,
                            velocity=[1.2, 0.0, 0.0], angular_velocity=[0.0, 0.0, 0.0], gait_phase=0.25,
-                           phase_index=8),
+                           phase_index=8, scale=0.8889),
     ],
     R.SkeletonRecord: [
         R.SkeletonRecord(sequence_id="s", frame_index=0, instance_id=102, asset_id="p1", joint_index=0, joint="pelvis",
@@ -84,6 +84,12 @@ SAMPLES: dict[type[R.Record], list[R.Record]] = {
         R.RectificationRecord(sequence_id="s", frame_index=4, camera="camera_01", source="recorded", pixels=10,
                               transparency=0, omission=0, relabelled=0, depth_changed=0, raw_semantic_wrong=-1,
                               semantic_mismatch=-1, instance_mismatch=-1, depth_mismatch=-1),
+    ],
+    R.LidarAgreementRecord: [
+        R.LidarAgreementRecord(sequence_id="s", frame_index=3, points=5760, static_points=5000, missed=2,
+                               median_m=0.0001, p95_m=0.02, within=0.998, tolerance_m=0.1),
+        R.LidarAgreementRecord(sequence_id="s", frame_index=4, points=0, static_points=0, missed=0, median_m=-1.0,
+                               p95_m=-1.0, within=0.0, tolerance_m=0.1),
     ],
     R.FrameStatisticsRecord: [R.FrameStatisticsRecord(sequence_id="s", voxel_size=0.05, frame_index=3, semantic_id=14,
                                                       voxels=2345, instance_ids=[7, 12, 4294967295]),

@@ -63,3 +63,68 @@ def test_a_recorded_town_places_every_static_mesh():
     assert town.bounds == (0.0, 0.0, 6.0, 1.0)
     with pytest.raises(ValueError, match="no static actor"):
         recorded_town("town03", 3, "rec", [])
+
+
+def _walk_tool():
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "make_carla_recording", Path(__file__).resolve().parents[2] / "tools" / "make_carla_recording.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("height", [1.2, 1.62, 1.8, 1.95])
+def test_a_recorded_walker_is_as_tall_as_its_box(height):
+    """The walk cycle (1.8 m tall, feet at its origin) is scaled to each walker's recorded box:
+    in every frame the posed mesh's top is the box's top within 1 mm (the scale is rounded to
+    4 decimals: 0.2 mm at 2 m) and its lowest point is the cycle frame's own lowest point, scaled,
+    above the box's bottom (the feet stand on it)."""
+    from carlaocc.catalog.carla_recording import EgoState, PedestrianState, TrafficFrame
+    from carlaocc.schemas.meshes import AssetGeometry, MeshPart
+    from carlaocc.schemas.records import AssetRecord
+    from carlaocc.schemas.rig import RigConfig
+    from carlaocc.stages.geometry import transform_points
+    from carlaocc.stages.scenes.assembly import PlacementIndex, assemble_frame
+    from carlaocc.stages.scenes.recording import (RecordedFrame, WalkFrame, cycle_height, recorded_sequence,
+                                                  translation)
+
+    tool = _walk_tool()
+    cycle, geometry, lows = [], {}, []
+    for i in range(0, 36, 6):  # six frames of the tool's walk cycle, in the actor axes with the feet at z = 0
+        V, F, _ = tool.walker_pose(i / 36)
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        off = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])  # the asset origin: bottom centre
+        aid = f"walk{i:02d}"
+        asset = AssetRecord(asset_id=aid, source="carla-recording", source_path=aid, licence="x", category_id=12,
+                            category="Pedestrian", subclass="adult", extent=list(hi - lo), vertex_count=len(V),
+                            face_count=len(F), part_count=1, transparent_part_count=0, surface_area=1.0, volume=1.0,
+                            watertight=True, geometry_hash=aid, mesh_path="")
+        geometry[aid] = AssetGeometry(aid, (MeshPart("body", V - off, F, 12),), (True,))
+        cycle.append(WalkFrame(asset=asset, offset=off, stride=float(np.sin(2 * np.pi * i / 36))))
+        lows.append(lo[2])
+    assert cycle_height(cycle) == pytest.approx(1.8)
+    town = recorded_town("town00", 0, "rec", [("Road", 1, np.array([[-50.0, -50, 0], [50, -50, 0], [0, 50, 0]]),
+                                                np.array([[0, 1, 2]]))])  # fmt: skip
+    geometry.update(town.stuff)
+    frames = []
+    for k in range(6):
+        walker = translation(3.0 + 0.14 * k, 4.0, 0.3 + height / 2) @ np.diag([-1.0, -1.0, 1.0, 1.0])  # turned 180 deg
+        ped = PedestrianState(id=301, type="walker.pedestrian.0001", transform=walker,
+                              extent=np.array([0.25, 0.25, height / 2]), bones={})
+        traffic = TrafficFrame(ego=EgoState(1, "vehicle.x", None, None, None), vehicles=(), pedestrians=(ped,))
+        frames.append(RecordedFrame(number=k, lidar_pose=translation(0.0, 0.0, 1.73 + 0.02 * k), traffic=traffic))
+    seq = recorded_sequence("town00_s", town, 0, frames, RigConfig(), {}, cycle)
+    index = PlacementIndex(town.placements)
+    for k, fr in enumerate(seq.frames):
+        (actor,) = [a for a in seq.actors if a.frame_index == k]
+        assert actor.scale == pytest.approx(height / 1.8, abs=1e-4) and actor.box_size[2] == pytest.approx(height)
+        scene = assemble_frame(fr, seq.actors, index, geometry, (np.full(3, -60.0), np.full(3, 60.0)))
+        (mesh,) = [m for m in scene if m.instance_id == actor.instance_id]
+        z = transform_points(np.asarray(fr.lidar_pose).reshape(4, 4), mesh.vertices)[:, 2]
+        bottom, top = 0.3, 0.3 + height  # the recorded box, world z
+        assert z.max() == pytest.approx(top, abs=1e-3)
+        j = round(actor.gait_phase * len(cycle))
+        assert z.min() == pytest.approx(bottom + actor.scale * lows[j], abs=1e-3)

@@ -7,7 +7,7 @@ What is written under ``OUT`` (formats: :mod:`carlaocc.catalog.formats.carlaocc_
     Town<NN>_Opt_Seq<NN>/occupancy/{vs_0_1, vs_0_2_forward_view, vs_0_4_surround_view}/<frame:04d>.npz
     Town<NN>_Opt_Seq<NN>/poses/lidar.txt
     Town<NN>_Opt_Seq<NN>/{rgb, depth, semantics, normal}/image_XX/<frame:04d>.png   (where built)
-    Town<NN>_Opt_Seq<NN>/lidar/<frame:04d>.ply                                     (where built)
+    Town<NN>_Opt_Seq<NN>/lidar/<frame:04d>.ply                                     (where built or recorded)
 
 How our dataset maps onto it:
 
@@ -43,7 +43,7 @@ from carlaocc.catalog.formats.manifest import grid_manifest, save_grid_manifest,
 from carlaocc.catalog.images import png_bytes
 from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.parquet import ParquetTable
-from carlaocc.catalog.sensors import LidarStore, SensorStore
+from carlaocc.catalog.sensors import LidarStore, RecordedLidarStore, SensorStore
 from carlaocc.catalog.splits import SPLIT_NAMES
 from carlaocc.catalog.store import Store, StoreError
 from carlaocc.catalog.formats.carlaocc_release import release_grid_spec
@@ -113,12 +113,21 @@ def _write_images(store: Store, seq: str, frame: int, folder: Path) -> int:
     return n
 
 
-def _write_lidar(store: Store, seq: str, frame: int, folder: Path) -> int:
-    lidar = LidarStore(store)
-    if not lidar.exists(seq, frame):
+def write_lidar(store: Store, seq: str, frame: int, folder: Path) -> int:
+    """The frame's scan as ``lidar/<frame>.ply``: our ray-cast one, else (a recorded frame) the
+    recording's own ``lidar/`` scan as kept in lidar_recorded/ (scan 0: CARLA's ray_cast LiDAR,
+    which is what the release's ``lidar/`` holds)."""
+    lidar, recorded = LidarStore(store), RecordedLidarStore(store)
+    intensity = None
+    if lidar.exists(seq, frame):
+        pts = lidar.load(seq, frame)
+    elif recorded.exists(seq, frame):
+        pts = recorded.load(seq, frame)
+        pts = {c: v[pts["scan"] == 0] for c, v in pts.items()}
+        intensity = pts["intensity"]
+    else:
         return 0
-    pts = lidar.load(seq, frame)
-    text = rel.ply_text(np.column_stack([pts["x"], pts["y"], pts["z"]]))
+    text = rel.ply_text(np.column_stack([pts["x"], pts["y"], pts["z"]]), intensity)
     atomic_write(folder / "lidar" / f"{frame:04d}.ply", lambda fh: fh.write(text.encode()))
     return 1
 
@@ -203,7 +212,7 @@ def write_release(job: ExportJob) -> tuple[int, int, int]:
                 save_carlaocc_npz(folder / "occupancy" / g.name / f"{t:04d}.npz", s_c, i_c, g.voxel_size,
                                   g.voxel_origin, encoding)
                 n_files += 1
-            n_files += _write_images(store, seq, t, folder) + _write_lidar(store, seq, t, folder)
+            n_files += _write_images(store, seq, t, folder) + write_lidar(store, seq, t, folder)
             n_frames += 1
             job.advance()
         note["towns"][rec.town] = {"number": f"{town_no:02d}", "folder": rel.sequence_folder(town_no, 0)[:-6]}
