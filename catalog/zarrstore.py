@@ -162,11 +162,14 @@ class FrameArrayStore(ABC):
         for name in names:
             dtype, description, trailing = self.arrays[name]
             path = self.array_path(sequence_id, group, name)
-            shape = (frame_count, *frame_shape, *trailing)
-            chunks = (1, *chunk_shape, *trailing)
+            f_shape, c_shape, dims = self._array_layout(name, frame_shape, chunk_shape, attrs.get("dims"))
+            shape = (frame_count, *f_shape, *trailing)
+            chunks = (1, *c_shape, *trailing)
             want = {**attrs, "description": description}
+            if dims is not None:
+                want["dims"] = list(dims)
             if trailing:
-                want["dims"] = [*attrs["dims"], "component"]
+                want["dims"] = [*want["dims"], "component"]
             if path in root:
                 arr = root[path]
                 if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
@@ -176,6 +179,13 @@ class FrameArrayStore(ABC):
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
                               compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
         return replaced
+
+    def _array_layout(self, name: str, frame_shape: tuple[int, ...], chunk_shape: tuple[int, ...],
+                      dims: list[str] | None) -> tuple[tuple[int, ...], tuple[int, ...], list[str] | None]:
+        """(frame shape, chunk shape, dims) of array ``name`` before its trailing axes: the
+        group's own by default; a subclass may give one array another last axis (e.g. bits
+        packed along it)."""
+        return tuple(frame_shape), tuple(chunk_shape), dims
 
     def _repair_metadata(self, sequence_id: str, group, names: tuple[str, ...],
                          drop_others: bool) -> tuple[bool, list[str]]:
@@ -389,8 +399,7 @@ class FrameArrayStore(ABC):
         :class:`carlaocc.stages.quality.blocks.BlockedGrid`. StoreError naming a damaged chunk."""
         x_size = self._layout(sequence_id, group, name)[0][1]
         (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, 0, x_size)
-        cx, cy = chunks[1], chunks[2]
-        layout = (-(-shape[1] // cx), -(-shape[2] // cy), *chunks[1:])
+        layout = self.block_layout(sequence_id, group, name)
         if out is None:
             out = np.empty(layout, dtype)
         elif out.shape != layout or out.dtype.itemsize != np.dtype(dtype).itemsize or not out.flags.c_contiguous:
@@ -406,6 +415,11 @@ class FrameArrayStore(ABC):
             except (RuntimeError, ValueError) as exc:  # zstd error, or the wrong decoded size
                 raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
         return out
+
+    def block_layout(self, sequence_id: str, group, name: str) -> tuple[int, ...]:
+        """The shape :meth:`read_blocks` fills for one frame of one array: ``(nbx, nby, cx, cy, *rest)``."""
+        shape, chunks, _ = self._layout(sequence_id, group, name)
+        return (-(-shape[1] // chunks[1]), -(-shape[2] // chunks[2]), *chunks[1:])
 
     def layout(self, sequence_id: str, group, name: str) -> tuple[tuple, tuple, np.dtype]:
         """``(shape, chunks, dtype)`` of one array (ValueError naming it when it does not exist)."""
