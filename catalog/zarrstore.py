@@ -104,6 +104,8 @@ class FrameArrayStore(ABC):
     # array name -> dtype, description, trailing axes (one chunk each, beyond the frame's axes)
     arrays: ClassVar[dict[str, tuple[str, str, tuple[int, ...]]]] = {}
     kind: ClassVar[str] = "arrays"  # what the arrays are called in errors ("occupancy arrays", "camera maps")
+    # array name -> zstd level of its chunks, where it is not ZSTD_LEVEL (decoding is the same)
+    zstd_levels: ClassVar[dict[str, int]] = {}
 
     def __init__(self, store: Store):
         self.store = store
@@ -177,7 +179,8 @@ class FrameArrayStore(ABC):
                     continue
                 replaced = True
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
-                              compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
+                              compressors=ZstdCodec(level=self.zstd_levels.get(name, ZSTD_LEVEL)), overwrite=True,
+                              attributes=want)
         return replaced
 
     def _array_layout(self, name: str, frame_shape: tuple[int, ...], chunk_shape: tuple[int, ...],
@@ -321,6 +324,7 @@ class FrameArrayStore(ABC):
         C-contiguous), or None for a chunk that is all zero (then removed)."""
         (_, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, x0, nx)
         little = dtype.newbyteorder("<")
+        level = self.zstd_levels.get(name, ZSTD_LEVEL)
         padded = None
         for ci, cj, key in keys:
             data = block(ci, cj)
@@ -333,7 +337,7 @@ class FrameArrayStore(ABC):
                 padded[...] = 0
                 padded[:data.shape[0], :data.shape[1]] = data
                 data = padded
-            put_object(self.store, key, encode_chunk(data, little))
+            put_object(self.store, key, encode_chunk(data, little, level))
 
     def clear_tile(self, sequence_id: str, group, frame: int, name: str, x0: int, nx: int) -> None:
         """Make ``[x0, x0 + nx)`` of one frame of one array all zero (its chunks are removed); the
