@@ -14,7 +14,7 @@ from carlaocc.stages.voxelize import visibility as vis
 from carlaocc.stages.voxelize.observed import observed_columns, packed_block, unpack_z
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=12, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(3, 140), st.integers(1, 9), st.integers(1, 9))
 def test_packed_blocks_of_traced_masks_equal_packbits_of_the_union(seed, nz, bx, by):
     rng = np.random.default_rng(seed)
