@@ -161,6 +161,7 @@ def test_metrics_task_uses_poses_and_the_mask_union(store, bits):
     assert _run_metrics(store, grid)[("temporal_consistency", 0)].value < 0.9
 
 
+@pytest.mark.parametrize("store", ["local"], indirect=True)  # the reading is the store's own: one kind is enough
 def test_quality_tables_from_observed_bits_equal_those_from_the_masks(store):
     """The quality stage reads observed_bits (the masks' union as bits) when voxelize wrote it;
     every table is the same as from the two uint8 masks (an older root's path)."""

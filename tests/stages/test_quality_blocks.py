@@ -130,7 +130,7 @@ def _first_and_last_bit(bits, base, lo, hi):  # compiled once for every example 
     return first_bit(bits, base, lo, hi), last_bit(bits, base, lo, hi)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 70), st.data())
 def test_first_and_last_bit_agree_with_a_scan(seed, Z, data):
     rng = np.random.default_rng(seed)
