@@ -138,6 +138,8 @@ STEPS = {
         ("carlaocc.pipeline.tasks.voxelize", "lidar_visibility_bits", "LiDAR mask traversal"),
         ("carlaocc.pipeline.tasks.voxelize", "camera_visibility_bits", "camera mask traversal"),
         ("carlaocc.stages.voxelize.visibility", "_Volume.block", "mask unpacking"),
+        ("carlaocc.pipeline.tasks.voxelize", "observed_columns", "observed bits (union, packing)"),
+        ("carlaocc.pipeline.tasks.voxelize", "packed_block", "observed bits (union, packing)"),
         ("carlaocc.catalog.occupancy", "OccupancyStore.write_tile", "encoding and writing"),
         ("carlaocc.catalog.occupancy", "OccupancyStore.write_chunks", "encoding and writing"),
         ("carlaocc.catalog.occupancy", "OccupancyStore.clear_tile", "encoding and writing"),

@@ -1,7 +1,8 @@
 """Occupancy volumes in Zarr v3:
-``occupancy.zarr/<sequence>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow}``.
+``occupancy.zarr/<sequence>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow,observed_bits}``.
 
-Each array is ``(frame, x, y, z)`` (``flow`` has a trailing axis of 3 velocity components); a
+Each array is ``(frame, x, y, z)`` (``flow`` has a trailing axis of 3 velocity components;
+``observed_bits`` holds z packed eight voxels to a byte, ``(frame, x, y, ceil(Z / 8))``); a
 chunk is one frame's ``chunk_edge x chunk_edge x Z`` column block, so a task that writes one whole
 frame writes whole chunks and no two tasks ever touch the same chunk. Arrays are created by the
 driver before any task runs (:meth:`OccupancyStore.create`) and carry the grid spec, voxel size,
@@ -37,7 +38,18 @@ OCCUPANCY_ARRAYS: dict[str, tuple[str, str, tuple[int, ...]]] = {
                             "the first occupied voxel (Occ3D semantics)", ()),
     "flow": ("float16", "velocity of the voxel's material point, m/s, world motion expressed in the LiDAR "
                         "frame's axes (x, y, z); 0 for free, stuff and static voxels", (3,)),
+    "observed_bits": ("uint8", "mask_camera | mask_lidar (observed by any sensor of the rig) as bits packed along "
+                               "z: voxel (x, y, z) is bit z % 8 of byte z // 8; np.unpackbits(a, axis=-1, count=Z, "
+                               "bitorder='little') gives the uint8 mask; written with the masks for the quality "
+                               "stage", ()),
 }
+# arrays whose last axis holds the z axis packed eight voxels to a byte (little bit order)
+PACKED_Z = frozenset({"observed_bits"})
+
+
+def packed_z(z: int) -> int:
+    """Bytes along the last axis of a packed-z array (:data:`PACKED_Z`) of a grid ``z`` voxels high."""
+    return -(-int(z) // 8)
 
 
 def parse_output_key(key: str) -> tuple[str, int] | None:
@@ -60,6 +72,9 @@ class OccupancyStore(FrameArrayStore):
     zarr_root = OCCUPANCY_ZARR
     arrays = OCCUPANCY_ARRAYS
     kind = "occupancy arrays"
+    # bits compress less at level 1 than bytes: 1.86 MiB a 0.05 m frame at 1, 1.06 at 3, for the
+    # same encoding time on 50 MiB (docs/benchmarks.md)
+    zstd_levels = {"observed_bits": 3}
 
     @staticmethod
     def array_path(sequence_id: str, grid: GridSpec, name: str) -> str:
@@ -86,6 +101,13 @@ class OccupancyStore(FrameArrayStore):
         names = tuple(OCCUPANCY_ARRAYS) if names is None else tuple(names)
         return self._create_arrays(sequence_id, grid, names, frame_count, (X, Y, Z),
                                    (min(chunk_edge, X), min(chunk_edge, Y), Z), attrs)
+
+    def _array_layout(self, name, frame_shape, chunk_shape, dims):
+        """The packed-z arrays (:data:`PACKED_Z`) hold ``ceil(Z / 8)`` bytes per column."""
+        if name not in PACKED_Z:
+            return super()._array_layout(name, frame_shape, chunk_shape, dims)
+        return ((*frame_shape[:2], packed_z(frame_shape[2])), (*chunk_shape[:2], packed_z(chunk_shape[2])),
+                [*(dims or ["frame", "x", "y", "z"])[:-1], "z_bytes"])
 
     def _stale_arrays(self, root: zarr.Group, sequence_id: str, grid: GridSpec, names: tuple[str, ...]) -> list[str]:
         """The occupancy arrays not in ``names`` that exist (an earlier configuration's)."""

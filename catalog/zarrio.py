@@ -40,11 +40,12 @@ def zarr_store(store: Store, name: str):
     return FsspecStore.from_url(store.uri(name), storage_options=store.storage_options or None)
 
 
-def encode_chunk(block: np.ndarray, dtype) -> bytes:
+def encode_chunk(block: np.ndarray, dtype, level: int = ZSTD_LEVEL) -> bytes:
     """One whole chunk as stored: the C-order little-endian bytes of ``block`` as ``dtype``,
-    zstd level :data:`ZSTD_LEVEL`. ``block`` must already have the full chunk shape."""
+    zstd ``level`` (:data:`ZSTD_LEVEL` by default; any level decodes the same way). ``block``
+    must already have the full chunk shape."""
     little = np.dtype(dtype).newbyteorder("<")
-    return Zstd(level=ZSTD_LEVEL).encode(np.ascontiguousarray(block, dtype=little))
+    return Zstd(level=level).encode(np.ascontiguousarray(block, dtype=little))
 
 
 def decode_chunk(payload: bytes, dtype, chunk_shape, scratch: bool = False,

@@ -104,6 +104,8 @@ class FrameArrayStore(ABC):
     # array name -> dtype, description, trailing axes (one chunk each, beyond the frame's axes)
     arrays: ClassVar[dict[str, tuple[str, str, tuple[int, ...]]]] = {}
     kind: ClassVar[str] = "arrays"  # what the arrays are called in errors ("occupancy arrays", "camera maps")
+    # array name -> zstd level of its chunks, where it is not ZSTD_LEVEL (decoding is the same)
+    zstd_levels: ClassVar[dict[str, int]] = {}
 
     def __init__(self, store: Store):
         self.store = store
@@ -162,11 +164,14 @@ class FrameArrayStore(ABC):
         for name in names:
             dtype, description, trailing = self.arrays[name]
             path = self.array_path(sequence_id, group, name)
-            shape = (frame_count, *frame_shape, *trailing)
-            chunks = (1, *chunk_shape, *trailing)
+            f_shape, c_shape, dims = self._array_layout(name, frame_shape, chunk_shape, attrs.get("dims"))
+            shape = (frame_count, *f_shape, *trailing)
+            chunks = (1, *c_shape, *trailing)
             want = {**attrs, "description": description}
+            if dims is not None:
+                want["dims"] = list(dims)
             if trailing:
-                want["dims"] = [*attrs["dims"], "component"]
+                want["dims"] = [*want["dims"], "component"]
             if path in root:
                 arr = root[path]
                 if (isinstance(arr, zarr.Array) and arr.shape == shape and arr.chunks == chunks
@@ -174,8 +179,16 @@ class FrameArrayStore(ABC):
                     continue
                 replaced = True
             root.create_array(path, shape=shape, chunks=chunks, dtype=dtype, fill_value=0,
-                              compressors=ZstdCodec(level=ZSTD_LEVEL), overwrite=True, attributes=want)
+                              compressors=ZstdCodec(level=self.zstd_levels.get(name, ZSTD_LEVEL)), overwrite=True,
+                              attributes=want)
         return replaced
+
+    def _array_layout(self, name: str, frame_shape: tuple[int, ...], chunk_shape: tuple[int, ...],
+                      dims: list[str] | None) -> tuple[tuple[int, ...], tuple[int, ...], list[str] | None]:
+        """(frame shape, chunk shape, dims) of array ``name`` before its trailing axes: the
+        group's own by default; a subclass may give one array another last axis (e.g. bits
+        packed along it)."""
+        return tuple(frame_shape), tuple(chunk_shape), dims
 
     def _repair_metadata(self, sequence_id: str, group, names: tuple[str, ...],
                          drop_others: bool) -> tuple[bool, list[str]]:
@@ -311,6 +324,7 @@ class FrameArrayStore(ABC):
         C-contiguous), or None for a chunk that is all zero (then removed)."""
         (_, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, x0, nx)
         little = dtype.newbyteorder("<")
+        level = self.zstd_levels.get(name, ZSTD_LEVEL)
         padded = None
         for ci, cj, key in keys:
             data = block(ci, cj)
@@ -323,7 +337,7 @@ class FrameArrayStore(ABC):
                 padded[...] = 0
                 padded[:data.shape[0], :data.shape[1]] = data
                 data = padded
-            put_object(self.store, key, encode_chunk(data, little))
+            put_object(self.store, key, encode_chunk(data, little, level))
 
     def clear_tile(self, sequence_id: str, group, frame: int, name: str, x0: int, nx: int) -> None:
         """Make ``[x0, x0 + nx)`` of one frame of one array all zero (its chunks are removed); the
@@ -389,8 +403,7 @@ class FrameArrayStore(ABC):
         :class:`carlaocc.stages.quality.blocks.BlockedGrid`. StoreError naming a damaged chunk."""
         x_size = self._layout(sequence_id, group, name)[0][1]
         (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, 0, x_size)
-        cx, cy = chunks[1], chunks[2]
-        layout = (-(-shape[1] // cx), -(-shape[2] // cy), *chunks[1:])
+        layout = self.block_layout(sequence_id, group, name)
         if out is None:
             out = np.empty(layout, dtype)
         elif out.shape != layout or out.dtype.itemsize != np.dtype(dtype).itemsize or not out.flags.c_contiguous:
@@ -406,6 +419,11 @@ class FrameArrayStore(ABC):
             except (RuntimeError, ValueError) as exc:  # zstd error, or the wrong decoded size
                 raise StoreError(f"damaged chunk in the store {self.store.url}: {key}: {exc}") from exc
         return out
+
+    def block_layout(self, sequence_id: str, group, name: str) -> tuple[int, ...]:
+        """The shape :meth:`read_blocks` fills for one frame of one array: ``(nbx, nby, cx, cy, *rest)``."""
+        shape, chunks, _ = self._layout(sequence_id, group, name)
+        return (-(-shape[1] // chunks[1]), -(-shape[2] // chunks[2]), *chunks[1:])
 
     def layout(self, sequence_id: str, group, name: str) -> tuple[tuple, tuple, np.dtype]:
         """``(shape, chunks, dtype)`` of one array (ValueError naming it when it does not exist)."""

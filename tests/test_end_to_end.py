@@ -189,6 +189,10 @@ def test_quality_map_reduce_is_independent_of_the_frames_per_task(config_file, b
     frames = [occ.read_frame(seq, grid, t, ("semantic", "mask_camera", "mask_lidar")) for t in range(F)]
     sems = [f["semantic"] for f in frames]
     masks = [(f["mask_camera"] | f["mask_lidar"]).astype(bool) for f in frames]
+    # what the stage read: the masks' union as voxelize kept it in bits
+    for t in range(F):
+        bits = occ.read_frame(seq, grid, t, ("observed_bits",))["observed_bits"]
+        np.testing.assert_array_equal(np.unpackbits(bits, axis=-1, count=grid.shape[2], bitorder="little"), masks[t])
     cont = sequence_continuity([spatial_continuity_counts(s) for s in sems])
     temp = sequence_temporal([temporal_consistency_counts(sems[t], sems[t + 1], poses[t], poses[t + 1], VOXEL_SIZE, grid.origin,
                                                           mask_t=masks[t], mask_t1=masks[t + 1],

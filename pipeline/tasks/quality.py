@@ -20,7 +20,7 @@ from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, FrameStatisticsRecord, QualityRecord
 from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
-from carlaocc.stages.quality.blocks import BlockedGrid
+from carlaocc.stages.quality.blocks import BitGrid, BlockedGrid
 from carlaocc.stages.quality.statistics import N_CLASSES, block_pairs, split_pairs
 from carlaocc.stages.scratch import scratch
 
@@ -125,8 +125,9 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     Temporal consistency warps each frame t+1 into frame t with the frames' LiDAR poses (the grids
     are in the LiDAR frame; ``scenes/frames``): the pair (t, t+1) is this task's for t in
     ``[first, stop)`` (frame ``stop`` is read for the last one). Its visibility mask is
-    ``mask_camera | mask_lidar`` (observed by any sensor of the rig): whichever of the two arrays
-    the sequence has; no mask when it has neither."""
+    ``mask_camera | mask_lidar`` (observed by any sensor of the rig), read as voxelize kept it in
+    bits (``observed_bits``), or from whichever of the two masks the sequence has without them;
+    no mask when it has neither."""
 
     seq_id, voxel_size = part.params["sequence_id"], part.params["voxel_size"]
     first, stop = part.params["first"], part.params["stop"]
@@ -142,7 +143,10 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     if missing and n_frames > 1:
         raise StoreError(f"sequence {seq_id}: no LiDAR pose for frame(s) {missing[:5]} in scenes/frames; "
                          f"re-run the scenes stage")
-    masks = [n for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
+    # visibility: the masks' union as voxelize kept it in bits (one eighth of a mask's bytes to
+    # decode); a root voxelized without it (an older voxelize) gives its masks, OR-ed here
+    bits = occ.exists(seq_id, grid, "observed_bits")
+    masks = [] if bits else [n for n in ("mask_camera", "mask_lidar") if occ.exists(seq_id, grid, n)]
     with_instances = occ.exists(seq_id, grid, "instance")
     shape = tuple(arr.shape[1:])
     # two block-major buffers per array (frames t - 1 and t are held; t + 1 goes where t - 1
@@ -151,6 +155,10 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     buffers = {name: [_frame_buffer(f"quality.{name}.{slot}", shape, occ.chunk_edges(seq_id, grid, name))
                       for slot in range(2)] for name in ("semantic", *masks)}
 
+    bit_buffers = [BitGrid(scratch(f"quality.observed_bits.{slot}", int(np.prod(layout)), np.uint8).reshape(layout),
+                           shape)
+                   for slot in range(2)
+                   for layout in [occ.block_layout(seq_id, grid, "observed_bits")]] if bits else []
     range_buffers = [tuple(scratch(f"quality.{end}.{slot}", shape[0] * shape[1], np.int32).reshape(shape[:2])
                            for end in ("lo", "hi")) for slot in range(2)]
 
@@ -159,7 +167,11 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
         occ.read_blocks(seq_id, grid, t, name, out=grid_t.blocks)
         return grid_t
 
-    def observed(t: int) -> tuple[BlockedGrid, ...] | None:
+    def observed(t: int) -> BitGrid | tuple[BlockedGrid, ...] | None:
+        if bits:  # observed by any sensor, as bits
+            grid_t = bit_buffers[t % 2]
+            occ.read_blocks(seq_id, grid, t, "observed_bits", out=grid_t.blocks)
+            return grid_t
         # the stored masks are uint8 0/1; the scores OR them (observed by any sensor)
         return tuple(read(name, t) for name in masks) or None
 

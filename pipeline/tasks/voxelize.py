@@ -1,7 +1,8 @@
 """The voxelize stage: one task per (sequence, voxel size, frame) voxelizes the frame's panoptic
 scene exactly (triangle-box overlap, closed things filled) into occupancy.zarr — semantic,
 instance and flow tile by tile, then the camera and LiDAR visibility masks traced through the
-frame's packed occupancy and written chunk by chunk from their bits. The Zarr arrays of every
+frame's packed occupancy and written chunk by chunk from their bits, with their union kept as
+bits (``observed_bits``, what the quality stage reads). The Zarr arrays of every
 (sequence, voxel size) are created before the tasks run (``prepare``).
 """
 
@@ -21,6 +22,7 @@ from carlaocc.stages.scenes.assembly import region_of_grid
 from carlaocc.stages.scratch import scratch
 from carlaocc.stages.voxelize import voxelize_tiles
 from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
+from carlaocc.stages.voxelize.observed import observed_columns, packed_block
 from carlaocc.stages.voxelize.visibility import camera_visibility_bits, lidar_visibility_bits, pack_occupancy
 
 
@@ -64,7 +66,7 @@ def _voxelize_prepare(ctx: Context, to_run: list[Partition], partitions: list[Pa
 
 def occupancy_arrays(cfg: VoxelizeConfig) -> tuple[str, ...]:
     """The occupancy arrays the voxelize stage writes under ``cfg``."""
-    return ("semantic", "instance") + (("mask_camera", "mask_lidar") if cfg.masks else ()) + (
+    return ("semantic", "instance") + (("mask_camera", "mask_lidar", "observed_bits") if cfg.masks else ()) + (
         ("flow",) if cfg.flow else ())
 
 
@@ -139,10 +141,16 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     if packed is not None:
         rig = cfg.rig or RigConfig()
         X, Y = packed.shape[:2]
-        for name, bits in (("mask_lidar", lidar_visibility_bits(packed, rig)),
-                           ("mask_camera", camera_visibility_bits(packed, rig, cfg.camera_ray_stride))):
+        lidar = lidar_visibility_bits(packed, rig)
+        camera = camera_visibility_bits(packed, rig, cfg.camera_ray_stride)
+        for name, bits in (("mask_lidar", lidar), ("mask_camera", camera)):
             occ.write_chunks(seq_id, grid, frame_index, name, 0, X, lambda ci, cj, bits=bits: packed.block(
                 bits, ci * cx, cj * cy, min(cx, X - ci * cx), min(cy, Y - cj * cy)))
+        # 3. their union as bits packed along z (a strided copy of the column words, no unpacking):
+        #    what the quality stage reads instead of decoding both masks byte per voxel
+        observed = observed_columns(lidar, camera)
+        occ.write_chunks(seq_id, grid, frame_index, "observed_bits", 0, X, lambda ci, cj: packed_block(
+            observed, packed.shape, ci * cx, cj * cy, min(cx, X - ci * cx), min(cy, Y - cj * cy)))
     return occ.fingerprints(seq_id, grid, frame_index, names)
 
 
@@ -151,7 +159,7 @@ SPEC = StageSpec(
     description="panoptic voxelization of every frame's scene mesh (exact triangle-box overlap)",
     upstream=("ingest", "scenes"),
     reads=("admesh/", "scenes/"),
-    writes=("occupancy.zarr/<seq>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow}",),
+    writes=("occupancy.zarr/<seq>/<voxel_size>/{semantic,instance,mask_camera,mask_lidar,flow,observed_bits}",),
     partitions=_voxelize_partitions,
     task=voxelize_task,
     prepare=_voxelize_prepare,

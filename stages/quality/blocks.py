@@ -9,6 +9,9 @@ contiguous block. Blocks at the high x / y edges may reach past ``X`` / ``Y``; t
 never read. A dense ``(X, Y, Z)`` array is the grid of one block (:meth:`BlockedGrid.dense`, no
 copy), so every kernel has one form.
 
+A visibility mask is held as bits packed along z in the same blocks (:class:`BitGrid`, the
+layout of the stored ``observed_bits``): one eighth of the bytes to decode and to read.
+
 Kernels read the grid as one flat array: voxel ``(i, j, k)`` is element ``ox[i] + oy[j] + k``
 with the per-axis offset tables of :meth:`BlockedGrid.offsets` (two lookups and an add where a
 kernel would divide by the block edges per voxel).
@@ -116,6 +119,91 @@ class BlockedGrid:
                 part = a[p * bx:(p + 1) * bx, q * by:(q + 1) * by]
                 out.blocks[p, q, :part.shape[0], :part.shape[1]] = part
         return out
+
+
+@dataclass(frozen=True)
+class BitGrid:
+    """A 0/1 grid of logical shape ``(X, Y, Z)`` held as bits packed along z in column blocks:
+    ``blocks`` of shape ``(nbx, nby, bx, by, ceil(Z / 8))`` uint8, voxel ``(i, j, k)`` being bit
+    ``k % 8`` (little bit order) of byte ``k // 8`` of its column in block ``(i // bx, j // by)``.
+    That is the layout of ``observed_bits``'s stored chunks, decoded one per block; a mask is
+    one eighth of the bytes of its uint8 grid (module docstring for the blocks)."""
+
+    blocks: np.ndarray
+    shape: tuple[int, int, int]
+
+    def __post_init__(self) -> None:
+        b, (X, Y, Z) = self.blocks, self.shape
+        if b.ndim != 5 or b.dtype != np.uint8 or not b.flags.c_contiguous:
+            raise ValueError(f"bit blocks must be a C-contiguous uint8 (nbx, nby, bx, by, ceil(Z/8)) array, "
+                             f"got {b.dtype} {b.shape}")
+        nbx, nby, bx, by, bz = b.shape
+        if bz != -(-Z // 8) or not (X == 0 or nbx * bx >= X > (nbx - 1) * bx) or not (
+                Y == 0 or nby * by >= Y > (nby - 1) * by):
+            raise ValueError(f"bit blocks of shape {b.shape} do not tile a grid of shape {self.shape}")
+
+    @classmethod
+    def pack(cls, grid: BlockedGrid) -> BitGrid:
+        """A grid's nonzero voxels as bits, in the same blocks."""
+        return cls(np.packbits(grid.blocks != 0, axis=-1, bitorder="little"), grid.shape)
+
+    @property
+    def block(self) -> tuple[int, int]:
+        return int(self.blocks.shape[2]), int(self.blocks.shape[3])
+
+    @property
+    def flat(self) -> np.ndarray:
+        return self.blocks.reshape(-1)
+
+    def offsets(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(ox, oy)``: the byte holding voxel ``(i, j, k)`` is ``flat[ox[i] + oy[j] + k // 8]``
+        (:meth:`BlockedGrid.offsets` with a column of ``ceil(Z / 8)`` bytes)."""
+        _, nby, bx, by, zb = self.blocks.shape
+        i = np.arange(self.shape[0], dtype=np.int64)
+        j = np.arange(self.shape[1], dtype=np.int64)
+        return ((i // bx) * nby * bx * by + (i % bx) * by) * zb, ((j // by) * bx * by + j % by) * zb
+
+    def unpacked(self) -> BlockedGrid:
+        """The uint8 0/1 grid in the same blocks (a copy)."""
+        Z = self.shape[2]
+        return BlockedGrid(np.ascontiguousarray(np.unpackbits(self.blocks, axis=-1, count=Z, bitorder="little")),
+                           self.shape)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def first_bit(bits, base, lo, hi):  # pragma: no cover - numba
+    """The lowest ``k`` in ``[lo, hi]`` whose bit is set in the packed column starting at byte
+    ``base`` of ``bits`` (bit ``k % 8`` of byte ``base + k // 8``); ``hi + 1`` when none. Zero
+    bytes are skipped eight voxels at a time."""
+    k = lo
+    while k <= hi:
+        b = bits[base + (k >> 3)] >> (k & 7)
+        if b == 0:
+            k = (k | 7) + 1  # the next byte
+            continue
+        while (b & 1) == 0:  # the lowest set bit of the rest of this byte
+            b >>= 1
+            k += 1
+        return k if k <= hi else hi + 1
+    return hi + 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def last_bit(bits, base, lo, hi):  # pragma: no cover - numba
+    """The highest ``k`` in ``[lo, hi]`` whose bit is set (see :func:`first_bit`); ``lo - 1``
+    when none."""
+    k = hi
+    while k >= lo:
+        b = bits[base + (k >> 3)] & ((2 << (k & 7)) - 1)  # bits 0 .. k % 8 of k's byte
+        if b == 0:
+            k = (k & ~7) - 1  # the previous byte's last bit
+            continue
+        p = 7
+        while (b >> p) == 0:  # the highest set bit of the byte
+            p -= 1
+        k = (k & ~7) + p
+        return k if k >= lo else lo - 1
+    return lo - 1
 
 
 def words_of(flat: np.ndarray) -> np.ndarray:

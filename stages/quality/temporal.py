@@ -51,7 +51,8 @@ import numba
 import numpy as np
 
 from carlaocc.schemas.taxonomy import dynamic_ids
-from carlaocc.stages.quality.blocks import BlockedGrid, first_nonzero, last_nonzero, uint8_grid, words_of
+from carlaocc.stages.quality.blocks import (BitGrid, BlockedGrid, first_bit, first_nonzero, last_bit,
+                                             last_nonzero, uint8_grid)
 
 N_CLASSES = 256  # counts are kept per uint8 value, as for spatial continuity
 
@@ -148,20 +149,26 @@ def _semantic(a, name: str) -> BlockedGrid:
     return uint8_grid(a, name)
 
 
-def _masks(m, sem: BlockedGrid, name: str) -> list[np.ndarray]:
-    """A frame's visibility: one mask or a tuple of masks (observed by any), each dense or
-    :class:`~.blocks.BlockedGrid`, as flat uint8 arrays in ``sem``'s layout (nonzero = observed)."""
+def _masks(m, sem: BlockedGrid, name: str) -> tuple[BitGrid, int]:
+    """A frame's visibility: one mask or a tuple of masks (observed by any), each dense, a
+    :class:`~.blocks.BlockedGrid` (nonzero = observed) or a :class:`~.blocks.BitGrid` (the stored
+    ``observed_bits``, used as it is when in ``sem``'s blocks), as one bit grid in ``sem``'s
+    blocks; and how many masks were given."""
     masks = list(m) if isinstance(m, tuple) else [m]
     if not 1 <= len(masks) <= 2:
         raise ValueError(f"{name}: give one or two visibility masks, got {len(masks)}")
-    out = []
+    out = None
     for mask in masks:
-        grid = sem.like(mask, name)
-        b = grid.blocks
-        if b.dtype != np.uint8:
-            b = b.view(np.uint8) if b.dtype == np.bool_ else (b != 0).view(np.uint8)
-        out.append(b.reshape(-1))
-    return out
+        if isinstance(mask, BitGrid):
+            if mask.shape != sem.shape:
+                raise ValueError(f"{name} has shape {mask.shape}, its semantic grid has {sem.shape}")
+            bits = mask if mask.blocks.shape[:4] == sem.blocks.shape[:4] else BitGrid.pack(
+                sem.like(mask.unpacked(), name))
+        else:
+            bits = BitGrid.pack(sem.like(mask, name))
+        # observed by any: the OR of the masks' bits
+        out = bits if out is None else BitGrid(out.blocks | bits.blocks, sem.shape)
+    return out, len(masks)
 
 
 def column_ranges(semantic: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,14 +199,14 @@ def _column_ranges(flat, words, ox, oy, Z):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, nogil=True)
-def _tc_kernel(sem0, ox0, oy0, Z0, sem1, ox1, oy1, Z1, m0a, m0aw, m0b, m0bw, m1a, m1b, n_masks, static, A, c,
+def _tc_kernel(sem0, ox0, oy0, Z0, sem1, ox1, oy1, Z1, mb0, mx0, my0, mb1, mx1, my1, has_mask, static, A, c,
                lo0, hi0, lo1, hi1):  # pragma: no cover - numba
     """Count per-class intersections and unions. ``q = A @ (i, j, k) + c`` is voxel (i, j, k)'s
     centre warped into frame t+1's continuous voxel coordinates (voxel u spans [u, u + 1)). Each
     grid is read flat through its offset tables (voxel (i, j, k) of frame t is
-    ``sem0[ox0[i] + oy0[j] + k]``, :class:`~.blocks.BlockedGrid`); each frame's masks (``n_masks``
-    of them, 0 to 2, in its semantic grid's layout; ``m0aw``, ``m0bw``: frame t's as whole uint64
-    words) are OR-ed: observed by any."""
+    ``sem0[ox0[i] + oy0[j] + k]``, :class:`~.blocks.BlockedGrid`); each frame's visibility (when
+    ``has_mask``) is bits packed along z, voxel (i, j, k) of frame t being bit ``k % 8`` of
+    ``mb0[mx0[i] + my0[j] + k // 8]`` (:class:`~.blocks.BitGrid`)."""
     X0, Y0 = ox0.size, oy0.size
     X1, Y1 = ox1.size, oy1.size
     inter = np.zeros(256, dtype=np.int64)
@@ -246,16 +253,14 @@ def _tc_kernel(sem0, ox0, oy0, Z0, sem1, ox1, oy1, Z1, m0a, m0aw, m0b, m0bw, m1a
             k_lo = max(k_lo, 0)
             k_hi = min(k_hi, Z0 - 1)
             s0 = ox0[i] + oy0[j]
-            if n_masks > 0 and k_lo <= k_hi:
+            m0 = mx0[i] + my0[j]
+            if has_mask and k_lo <= k_hi:
                 # every voxel that counts is observed in frame t: narrow the range to the
                 # column's first and last observed voxels in it (unobserved runs, the insides of
                 # the ground and of buildings, skipped eight voxels at a time)
-                a0 = first_nonzero(m0a, m0aw, s0 + k_lo, s0 + k_hi + 1)
-                a1 = last_nonzero(m0a, m0aw, s0 + k_lo, s0 + k_hi + 1)
-                if n_masks == 2:
-                    a0 = min(a0, first_nonzero(m0b, m0bw, s0 + k_lo, s0 + k_hi + 1))
-                    a1 = max(a1, last_nonzero(m0b, m0bw, s0 + k_lo, s0 + k_hi + 1))
-                k_lo, k_hi = a0 - s0, a1 - s0
+                a0 = first_bit(mb0, m0, k_lo, k_hi)
+                k_hi = last_bit(mb0, m0, k_lo, k_hi)
+                k_lo = a0
             for k in range(k_lo, k_hi + 1):
                 a = sem0[s0 + k]
                 if not static[a]:
@@ -277,9 +282,9 @@ def _tc_kernel(sem0, ox0, oy0, Z0, sem1, ox1, oy1, Z1, m0a, m0aw, m0b, m0bw, m1a
                 # where a count may change
                 if (a == 0 and b == 0) or not static[b]:
                     continue
-                if n_masks > 0 and m0a[s0 + k] == 0 and (n_masks == 1 or m0b[s0 + k] == 0):
+                if has_mask and ((mb0[m0 + (k >> 3)] >> (k & 7)) & 1) == 0:
                     continue
-                if n_masks > 0 and m1a[s1] == 0 and (n_masks == 1 or m1b[s1] == 0):
+                if has_mask and ((mb1[mx1[u] + my1[w] + (s >> 3)] >> (s & 7)) & 1) == 0:
                     continue
                 # per-class intersection and union over classes >= 1
                 if a == b:
@@ -329,7 +334,9 @@ def temporal_consistency_counts(
     sensor-to-world poses of the grids' frame. ``voxel_size`` (m) and ``origin`` (m, minimum corner
     of voxel (0, 0, 0)) describe grid t and, unless ``voxel_size_t1`` / ``origin_t1`` are given,
     grid t+1 too. ``mask_*``: visibility (nonzero = observed), both or neither; a tuple of
-    two masks per frame means observed by either (camera or LiDAR). ``static``: (256,)
+    two masks per frame means observed by either (camera or LiDAR); a
+    :class:`~carlaocc.stages.quality.blocks.BitGrid` is a mask already packed to bits (the stored
+    ``observed_bits``), read as it is. ``static``: (256,)
     bool table (:func:`static_table`; default: the CarlaOcc taxonomy). ``ranges_*``: each grid's
     :func:`column_ranges`, when the caller already has them (computed here otherwise).
     """
@@ -337,13 +344,13 @@ def temporal_consistency_counts(
     if (mask_t is None) != (mask_t1 is None):
         raise ValueError("give both visibility masks (mask_t and mask_t1) or neither")
     if mask_t is None:
-        m0 = m1 = [np.zeros(1, np.uint8)]
-        n_masks = 0
+        m0 = m1 = BitGrid.pack(BlockedGrid.dense(np.zeros((1, 1, 1), np.uint8)))  # never read
+        (mx0, my0), (mx1, my1) = m0.offsets(), m1.offsets()
     else:
-        m0, m1 = _masks(mask_t, sem0, "mask_t"), _masks(mask_t1, sem1, "mask_t1")
-        if len(m0) != len(m1):
-            raise ValueError(f"mask_t has {len(m0)} masks and mask_t1 {len(m1)}: give each frame the same ones")
-        n_masks = len(m0)
+        (m0, n0), (m1, n1) = _masks(mask_t, sem0, "mask_t"), _masks(mask_t1, sem1, "mask_t1")
+        if n0 != n1:
+            raise ValueError(f"mask_t has {n0} masks and mask_t1 {n1}: give each frame the same ones")
+        (mx0, my0), (mx1, my1) = m0.offsets(), m1.offsets()
     table = static_table() if static is None else np.asarray(static, dtype=np.bool_)
     if table.shape != (N_CLASSES,):
         raise ValueError(f"static must be a (256,) bool table, got shape {table.shape}")
@@ -363,6 +370,6 @@ def temporal_consistency_counts(
         raise ValueError("ranges_t / ranges_t1 must be the column_ranges of semantic_t / semantic_t1")
     (ox0, oy0), (ox1, oy1) = sem0.offsets(), sem1.offsets()
     inter, union = _tc_kernel(sem0.flat, ox0, oy0, sem0.shape[2], sem1.flat, ox1, oy1, sem1.shape[2],
-                              m0[0], words_of(m0[0]), m0[-1], words_of(m0[-1]), m1[0], m1[-1], n_masks, table, A, c,
+                              m0.flat, mx0, my0, m1.flat, mx1, my1, mask_t is not None, table, A, c,
                               lo0, hi0, lo1, hi1)
     return TemporalCounts(inter, union)

@@ -28,6 +28,38 @@ def test_attributes_describe_the_grid(store):
     assert occ.stored_grid("seq", 0.5) is None and occ.stored_grid("nope", 0.25) is None
 
 
+def test_observed_bits_hold_z_packed_and_read_back_with_plain_zarr(store):
+    """observed_bits: (frame, x, y, ceil(Z / 8)) uint8, chunked as the other arrays along x and
+    y; what is written reads back through zarr-python and through read_blocks; created again
+    identical, it is kept."""
+    import zarr
+
+    from carlaocc.catalog.zarrio import zarr_store
+
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(3.0, 2.0, 1.3), voxel_size=0.1)  # 30 x 20 x 13
+    occ = OccupancyStore(store)
+    occ.create("seq", grid, frame_count=2, chunk_edge=16)
+    arr = occ.open("seq", grid, "observed_bits")
+    assert arr.shape == (2, 30, 20, 2) and arr.chunks == (1, 16, 16, 2) and arr.dtype == np.uint8
+    assert occ.attrs("seq", grid, "observed_bits")["dims"] == ["frame", "x", "y", "z_bytes"]
+    assert arr.compressors[0].level == 3 and occ.open("seq", grid, "semantic").compressors[0].level == 1
+    rng = np.random.default_rng(1)
+    mask = rng.random(grid.shape) < 0.3
+    bits = np.packbits(mask, axis=-1, bitorder="little")
+    occ.write_frame("seq", grid, 1, {"observed_bits": bits})
+    plain = zarr.open_group(store=zarr_store(store, "occupancy.zarr"), mode="r")["seq/0.1/observed_bits"][1]
+    np.testing.assert_array_equal(plain, bits)
+    np.testing.assert_array_equal(np.unpackbits(plain, axis=-1, count=13, bitorder="little"), mask)
+    from carlaocc.catalog.zarrio import encode_chunk, get_object
+
+    stored = get_object(store, "occupancy.zarr/seq/0.1/observed_bits/c/1/0/0/0")
+    assert stored == encode_chunk(bits[:16, :16], np.uint8, 3)  # the level its metadata states
+    blocks = occ.read_blocks("seq", grid, 1, "observed_bits")
+    assert blocks.shape == occ.block_layout("seq", grid, "observed_bits") == (2, 2, 16, 16, 2)
+    np.testing.assert_array_equal(blocks[1, 0, :14], bits[16:30, :16])
+    assert not occ.create("seq", grid, frame_count=2, chunk_edge=16)  # identical: kept
+
+
 def test_read_frame_reads_semantic_and_instance_by_default(store):
     occ = OccupancyStore(store)
     occ.create("seq", GRID, frame_count=2, chunk_edge=16)

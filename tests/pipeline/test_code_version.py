@@ -23,6 +23,21 @@ def test_each_stage_covers_its_compute_and_its_wiring():
     assert any(m.startswith("carlaocc.stages.scenes.town.") for m in closure("scenes"))
 
 
+def test_a_root_from_before_observed_bits_is_stale_not_broken():
+    """A root voxelized before observed_bits existed has no such array: what writes it is in
+    voxelize's code version and what reads it in quality's, so ``run`` finds both stages' frames
+    changed and rebuilds them (and quality over frames without it reads the two masks:
+    tests/stages/test_quality.py)."""
+    assert {"carlaocc.stages.voxelize.observed", "carlaocc.catalog.occupancy"} <= closure("voxelize")
+    assert {"carlaocc.stages.quality.blocks", "carlaocc.stages.quality.temporal",
+            "carlaocc.catalog.occupancy"} <= closure("quality")
+    from carlaocc.pipeline.tasks.voxelize import occupancy_arrays
+    from carlaocc.schemas.configs import VoxelizeConfig
+
+    assert "observed_bits" in occupancy_arrays(VoxelizeConfig())  # an output of every masked frame
+    assert "observed_bits" not in occupancy_arrays(VoxelizeConfig(masks=False))
+
+
 def test_a_stage_does_not_cover_code_it_never_runs():
     # editing the procedural town or the traffic re-runs the scenes stage, not every voxelized frame
     for stage in ("voxelize", "sensors", "quality"):

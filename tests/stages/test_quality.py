@@ -56,8 +56,9 @@ def test_sequence_sums_frames():
 
 
 # -- the metrics stage's task: s_sc and s_tc per frame, pair and sequence from the store --------
-def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
-    """A sequence's occupancy frames and LiDAR poses in ``store`` (grid 1 m over 6 x 5 x 3 m)."""
+def _write_sequence(store, frames, poses, masks=None, seq="seq0", bits=False):
+    """A sequence's occupancy frames and LiDAR poses in ``store`` (grid 1 m over 6 x 5 x 3 m);
+    ``bits``: the masks' union also as voxelize keeps it, ``observed_bits``."""
     from carlaocc.catalog.occupancy import OccupancyStore
     from carlaocc.catalog.parquet import ParquetTable
     from carlaocc.schemas.grid import GridSpec
@@ -66,11 +67,15 @@ def _write_sequence(store, frames, poses, masks=None, seq="seq0"):
     grid = GridSpec(region_min=(0, 0, 0), region_max=(6, 5, 3), voxel_size=1.0)
     occ = OccupancyStore(store)
     names = ("semantic", "mask_camera", "mask_lidar") if masks is not None else ("semantic",)
+    names += ("observed_bits",) if bits else ()
     occ.create(seq, grid, len(frames), 4, names=names)
     for t, sem in enumerate(frames):
         arrays = {"semantic": sem}
         if masks is not None:
             arrays |= {"mask_camera": masks[t][0], "mask_lidar": masks[t][1]}
+        if bits:
+            arrays["observed_bits"] = np.packbits((masks[t][0] != 0) | (masks[t][1] != 0), axis=-1,
+                                                  bitorder="little")
         occ.write_frame(seq, grid, t, arrays)
     rows = [FrameRecord(sequence_id=seq, frame_index=t, timestamp=0.1 * t, ego_pose=np.eye(4).ravel().tolist(),
                         lidar_pose=np.asarray(p, float).ravel().tolist()) for t, p in enumerate(poses)]
@@ -133,7 +138,8 @@ def test_metrics_task_writes_temporal_consistency(store):
     assert sc.numerator == sc.occupied - sc.isolated and sc.denominator == sc.occupied and sc.isolated == 1  # the car
 
 
-def test_metrics_task_uses_poses_and_the_mask_union(store):
+@pytest.mark.parametrize("bits", [False, True], ids=["masks", "observed_bits"])
+def test_metrics_task_uses_poses_and_the_mask_union(store, bits):
     frames = [_moving_street(0), _moving_street(1)]
     frames[1][4, 4, 1] = 5  # a fence voxel frame t never saw ...
     ones = np.ones(frames[0].shape, np.uint8)
@@ -143,16 +149,53 @@ def test_metrics_task_uses_poses_and_the_mask_union(store):
     masks = [(ones, ones), (hidden, hidden)]
     moved = np.eye(4)
     moved[0, 3] = 1.0
-    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks)
+    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks, bits=bits)
     assert _run_metrics(store, grid)[("temporal_consistency", 0)].value == 1.0
     # seen by the LiDAR only: the union of the masks counts it, and the pair disagrees there
     masks = [(ones, ones), (hidden, ones)]
-    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks)
+    grid = _write_sequence(store, frames, [np.eye(4), moved], masks=masks, bits=bits)
     row = _run_metrics(store, grid)[("temporal_consistency", 0)]
     assert row.denominator - row.numerator == 1
     # with wrong poses (no motion) the same frames disagree along every moved boundary
-    grid = _write_sequence(store, frames, [np.eye(4), np.eye(4)], masks=masks)
+    grid = _write_sequence(store, frames, [np.eye(4), np.eye(4)], masks=masks, bits=bits)
     assert _run_metrics(store, grid)[("temporal_consistency", 0)].value < 0.9
+
+
+@pytest.mark.parametrize("store", ["local"], indirect=True)  # the reading is the store's own: one kind is enough
+def test_quality_tables_from_observed_bits_equal_those_from_the_masks(store):
+    """The quality stage reads observed_bits (the masks' union as bits) when voxelize wrote it;
+    every table is the same as from the two uint8 masks (an older root's path)."""
+    from carlaocc.catalog.parquet import ParquetTable
+    from carlaocc.schemas.records import ClassQualityRecord, FrameStatisticsRecord
+
+    rng = np.random.default_rng(7)
+    frames = [_moving_street(s) for s in (0, 1, 2)]
+    for f in frames:  # scattered labels and holes
+        hit = rng.random(f.shape) < 0.15
+        f[hit] = rng.integers(0, 30, int(hit.sum()), dtype=np.uint8)
+    masks = [tuple((rng.random(frames[0].shape) < 0.6).astype(np.uint8) for _ in range(2)) for _ in frames]
+    poses = [np.eye(4) for _ in frames]
+    for p, s in zip(poses, (0, 1, 2)):
+        p[0, 3] = float(s)
+
+    def tables(bits):
+        grid = _write_sequence(store, frames, poses, masks=masks, bits=bits)
+        q = _run_metrics(store, grid)
+        rest = [sorted(r.model_dump_json() for r in ParquetTable(store, m).load())
+                for m in (ClassQualityRecord, FrameStatisticsRecord)]
+        return {k: r.model_dump() for k, r in q.items()}, rest
+
+    with_masks, with_bits = tables(False), tables(True)
+    assert with_bits == with_masks
+    assert with_masks[0][("temporal_consistency", None)]["denominator"] > 0
+    # the bits are what is read: nothing observed there, no pair counts (the masks still say 60 %)
+    from carlaocc.catalog.occupancy import OccupancyStore
+
+    grid = _write_sequence(store, frames, poses, masks=masks, bits=True)
+    occ = OccupancyStore(store)
+    for t in range(len(frames)):
+        occ.write_frame("seq0", grid, t, {"observed_bits": np.zeros((6, 5, 1), np.uint8)})
+    assert _run_metrics(store, grid)[("temporal_consistency", None)].denominator == 0
 
 
 def test_metrics_task_names_a_missing_pose(store):

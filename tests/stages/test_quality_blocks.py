@@ -3,6 +3,7 @@ and the brute-force references, for any block edges, edge padding and column hei
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -10,7 +11,7 @@ from hypothesis import strategies as st
 
 from carlaocc.stages.quality import (column_ranges, continuity_and_ranges, isolated_mask_reference,
                                      spatial_continuity_counts)
-from carlaocc.stages.quality.blocks import BlockedGrid
+from carlaocc.stages.quality.blocks import BlockedGrid, first_bit, last_bit
 from carlaocc.stages.quality.statistics import block_pairs, instance_class_pairs
 
 
@@ -103,3 +104,52 @@ def test_blocked_grid_layout():
         BlockedGrid(np.zeros((3, 2, 2, 2, 2), np.uint8), (7, 3, 2))
     with pytest.raises(ValueError, match="has shape"):
         g.like(np.zeros((5, 3, 3), np.uint8), "mask_t")
+
+
+# -- visibility as bits packed along z (BitGrid: observed_bits as the store decodes it) ---------
+@settings(max_examples=80, deadline=None)
+@given(grids())
+def test_bit_grid_packs_a_mask_in_its_blocks(case):
+    from carlaocc.stages.quality.blocks import BitGrid
+
+    sem, bx, by, pad = case
+    grid = blocked(sem, bx, by, pad)
+    bits = BitGrid.pack(grid)
+    X, Y, Z = sem.shape
+    assert bits.blocks.shape == (*grid.blocks.shape[:4], -(-Z // 8)) and bits.block == (bx, by)
+    # every voxel's bit is where the offset tables say, and is set exactly where the mask is nonzero
+    ox, oy = bits.offsets()
+    i, j, k = np.meshgrid(np.arange(X), np.arange(Y), np.arange(Z), indexing="ij")
+    got = (bits.flat[ox[i] + oy[j] + k // 8] >> (k % 8)) & 1
+    np.testing.assert_array_equal(got, sem != 0)
+    np.testing.assert_array_equal(bits.unpacked().to_dense(), (sem != 0).astype(np.uint8))
+
+
+@numba.njit(cache=False)
+def _first_and_last_bit(bits, base, lo, hi):  # compiled once for every example below
+    return first_bit(bits, base, lo, hi), last_bit(bits, base, lo, hi)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 70), st.data())
+def test_first_and_last_bit_agree_with_a_scan(seed, Z, data):
+    rng = np.random.default_rng(seed)
+    col = rng.random(Z) < data.draw(st.sampled_from([0.0, 0.02, 0.3, 1.0]))
+    base = data.draw(st.integers(0, 3))
+    packed = np.concatenate([rng.integers(0, 256, base, dtype=np.uint8), np.packbits(col, bitorder="little"),
+                             rng.integers(0, 256, 2, dtype=np.uint8)])  # neighbours' bytes must not count
+    lo = data.draw(st.integers(0, Z - 1))
+    hi = data.draw(st.integers(lo - 1, Z - 1))
+    set_ = np.flatnonzero(col[lo:hi + 1]) + lo if hi >= lo else np.zeros(0, int)
+    first, last = _first_and_last_bit(packed, base, lo, hi)
+    assert first == (set_[0] if len(set_) else hi + 1)
+    assert last == (set_[-1] if len(set_) else lo - 1)
+
+
+def test_bit_grid_is_checked():
+    from carlaocc.stages.quality.blocks import BitGrid
+
+    with pytest.raises(ValueError, match="do not tile"):
+        BitGrid(np.zeros((1, 1, 4, 4, 2), np.uint8), (4, 4, 17))
+    with pytest.raises(ValueError, match="uint8"):
+        BitGrid(np.zeros((1, 1, 4, 4, 2), np.uint16), (4, 4, 9))

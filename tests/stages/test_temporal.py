@@ -299,3 +299,28 @@ def test_temporal_counts_need_the_same_masks_in_both_frames():
         temporal_consistency_counts(s, s, np.eye(4), np.eye(4), 1.0, (0, 0, 0), mask_t=(m, m), mask_t1=m)
     with pytest.raises(ValueError, match="one or two"):
         temporal_consistency_counts(s, s, np.eye(4), np.eye(4), 1.0, (0, 0, 0), mask_t=(m, m, m), mask_t1=(m, m, m))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 4), st.integers(1, 4), st.integers(1, 21), st.booleans())
+def test_temporal_counts_with_bit_masks_agree_with_brute_force(seed, bx, by, Z, other_blocks):
+    """Visibility given as bits packed along z (the stored observed_bits, a BitGrid), in the
+    semantic grid's blocks or in others, counts as the uint8 masks do (any height, not only
+    whole bytes)."""
+    from carlaocc.stages.quality.blocks import BitGrid
+
+    rng = np.random.default_rng(seed)
+    shape = (rng.integers(2, 9), rng.integers(2, 9), Z)
+    s0 = rng.choice(np.array([0, 0, 1, 3, 14], np.uint8), size=shape)
+    s1 = rng.choice(np.array([0, 0, 1, 3, 14], np.uint8), size=shape)
+    p0, p1 = np.eye(4), np.eye(4)
+    p1[:3, 3] = rng.integers(-2, 3, 3) * 0.4
+    m0, m1 = rng.random(shape) < 0.5, rng.random(shape) < 0.5
+    g0, g1 = BlockedGrid.from_dense(s0, (bx, by)), BlockedGrid.from_dense(s1, (by, bx))
+    eb = (by, bx) if other_blocks else (bx, by)
+    b0 = BitGrid.pack(BlockedGrid.from_dense(m0.astype(np.uint8), eb))
+    b1 = BitGrid.pack(BlockedGrid.from_dense(m1.astype(np.uint8), (by, bx)))
+    c = temporal_consistency_counts(g0, g1, p0, p1, 0.4, (0.0, 0.0, 0.0), mask_t=b0, mask_t1=b1)
+    inter, union = reference_counts(s0, s1, p0, p1, 0.4, (0.0, 0.0, 0.0), m0, m1)
+    np.testing.assert_array_equal(c.intersection, inter)
+    np.testing.assert_array_equal(c.union, union)
