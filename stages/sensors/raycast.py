@@ -114,6 +114,12 @@ class RayScene:
         """Whether each hit triangle is transparent (False on a miss)."""
         return self._transparent[face]
 
+    @property
+    def transparent_table(self) -> np.ndarray:
+        """Bool per triangle, whether it is transparent, plus a last False for index -1 (a miss):
+        :meth:`transparent` as a table, for compiled kernels."""
+        return self._transparent
+
     def color(self, face: np.ndarray) -> np.ndarray:
         """Base colour (uint8 RGB, (N, 3)) of each hit triangle (black on a miss)."""
         return self._color[face]
