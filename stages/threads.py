@@ -7,11 +7,9 @@ in every worker (:func:`thread_report` says what a process ended up with)."""
 
 from __future__ import annotations
 
-import os
-
 _THREADS = 0  # 0: each library's own default (all cores)
 _LIMITED: set[int] = set()  # the caps already applied to the runtimes loaded in this process
-# read by OpenBLAS, MKL and OpenMP when they load: a runtime loaded after the cap gets it too
+# read by OpenBLAS, MKL and OpenMP when they load (the executor sets them for its worker processes)
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -27,22 +25,21 @@ def set_kernel_threads(n: int | None) -> None:
     import numba
 
     numba.set_num_threads(min(_THREADS, numba.config.NUMBA_NUM_THREADS))
-    # 2. BLAS and OpenMP: those already loaded through threadpoolctl (once per process and cap:
-    #    6 ms a call), those loaded later through the variables they read when they load
+    # 2. OpenCV's own pool (D2NT's reference filters); importing it loads its BLAS before 3.
+    try:
+        import cv2
+    except ImportError:  # pragma: no cover - cv2 comes with d2nt
+        cv2 = None
+    if cv2 is not None:
+        cv2.setNumThreads(_THREADS)
+    # 3. the BLAS and OpenMP runtimes loaded in this process (numpy's, OpenCV's...), through
+    #    threadpoolctl: once per process and cap (6 ms a call)
     if _THREADS not in _LIMITED:
-        for name in THREAD_ENV:
-            os.environ[name] = str(_THREADS)
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(limits=_THREADS)
         _LIMITED.clear()
         _LIMITED.add(_THREADS)
-    # 3. OpenCV's own pool (D2NT's reference filters)
-    try:
-        import cv2
-    except ImportError:  # pragma: no cover - cv2 comes with d2nt
-        return
-    cv2.setNumThreads(_THREADS)
 
 
 def kernel_threads() -> int:

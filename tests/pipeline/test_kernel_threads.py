@@ -1,7 +1,7 @@
 """Kernel threads per worker (issue 39): a task of a two-worker LocalCluster runs every kernel
 library on one thread (numba, the BLAS and OpenMP runtimes, OpenCV, open3d's casts), so two
-tasks on two cores never start a thread per core each; in process, the cap holds for runtimes
-loaded after it too."""
+tasks on two cores never start a thread per core each; in process, a task run as those workers
+run it finds the same."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ import numpy  # a BLAS loaded before the cap
 before = thread_report()
 
 def task(store, cfg, part):
-    import cv2  # a runtime loaded after the cap (OpenCV's own OpenBLAS)
+    import cv2  # OpenCV (and its own OpenBLAS), loaded by the cap
     return {"report": json.dumps(thread_report())}
 
 # a task as our own LocalCluster's workers run it
@@ -84,5 +84,5 @@ def test_the_cap_reaches_runtimes_loaded_before_and_after_it(tmp_path):
     after = r["after"]
     assert r["threads"] == 1
     assert after["numba"] == 1 and after["cv2"] == 1 and after["open3d"] == 1
-    assert len(after["pools"]) > len(r["before"]["pools"])  # OpenCV's BLAS joined, capped
+    assert len(after["pools"]) > len(r["before"]["pools"])  # OpenCV's BLAS joined, capped too
     assert all(p["threads"] == 1 for p in after["pools"]), after
