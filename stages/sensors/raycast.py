@@ -397,6 +397,14 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     t_raw, face_raw = t.astype(np.float64), face.copy()
     t_raw[far] = np.inf
     todo = np.flatnonzero(scene.transparent(face_raw)) if see_through else np.zeros(0, dtype=np.int64)
+    if len(todo):
+        # the rays on glass cast again from the camera: the continuation starts from the caster's
+        # own hit (its float32 t, which the rasterizer's may miss by an ulp), so the layers behind
+        # are found as before (rays continued a rounding error apart can part ways between two
+        # close layers of glass)
+        t_cast, f_cast = scene.cast_rays(rays[todo], nthreads=nthreads)
+        t_raw[todo], face_raw[todo] = t_cast, f_cast
+        todo = todo[scene.transparent(f_cast)]
     step = 1e-4
     for _ in range(max_layers):
         if len(todo) == 0:

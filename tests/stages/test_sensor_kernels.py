@@ -160,3 +160,34 @@ def test_the_tie_rule_lower_triangle_index_and_no_crack_on_a_shared_edge():
         assert (face[:, :8] < 2).all() == (order[0] is left) and (face[:, 9:] < 2).all() == (order[0] is right)
         # the left half and its copy (triangles 4, 5) coincide: the lower index (the original) is kept
         assert not np.isin(face, [4, 5]).any()
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 2**31))
+def test_raw_maps_through_glass_are_the_casters_but_on_ties(seed):
+    # the raw maps continue rays on glass from the caster's own hit: with the caster alone
+    # (first_hits cast too) the raw maps are the same wherever the clean triangle is
+    import pytest
+
+    from carlaocc.stages.sensors import raycast
+
+    rs, _, _, _, _, _, _ = _random_scene(seed)
+    from carlaocc.schemas.rig import CameraSpec
+
+    cam = CameraSpec(name="c", x=0.0, y=0.0, z=0.0, width=64, height=40)
+    pose = np.eye(4)
+    pose[:3, :3] = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)
+    clean, raw = raycast.render_camera(rs, cam, pose, raw=True)
+
+    def cast_first_hits(self, camera, camera_to_scene):
+        origin, dirs = raycast.rig_camera_rays(camera, camera_to_scene)
+        return self.cast(origin, dirs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(raycast.RayScene, "first_hits", cast_first_hits)
+        clean_ref, raw_ref = raycast.render_camera(rs, cam, pose, raw=True)
+    same = clean.face == clean_ref.face
+    for a, b in ((raw.face, raw_ref.face), (raw.semantic, raw_ref.semantic), (raw.instance, raw_ref.instance)):
+        assert np.array_equal(a[same], b[same])
+    glass = same & rs.transparent(clean.face.reshape(-1)).reshape(clean.face.shape)
+    assert np.array_equal(raw.depth[glass], raw_ref.depth[glass])  # the caster's depths behind glass
