@@ -22,6 +22,7 @@ from carlaocc.catalog.signatures import output_signatures
 from carlaocc.catalog.store import Store
 from carlaocc.pipeline.engine.spec import Partition, PlanError, StageSpec
 from carlaocc.schemas.configs import StageConfig
+from carlaocc.stages.threads import THREAD_ENV
 
 SYNCHRONOUS = "synchronous"
 
@@ -44,9 +45,9 @@ def execute_task(task: Callable, stage: str, store_url: str, cfg: StageConfig, p
                  kernel_threads: int | None = None) -> TaskResult:
     """Run one partition of a stage; never raises (a failure is a result with its error).
 
-    ``kernel_threads`` caps the kernels' threads in this process (numba, open3d, OpenCV: see
-    :mod:`carlaocc.stages.threads`): a LocalCluster already runs one worker process per core, so its
-    kernels run single-threaded instead of oversubscribing.
+    ``kernel_threads`` caps the kernels' threads in this process (numba, BLAS, OpenMP, OpenCV,
+    open3d's casts: see :mod:`carlaocc.stages.threads`): a LocalCluster already runs one
+    single-threaded worker per core, so its kernels run single-threaded instead of oversubscribing.
     """
     if kernel_threads:
         from carlaocc.stages.threads import set_kernel_threads
@@ -102,8 +103,9 @@ class DaskExecutor(Executor):
         self.submit_seconds = 0.0  # the last map's first batch
         self._client = None
         self._cluster = None
-        # own LocalCluster of single-threaded worker processes: one kernel thread each
-        self.kernel_threads = 1 if (address is None and processes) else None
+        # own LocalCluster of single-threaded workers (processes, or threads of this process for a
+        # memory:// root): one kernel thread each (numba, BLAS, OpenMP, OpenCV, open3d's casts)
+        self.kernel_threads = 1 if address is None else None
 
     # schemes whose address is host:port (probed with a plain TCP connect before the Client)
     HOST_PORT_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
@@ -192,6 +194,9 @@ class DaskExecutor(Executor):
                 # task 2.4x slower, mostly system time). Our workers keep glibc's default.
                 environ = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
                            if k != "MALLOC_TRIM_THRESHOLD_"}
+                # one thread for each kernel library from the worker's start (distributed sets
+                # OpenMP's, OpenBLAS's and MKL's; numba's pool would start a thread per core)
+                environ.update({name: 1 for name in (*THREAD_ENV, "NUMBA_NUM_THREADS")})
                 ttl = os.environ.get("DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL") or self.WORKER_TTL
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                                       "distributed.scheduler.worker-ttl": ttl}):

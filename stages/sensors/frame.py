@@ -23,8 +23,7 @@ from carlaocc.schemas.rig import CameraSpec, RigConfig
 from carlaocc.stages.scenes.assembly import flatten
 from carlaocc.stages.sensors.artifacts import unlabelled_meshes
 from carlaocc.stages.sensors.normals import depth_normals
-from carlaocc.stages.sensors.raycast import (CameraMaps, RayScene, covered_pixels, lidar_scan, rig_camera_rays,
-                                             render_camera)
+from carlaocc.stages.sensors.raycast import CameraMaps, RayScene, lidar_scan, rig_camera_rays, render_camera
 from carlaocc.stages.sensors.rectify import Rectification, compact_mesh, rectify
 from carlaocc.stages.sensors.shading import base_colours, face_normals, render_rgb, sun_direction
 from carlaocc.stages.voxelize.visibility import sensor_to_lidar
@@ -94,8 +93,7 @@ def rectify_cameras(scene: Sequence[SceneMesh], rig: RigConfig, cfg: SensorsConf
         if maps.depth.shape != (cam.height, cam.width):
             raise ValueError(f"{name}: raw maps are {maps.depth.shape}, the camera is {cam.height}x{cam.width}")
         # 2. D_rc, S_rc, I_rc from M; 3. the paper's fusion; 4. normals of the rectified depth
-        cast, _ = render_camera(compact, cam, poses[name], nthreads=nthreads,
-                                pixels=covered_pixels(m, cam, poses[name]))
+        cast, _ = render_camera(compact, cam, poses[name], nthreads=nthreads)  # rasterized: M's triangles only
         rect = rectify(maps, cast, cfg.epsilon)
         out[name] = (rect, depth_normals(rect.maps.depth, cam.intrinsics, cfg.normals))
     return out

@@ -28,11 +28,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from carlaocc.schemas import taxonomy
 
 __all__ = ["CLASS_BASE", "DEFAULT_GREY", "GLASS", "GLASS_OPACITY", "SKY_HORIZON", "SKY_ZENITH", "barycentric",
-           "base_colours", "face_normals", "render_rgb", "sample_texture", "shade", "sun_direction"]
+           "base_colours", "face_normals", "reference_rgb", "reference_shade", "render_rgb", "sample_texture", "shade",
+           "sun_direction"]
 
 SKY_HORIZON = np.array([206.0, 222.0, 236.0])
 SKY_ZENITH = np.array([92.0, 142.0, 207.0])
@@ -137,13 +139,182 @@ def textured_base(mesh, f: np.ndarray, points: np.ndarray, base: np.ndarray) -> 
     return out
 
 
+# -- the compiled per-pixel kernels ------------------------------------------------------------------
+# Float32 arithmetic in the numpy reference's order (:func:`reference_shade`,
+# :func:`reference_rgb`), except the two dot products n . d and n . sun, summed here left to right
+# where numpy's einsum / BLAS may order or fuse them otherwise: a colour can then differ in its
+# last float32 bit, and a byte by one where that bit crosses a rounding boundary (tests count them).
+
+
+@njit(cache=True, nogil=True)
+def _sunlit(face, t, dirs, normals, sun, origin, offset, sign, lambert, rays, lit_index):
+    """Step 2 and 3's first half for every hit pixel: the normal's sign against the ray, the
+    Lambert term, and a shadow ray (origin just off the surface, towards the sun) for each pixel
+    facing the sun. Returns how many shadow rays were written."""
+    k = 0
+    s0, s1, s2 = np.float32(sun[0]), np.float32(sun[1]), np.float32(sun[2])
+    for i in range(len(face)):
+        f = face[i]
+        if f < 0:
+            continue
+        d0, d1, d2 = np.float32(dirs[i, 0]), np.float32(dirs[i, 1]), np.float32(dirs[i, 2])
+        n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+        # the normal turned towards the camera: its sign against the ray
+        sg = np.float32(-1.0) if (n0 * d0 + n1 * d1) + n2 * d2 > 0 else np.float32(1.0)
+        lam = min(max(sg * ((n0 * s0 + n1 * s1) + n2 * s2), np.float32(0.0)), np.float32(1.0))
+        sign[i], lambert[i] = sg, lam
+        if lam > 0:
+            # the hit point (float64, as numpy promotes the float64 origin), pushed off the surface
+            off = np.float32(offset * sg)
+            ti = t[i]
+            rays[k, 0] = np.float32(origin[0] + ti * d0 + off * n0)
+            rays[k, 1] = np.float32(origin[1] + ti * d1 + off * n1)
+            rays[k, 2] = np.float32(origin[2] + ti * d2 + off * n2)
+            rays[k, 3], rays[k, 4], rays[k, 5] = s0, s1, s2
+            lit_index[k] = i
+            k += 1
+    return k
+
+
+@njit(cache=True, nogil=True)
+def _lit(lit_index, blocker, transparent, lit):
+    # a sunlit point is lit when its shadow ray escapes or meets only glass
+    for k in range(len(lit_index)):
+        b = blocker[k]
+        lit[lit_index[k]] = b < 0 or transparent[b]
+
+
+@njit(cache=True, nogil=True)
+def _light(face, lambert, lit, colour, base, ambient, out):
+    # step 3's second half: ambient + (1 - ambient) * lambert * lit times the base colour
+    # (``colour`` per hit pixel when textured, else empty and ``base`` per triangle)
+    amb = np.float32(ambient)
+    direct = np.float32(1.0 - ambient)
+    textured = len(colour) > 0
+    j = 0
+    for i in range(len(face)):
+        f = face[i]
+        if f < 0:
+            continue
+        light = amb + (direct * lambert[i]) * (np.float32(1.0) if lit[i] else np.float32(0.0))
+        for c in range(3):
+            out[i, c] = (colour[j, c] if textured else base[f, c]) * light
+        j += 1
+
+
+@njit(cache=True, nogil=True)
+def _tint_and_round(rgb, front, face, transparent, keep, tint, out):
+    # step 4: glass in front of the opaque surface tints it; then round half to even to bytes
+    for i in range(len(face)):
+        g = front[i] >= 0 and transparent[front[i]] and front[i] != face[i]
+        for c in range(3):
+            x = rgb[i, c]
+            if g:
+                x = keep * x + tint[c]
+            out[i, c] = np.uint8(min(max(np.rint(x), np.float32(0.0)), np.float32(255.0)))
+
+
+@njit(cache=True, nogil=True)
+def _sky_elevation(face, dirs, up, h):
+    # step 1's first half, on the pixels without a surface: the sine of the ray's elevation,
+    # clipped to [0, 1] (float32: the dot product left to right, the norm's sum of squares too)
+    u0, u1, u2 = np.float32(up[0]), np.float32(up[1]), np.float32(up[2])
+    j = 0
+    for i in range(len(face)):
+        if face[i] >= 0:
+            continue
+        d0, d1, d2 = np.float32(dirs[i, 0]), np.float32(dirs[i, 1]), np.float32(dirs[i, 2])
+        norm = np.float32(math.sqrt((d0 * d0 + d1 * d1) + d2 * d2))
+        h[j] = min(max(((d0 * u0 + d1 * u1) + d2 * u2) / norm, np.float32(0.0)), np.float32(1.0))
+        j += 1
+
+
+@njit(cache=True, nogil=True)
+def _sky_colour(face, h, horizon, zenith_minus_horizon, out):
+    # step 1's second half: horizon to zenith by the elevation's power
+    j = 0
+    for i in range(len(face)):
+        if face[i] >= 0:
+            continue
+        for c in range(3):
+            out[i, c] = horizon[c] + zenith_minus_horizon[c] * h[j]
+        j += 1
+
+
 def shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.ndarray, sun: np.ndarray,
           up: np.ndarray, ambient: float, normals: np.ndarray, base: np.ndarray | None = None,
           nthreads: int = 0) -> np.ndarray:
     """(N, 3) float32 colours of rays ``origin + t * dirs`` hitting triangles ``face`` (-1: sky)
     of ``scene`` (a :class:`~carlaocc.stages.sensors.raycast.RayScene`), lit by ``sun``;
     ``normals`` and ``base`` (per triangle, :func:`face_normals` and :func:`base_colours`; base
-    computed here when None) are computed once per frame for all cameras."""
+    computed here when None) are computed once per frame for all cameras. Compiled per pixel;
+    :func:`reference_shade` is the same model in numpy."""
+    face = np.ascontiguousarray(face, dtype=np.int64).reshape(-1)
+    n_rays = len(face)
+    out = np.empty((n_rays, 3), dtype=np.float32)
+    hit = face >= 0
+    n_hit = int(np.count_nonzero(hit))
+    dirs = np.asarray(dirs).reshape(-1, 3)
+    # 1. the sky: horizon to zenith by the ray's elevation (its power by numpy's own float32 pow,
+    #    as the reference computes it)
+    h = np.empty(n_rays - n_hit, dtype=np.float32)
+    _sky_elevation(face, dirs, np.asarray(up, dtype=np.float64), h)
+    _sky_colour(face, h ** 0.6, SKY_HORIZON.astype(np.float32), (SKY_ZENITH - SKY_HORIZON).astype(np.float32), out)
+    if not n_hit:
+        return out
+    if base is None:
+        base = base_colours(scene.mesh.color, scene.mesh.semantic).astype(np.float32)
+    t = np.ascontiguousarray(t).reshape(-1)
+    normals = np.ascontiguousarray(normals, dtype=np.float32)
+    origin = np.asarray(origin, dtype=np.float64).reshape(3)
+    # 2. the normal turned towards the camera and the Lambert term; 3. shadow rays from the sunlit
+    sign = np.zeros(n_rays, dtype=np.float32)
+    lambert = np.zeros(n_rays, dtype=np.float32)
+    rays = np.empty((n_hit, 6), dtype=np.float32)
+    lit_index = np.empty(len(rays), dtype=np.int64)
+    k = _sunlit(face, t, dirs, normals, np.asarray(sun, dtype=np.float64), origin, SHADOW_OFFSET, sign, lambert,
+                rays, lit_index)
+    lit = np.zeros(n_rays, dtype=bool)
+    if k:
+        _, blocker = scene.cast_rays(rays[:k], nthreads=nthreads)
+        _lit(lit_index[:k], blocker, scene.transparent_table, lit)
+    if getattr(scene.mesh, "texture", None) is None:
+        colour = np.zeros((0, 3), dtype=np.float32)
+    else:  # the hits' points, where the texture is read
+        f = face[hit]
+        colour = textured_base(scene.mesh, f, origin + t[hit][:, None].astype(np.float64)
+                               * np.asarray(dirs[hit], dtype=np.float32), base)
+    _light(face, lambert, lit, colour, np.ascontiguousarray(base, dtype=np.float32), float(ambient), out)
+    return out
+
+
+def render_rgb(scene, origin: np.ndarray, dirs: np.ndarray, clean, raw, sun: np.ndarray, up: np.ndarray,
+               ambient: float = 0.35, normals: np.ndarray | None = None, base: np.ndarray | None = None,
+               nthreads: int = 0) -> np.ndarray:
+    """(H, W, 3) uint8 image of one camera from its maps: ``clean`` (first surface) and ``raw``
+    (first opaque surface; None: the clean one), :class:`CameraMaps` with ``face`` set; ``origin``
+    and ``dirs`` the camera's rays (unit component along the optical axis, so the planar depth
+    is the hit distance). ``normals`` / ``base``: per triangle, shared by a frame's cameras.
+    Compiled per pixel; :func:`reference_rgb` is the same model in numpy."""
+    opaque = raw if raw is not None else clean
+    H, W = opaque.depth.shape
+    face = np.ascontiguousarray(opaque.face, dtype=np.int64).reshape(-1)
+    if normals is None:
+        normals = face_normals(scene.mesh.vertices, scene.mesh.faces)
+    rgb = shade(scene, origin, dirs, opaque.depth.reshape(-1), face, sun, up, ambient, normals, base, nthreads)
+    # 4. glass in front of the opaque surface tints it; bytes
+    out = np.empty((H * W, 3), dtype=np.uint8)
+    tint = (np.float32(GLASS_OPACITY) * GLASS.astype(np.float32)).astype(np.float32)
+    _tint_and_round(rgb, np.ascontiguousarray(clean.face, dtype=np.int64).reshape(-1), face, scene.transparent_table,
+                    np.float32(1.0 - GLASS_OPACITY), tint, out)
+    return out.reshape(H, W, 3)
+
+
+# -- the numpy reference -----------------------------------------------------------------------------
+def reference_shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.ndarray, sun: np.ndarray,
+                    up: np.ndarray, ambient: float, normals: np.ndarray, base: np.ndarray | None = None,
+                    nthreads: int = 0) -> np.ndarray:
+    """:func:`shade` in numpy (the reference the compiled kernels are checked against)."""
     n_rays = len(face)
     out = np.empty((n_rays, 3), dtype=np.float32)
     hit = face >= 0
@@ -178,20 +349,21 @@ def shade(scene, origin: np.ndarray, dirs: np.ndarray, t: np.ndarray, face: np.n
     return out
 
 
-def render_rgb(scene, origin: np.ndarray, dirs: np.ndarray, clean, raw, sun: np.ndarray, up: np.ndarray,
-               ambient: float = 0.35, normals: np.ndarray | None = None, base: np.ndarray | None = None,
-               nthreads: int = 0) -> np.ndarray:
+def reference_rgb(scene, origin: np.ndarray, dirs: np.ndarray, clean, raw, sun: np.ndarray, up: np.ndarray,
+                  ambient: float = 0.35, normals: np.ndarray | None = None, base: np.ndarray | None = None,
+                  nthreads: int = 0) -> np.ndarray:
     """(H, W, 3) uint8 image of one camera from its maps: ``clean`` (first surface) and ``raw``
     (first opaque surface; None: the clean one), :class:`CameraMaps` with ``face`` set; ``origin``
     and ``dirs`` the camera's rays (unit component along the optical axis, so the planar depth
-    is the hit distance). ``normals`` / ``base``: per triangle, shared by a frame's cameras."""
+    is the hit distance). ``normals`` / ``base``: per triangle, shared by a frame's cameras.
+    :func:`render_rgb` in numpy (the reference the compiled kernels are checked against)."""
     opaque = raw if raw is not None else clean
     H, W = opaque.depth.shape
     face = opaque.face.reshape(-1)
     t = opaque.depth.reshape(-1)
     if normals is None:
         normals = face_normals(scene.mesh.vertices, scene.mesh.faces)
-    rgb = shade(scene, origin, dirs, t, face, sun, up, ambient, normals, base, nthreads)
+    rgb = reference_shade(scene, origin, dirs, t, face, sun, up, ambient, normals, base, nthreads)
     # 4. glass in front of the opaque surface tints it
     front = clean.face.reshape(-1)
     glass = (front >= 0) & scene.transparent(front) & (front != face)

@@ -1,0 +1,193 @@
+"""The sensors stage's compiled per-pixel kernels against the code they replace: D2NT normals
+against the ``d2nt`` package itself (bit for bit), RGB shading against the numpy shading."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from carlaocc.stages.sensors.normals import VERSIONS, depth_normals, reference_normals
+from tests.raster_ties import agree_with_the_caster
+
+
+def _depth(seed: int, H: int, W: int) -> np.ndarray:
+    """A depth map with what D2NT's branches meet: tilted planes, depth steps, noise, holes,
+    equal neighbours (flat runs) and the void along whole rows or columns."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:H, 0:W]
+    d = rng.uniform(0.5, 80.0) + rng.normal(0, 0.05) * u + rng.normal(0, 0.05) * v
+    d = d + rng.uniform(0, 20.0) * (u > rng.integers(0, W + 1)) + rng.normal(0, 0.02, (H, W)) * rng.integers(0, 2)
+    d = np.round(d, int(rng.integers(1, 4))) if rng.random() < 0.3 else d  # flat runs: exact ties
+    d = np.maximum(d, 0.1).astype(np.float32)
+    d[rng.random((H, W)) < rng.uniform(0, 0.2)] = 0.0
+    if rng.random() < 0.2:
+        d[: rng.integers(0, H + 1)] = 0.0
+    return d
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 24), st.integers(1, 24))
+def test_d2nt_kernel_equals_the_d2nt_package(seed, H, W):
+    depth = _depth(seed, H, W)
+    rng = np.random.default_rng(seed + 1)
+    f = rng.uniform(50, 1500)
+    K = np.array([[f, 0, rng.uniform(0, W)], [0, f * rng.uniform(0.8, 1.2), rng.uniform(0, H)], [0, 0, 1]])
+    for version in VERSIONS:
+        ours, ref = depth_normals(depth, K, version), reference_normals(depth, K, version)
+        assert ours.dtype == np.float32 and ours.shape == (H, W, 3)
+        # the same float32 operations in the same order: the same bits
+        assert np.array_equal(ours.view(np.uint32), ref.view(np.uint32)), version
+
+
+def test_d2nt_kernel_equals_the_package_on_a_camera_image():
+    # a full rig image (1408 x 376): the borders, the soft-min's padding and v3's argmin at scale
+    from carlaocc.schemas.rig import RigConfig
+
+    cam = RigConfig().cameras[0]
+    depth = _depth(7, cam.height, cam.width)
+    for version in VERSIONS:
+        assert np.array_equal(depth_normals(depth, cam.intrinsics, version), reference_normals(depth, cam.intrinsics, version))
+
+
+# -- RGB shading -------------------------------------------------------------------------------------
+def _random_scene(seed: int):
+    """A ground, random boxes (some glass, some textured) and random triangles around a small
+    camera, with the camera's rays and clean + raw maps."""
+    from carlaocc.schemas.meshes import SceneMesh
+    from carlaocc.schemas.rig import CameraSpec
+    from carlaocc.stages.scenes.assembly import flatten
+    from carlaocc.stages.sensors.raycast import RayScene, camera_ray_bundle, render_camera
+
+    rng = np.random.default_rng(seed)
+    meshes = [SceneMesh(np.array([[-80, -80, -1.7], [80, -80, -1.7], [80, 80, -1.7], [-80, 80, -1.7]], float),
+                        np.array([[0, 1, 2], [0, 2, 3]]), 1, 0, True, False, name="road")]
+    image = rng.integers(0, 256, (4, 3, 3), dtype=np.uint8)
+    for k in range(int(rng.integers(1, 8))):
+        lo = rng.uniform([2, -10, -1.7], [30, 10, 2])
+        V = lo + rng.uniform(0.2, 6, 3) * np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
+        F = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])  # fmt: skip
+        textured = rng.random() < 0.3
+        extra = dict(corner_uv=rng.uniform(-1, 2, (12, 3, 2)).astype(np.float32), image=image) if textured else {}
+        meshes.append(SceneMesh(V, F, int(rng.choice([3, 14, 20])), k + 1, False, True, name=f"b{k}",
+                                transparent=bool(rng.random() < 0.3), color=tuple(int(c) for c in rng.integers(0, 256, 3)),
+                                **extra))
+    tris = rng.uniform([1, -15, -2], [40, 15, 8], (int(rng.integers(0, 40)), 3, 3))
+    if len(tris):
+        meshes.append(SceneMesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3), 20, 99, False, True,
+                                name="tris"))
+    rs = RayScene(flatten(meshes))
+    cam = CameraSpec(name="c", x=0.0, y=0.0, z=0.0, width=int(rng.integers(8, 96)), height=int(rng.integers(8, 64)))
+    pose = np.eye(4)
+    pose[:3, :3] = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)  # OpenCV optical frame looking along +x
+    clean, raw = render_camera(rs, cam, pose, raw=True)
+    origin, dirs = camera_ray_bundle(cam, pose)
+    sun = rng.normal(size=3)
+    sun[2] = abs(sun[2]) + 0.1
+    return rs, origin, dirs, clean, raw, sun / np.linalg.norm(sun), float(rng.uniform(0, 1))
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 2**31))
+def test_rgb_kernels_equal_the_numpy_shading(seed):
+    from carlaocc.stages.sensors.shading import reference_rgb, render_rgb
+
+    rs, origin, dirs, clean, raw, sun, ambient = _random_scene(seed)
+    up = np.array([0.0, 0.0, 1.0])
+    ours = render_rgb(rs, origin, dirs, clean, raw, sun, up, ambient)
+    ref = reference_rgb(rs, origin, dirs, clean, raw, sun, up, ambient)
+    assert ours.dtype == np.uint8 and ours.shape == ref.shape
+    # the same float32 operations, but for the Lambert term's dot product n . sun, which the
+    # reference leaves to BLAS (its order of summation, or a fused multiply-add, may change the
+    # last bit): a byte may then differ by one where a colour sits on a rounding boundary
+    diff = np.abs(ours.astype(np.int16) - ref.astype(np.int16))
+    assert diff.max() <= 1 and (diff > 0).mean() < 1e-3
+    # the float colours agree to a few float32 ulps, with either ray parameter type
+    from carlaocc.stages.sensors.shading import face_normals, reference_shade, shade
+
+    n = face_normals(rs.mesh.vertices, rs.mesh.faces)
+    face = raw.face.reshape(-1)
+    for t in (raw.depth.reshape(-1), raw.depth.reshape(-1).astype(np.float64)):
+        a = shade(rs, origin, dirs, t, face, sun, up, ambient, n)
+        b = reference_shade(rs, origin, dirs, t, face, sun, up, ambient, n)
+        assert a.dtype == np.float32 and np.allclose(a, b, rtol=4e-7, atol=0)
+
+
+# -- primary visibility by rasterization --------------------------------------------------------------
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31))
+def test_rasterized_first_hits_equal_the_caster_but_on_ties(seed):
+    rs, origin, dirs, clean, raw, sun, ambient = _random_scene(seed)
+    from carlaocc.schemas.rig import CameraSpec
+
+    rng = np.random.default_rng(seed)
+    cam = CameraSpec(name="c", x=0.0, y=0.0, z=0.0, width=int(rng.integers(8, 96)), height=int(rng.integers(8, 64)))
+    # the camera turned a little (rays not on the axes), at a random place among the boxes
+    pose = np.eye(4)
+    yaw = rng.uniform(-0.5, 0.5)
+    Rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+    pose[:3, :3] = Rz @ np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)
+    pose[:3, 3] = rng.uniform([-2, -3, -1], [4, 3, 2])
+    agree_with_the_caster(rs, cam, pose)
+
+
+def test_the_tie_rule_lower_triangle_index_and_no_crack_on_a_shared_edge():
+    from carlaocc.schemas.meshes import SceneMesh
+    from carlaocc.schemas.rig import CameraSpec
+    from carlaocc.stages.scenes.assembly import flatten
+    from carlaocc.stages.sensors.raycast import RayScene
+
+    # camera frame = scene frame, looking along +z; pixel column 8's rays have x = 0 exactly
+    # (principal point at 17 / 2 = 8 + 0.5)
+    cam = CameraSpec(name="c", width=17, height=12, hfov_deg=60.0)
+    pose = np.eye(4)
+    # a quad at z = 10 split along x = 0 (the shared edge), and a copy of its left half (coplanar)
+    left = np.array([[-20, -20, 10], [0, -20, 10], [0, 20, 10], [-20, 20, 10]], float)
+    right = left + [20, 0, 0]
+    for order in ((left, right), (right, left)):
+        meshes = [SceneMesh(q, np.array([[0, 1, 2], [0, 2, 3]]), 3, k + 1, False, True, name=f"q{k}")
+                  for k, q in enumerate(order)]
+        meshes.append(SceneMesh(left, np.array([[0, 1, 2], [0, 2, 3]]), 3, 9, False, True, name="copy"))
+        rs = RayScene(flatten(meshes))
+        t, face = rs.first_hits(cam, pose)
+        face = face.reshape(cam.height, cam.width)
+        # every pixel sees the quad at depth 10 (no crack along the edge or the diagonals)
+        assert (face >= 0).all() and np.allclose(t, 10.0)
+        # the column through the shared edge: both halves hit at equal depth, the lower index
+        # kept whichever half it is
+        assert (face[:, 8] < 2).all()
+        assert (face[:, :8] < 2).all() == (order[0] is left) and (face[:, 9:] < 2).all() == (order[0] is right)
+        # the left half and its copy (triangles 4, 5) coincide: the lower index (the original) is kept
+        assert not np.isin(face, [4, 5]).any()
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 2**31))
+def test_raw_maps_through_glass_are_the_casters_but_on_ties(seed):
+    # the raw maps continue rays on glass from the caster's own hit: with the caster alone
+    # (first_hits cast too) the raw maps are the same wherever the clean triangle is
+    import pytest
+
+    from carlaocc.stages.sensors import raycast
+
+    rs, _, _, _, _, _, _ = _random_scene(seed)
+    from carlaocc.schemas.rig import CameraSpec
+
+    cam = CameraSpec(name="c", x=0.0, y=0.0, z=0.0, width=64, height=40)
+    pose = np.eye(4)
+    pose[:3, :3] = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)
+    clean, raw = raycast.render_camera(rs, cam, pose, raw=True)
+
+    def cast_first_hits(self, camera, camera_to_scene):
+        origin, dirs = raycast.rig_camera_rays(camera, camera_to_scene)
+        return self.cast(origin, dirs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(raycast.RayScene, "first_hits", cast_first_hits)
+        clean_ref, raw_ref = raycast.render_camera(rs, cam, pose, raw=True)
+    same = clean.face == clean_ref.face
+    for a, b in ((raw.face, raw_ref.face), (raw.semantic, raw_ref.semantic), (raw.instance, raw_ref.instance)):
+        assert np.array_equal(a[same], b[same])
+    glass = same & rs.transparent(clean.face.reshape(-1)).reshape(clean.face.shape)
+    assert np.array_equal(raw.depth[glass], raw_ref.depth[glass])  # the caster's depths behind glass
