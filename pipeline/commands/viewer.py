@@ -311,9 +311,9 @@ def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes
     if flow and len(v.arrows) and len(v.arrows[0]):
         start, end = v.arrows
         overlays.append(scene.add_line_segments("/flow", np.stack([start, end], 1), colors=(255, 0, 255),
-                                                line_width=3.0))
+                                                thickness=0.08))
     if boxes and len(v.boxes):
-        overlays.append(scene.add_line_segments("/boxes/edges", v.boxes, colors=(255, 255, 0), line_width=2.0))
+        overlays.append(scene.add_line_segments("/boxes/edges", v.boxes, colors=(255, 255, 0), thickness=0.04))
         for k, (text, pos) in enumerate(v.box_labels):
             overlays.append(scene.add_label(f"/boxes/label_{k}", text, position=tuple(float(x) for x in pos)))
     if lidar and v.points is not None:
