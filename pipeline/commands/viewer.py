@@ -165,7 +165,8 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
         occupied = len(flat)
     origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
     # flow arrows from every voxel of a moving thing (before the surface is taken)
-    arrows = flow_arrows(voxel_centres(ijk, origin, voxel_size), inst, flow)[:2]
+    things = inst != 0
+    arrows = flow_arrows(voxel_centres(ijk[things], origin, voxel_size), inst[things], flow[things])[:2]
     surf = np.flatnonzero(surface_voxels(ijk, shape))
     keep, factor = level_of_detail(ijk[surf], budget)
     sel = surf[keep]
@@ -327,7 +328,7 @@ def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes
     if cameras:
         for cam in v.cameras:
             overlays.append(scene.add_camera_frustum(f"/cameras/{cam['name']}", fov=cam["fov"], aspect=cam["aspect"],
-                                                     scale=1.0, image=cam[image], wxyz=tuple(cam["wxyz"]),
+                                                     scale=0.6, image=cam[image], wxyz=tuple(cam["wxyz"]),
                                                      position=tuple(cam["position"]), color=(40, 40, 40)))
 
 

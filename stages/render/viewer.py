@@ -20,6 +20,7 @@ and units").
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import quaternion_wxyz
@@ -44,6 +45,24 @@ def linear_index(ijk: np.ndarray, shape) -> np.ndarray:
     return (ijk[:, 0] * Y + ijk[:, 1]) * Z + ijk[:, 2]
 
 
+@njit(cache=True)
+def _has_neighbour(flat: np.ndarray, offset: int) -> np.ndarray:
+    """For each value of the sorted unique int64 ``flat``, whether ``value + offset`` is in it: one
+    merge walk of a second pointer (O(N), no search)."""
+    n = len(flat)
+    out = np.zeros(n, np.bool_)
+    j = 0
+    for i in range(n):
+        target = flat[i] + offset
+        # the second pointer only moves forward: the targets are sorted too
+        while j < n and flat[j] < target:
+            j += 1
+        if j == n:
+            break
+        out[i] = flat[j] == target
+    return out
+
+
 def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
     """Bool mask (N,) of the occupied voxels ``ijk`` (N, 3, unique, in a grid of ``shape``) that
     have at least one free face neighbour; a face on the grid's border counts as free."""
@@ -52,19 +71,24 @@ def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
     if n == 0:
         return np.zeros(0, bool)
     shape = np.asarray(shape, np.int64)
-    # the occupied set as sorted flat indices: a neighbour is occupied iff found by binary search
+    # the occupied set as sorted flat indices (the store's rows come in C order: no sort then)
     flat = linear_index(ijk, shape)
-    occupied = np.sort(flat)
+    order = None
+    if n > 1 and not bool(np.all(flat[1:] > flat[:-1])):
+        order = np.argsort(flat, kind="stable")
+        flat = flat[order]
+        ijk = ijk[order]
     exposed = np.zeros(n, bool)
+    strides = (int(shape[1] * shape[2]), int(shape[2]), 1)
     for axis in range(3):
         for step in (-1, 1):
-            nb = ijk.copy()
-            nb[:, axis] += step
-            # a neighbour outside the grid is free space
-            outside = (nb[:, axis] < 0) | (nb[:, axis] >= shape[axis])
-            nb_flat = linear_index(np.clip(nb, 0, shape - 1), shape)
-            pos = np.minimum(np.searchsorted(occupied, nb_flat), n - 1)
-            exposed |= outside | (occupied[pos] != nb_flat)
+            # a neighbour outside the grid is free space; inside, free unless it is in the set
+            edge = ijk[:, axis] == (0 if step < 0 else shape[axis] - 1)
+            exposed |= edge | ~_has_neighbour(flat, step * strides[axis])
+    if order is not None:
+        out = np.empty(n, bool)
+        out[order] = exposed
+        return out
     return exposed
 
 
@@ -77,11 +101,13 @@ def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
         raise ValueError(f"budget {budget}: at least 1 voxel")
     factor = 1
     keep = np.arange(len(ijk))
+    if len(ijk) == 0:
+        return keep, factor
     while len(keep) > budget:
         factor *= 2
-        # the block of every voxel, then the first voxel of each block
+        # the block of every voxel as one flat index, then the first voxel of each block
         blocks = ijk // factor
-        _, first = np.unique(blocks, axis=0, return_index=True)
+        _, first = np.unique(linear_index(blocks, blocks.max(axis=0) + 1), return_index=True)
         keep = np.sort(first)
     return keep, factor
 
