@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -346,6 +347,9 @@ def start_server(host: str = "127.0.0.1", port: int = 0):
     forward from behind and above the ego (LiDAR frame, metres)."""
     import viser
 
+    # a browser's speculative connection closed before its handshake is logged as a traceback
+    # by websockets' server: not an error of ours, kept off the terminal
+    logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host=host, port=port, verbose=False)
     server.scene.set_up_direction("+z")
