@@ -98,3 +98,25 @@ def test_prediction_refusals(default_01, tmp_path):
     r = CliRunner().invoke(app, ["view", "--root", default_01.url, "--pred", str(tmp_path / "p"), "--frames", "1:2",
                                  "--save", str(tmp_path / "b.html")])
     assert r.exit_code == 2 and "no prediction for" in r.output and not (tmp_path / "b.html").exists()
+
+
+def test_the_command_serves_on_a_free_port_and_stops_on_ctrl_c(default_01):
+    import os
+    import signal
+    import urllib.request
+
+    proc = subprocess.Popen([sys.executable, "-m", "carlaocc", "view", "--root", default_01.url, "--port", "0",
+                             "--max-points", "5000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("viewing ") and "http://localhost:" in line, (line, proc.stderr.read()[-2000:])
+        url = line.split(": ", 1)[1].split()[0]
+        with urllib.request.urlopen(url, timeout=30) as r:
+            assert r.status == 200 and b"<html" in r.read(2000).lower()
+        # Ctrl-C: the server stops, and the process ends as every command does on a stop signal
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 128 + signal.SIGINT
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
