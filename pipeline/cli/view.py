@@ -47,7 +47,7 @@ def view(
     frames: Annotated[Optional[str], typer.Option("--frames", help="START:STOP: only these frames (sample indices) on the timeline and in --save")] = None,
     max_points: Annotated[int, typer.Option("--max-points", min=1000, help="surface voxels drawn per frame before the level of detail coarsens them (x2 per step)")] = 400_000,
     host: Annotated[str, typer.Option("--host", help="address to serve on (127.0.0.1: this machine only; reach it through ssh -L)")] = "127.0.0.1",
-    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="port to serve on (0: a free one)")] = 8080,
+    port: Annotated[int, typer.Option("--port", min=0, max=65535, help="port to serve on (0: any free one; a taken port: the next free one, the printed URL says which)")] = 8080,
     save: Annotated[Optional[Path], typer.Option("--save", help="write the frames as one offline HTML page (opened by any browser, no dataset or carlaocc needed) instead of serving")] = None,
 ) -> None:
     """Look around a sequence in a web viewer served on a local port: surface voxels by class,
