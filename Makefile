@@ -21,7 +21,7 @@ PLAN_ARGS := $(if $(RES),--res $(RES),) $(if $(FRAMES),--limit-frames $(FRAMES),
 RUN_ARGS  := $(PLAN_ARGS) $(if $(WORKERS),--workers $(WORKERS),) $(SCHED_ARG)
 
 .DEFAULT_GOAL := help
-.PHONY: help venv venv-test venv-docs dataset stage query status info test test-all bench docs clean-venv syslibs
+.PHONY: help venv syslibs-test venv-test venv-docs dataset stage query status info test test-all bench docs clean-venv syslibs
 
 help: ## list the targets
 	@echo "carlaocc make targets"
@@ -65,7 +65,12 @@ $(BIN)/.installed-docs: pyproject.toml $(BIN)/.installed
 
 venv: syslibs $(BIN)/.installed ## create .venv with what building needs (no test packages)
 
-venv-test: venv $(BIN)/.installed-test ## add the test extra to .venv (make test does it)
+# the system packages of the tests only (a headless Chromium for the browser tests), checked on every
+# `make test` (nothing is done when present); `make dataset` never installs a browser
+syslibs-test:
+	@sh tools/setup_system.sh --test "$(PYTHON)"
+
+venv-test: venv syslibs-test $(BIN)/.installed-test ## add the test extra to .venv (make test does it)
 
 venv-docs: venv $(BIN)/.installed-docs ## add the docs extra to .venv (make docs does it)
 

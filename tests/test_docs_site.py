@@ -9,7 +9,6 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +20,7 @@ from PIL import Image
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import docs_hooks
+from browser import chromium
 
 
 def test_readme_is_a_short_front_page_whose_links_resolve():
@@ -91,7 +91,6 @@ def test_config_reference_has_every_key_with_its_default():
 
 
 NO_MKDOCS = importlib.util.find_spec("mkdocs") is None
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 # the Terrain colour of docs/front.png's 3D view: large flat areas keep it when the browser scales
 TERRAIN = np.array([140, 231, 140])
 
@@ -126,13 +125,13 @@ def test_site_builds_strict(site):
     assert not re.search(r":(class|func|meth|mod|attr|data):<code>", api) and "::</p>" not in api
 
 
-@pytest.mark.skipif(NO_MKDOCS or CHROMIUM is None, reason="needs the docs toolchain and a headless Chromium")
+@pytest.mark.skipif(NO_MKDOCS, reason="needs the docs toolchain")
 @pytest.mark.parametrize("page", ["index.html", "tutorials/first-dataset.html"])
 def test_page_shows_its_picture_in_a_browser(site, page, tmp_path):
     # a screenshot in headless Chromium: the page's picture loaded and drawn (its flat terrain
     # colour covers thousands of pixels; a missing image would draw none)
     shot = tmp_path / "shot.png"
-    r = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+    r = subprocess.run([chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
                         "--window-size=1280,3000", f"--screenshot={shot}", (site / page).as_uri()],
                        check=False, capture_output=True, text=True, timeout=120)
     assert shot.is_file(), r.stderr[-2000:]

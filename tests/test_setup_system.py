@@ -41,6 +41,8 @@ def run_setup(
     venv: bool = True,
     apt: str | None = "ok",  # None: no apt-get on PATH; "fail": apt-get exits 100
     python: str = "python3",
+    test: bool = False,  # --test: the tests' packages too (a headless Chromium)
+    browser: str | None = None,  # the name of a browser executable on PATH, if any
 ):
     """Runs the script with only the stand-ins on PATH; returns (result, recorded calls)."""
     bin_ = tmp / "bin"
@@ -73,9 +75,12 @@ def run_setup(
         _write(bin_ / "true", "exit 0\n")  # what `sudo -n true` runs
     py = bin_ / python
     _write(py, f'echo "{python} $*" {log}\nexit {0 if venv else 1}\n')
+    if browser is not None:
+        _write(bin_ / browser, "exit 0\n")
     env = {"PATH": str(bin_), "HOME": str(tmp)}  # no DEBIAN_FRONTEND: the script must set it
     result = subprocess.run(
-        [SH, str(SCRIPT), str(py)], env=env, capture_output=True, text=True, timeout=60
+        [SH, str(SCRIPT), *(["--test"] if test else []), str(py)], env=env, capture_output=True, text=True,
+        timeout=60
     )
     recorded = [ln for ln in calls.read_text().splitlines() if not ln.startswith(python)]
     return result, recorded
@@ -183,6 +188,32 @@ def test_installs_exactly_what_is_missing(present, venv, uid):
     else:
         assert installs == [f"apt-get [DEBIAN_FRONTEND=noninteractive] {INSTALL} {' '.join(expected)}"]
         assert sum(" update " in c or c.endswith(" update -qq") for c in calls if c.startswith("apt-get")) == 1
+
+
+def test_the_test_variant_installs_chromium_only_when_no_browser_is_there(tmp_path):
+    (tmp_path / "none").mkdir()
+    result, calls = run_setup(tmp_path / "none", test=True)
+    assert result.returncode == 0, result.stderr
+    assert calls == ["apt-get [DEBIAN_FRONTEND=noninteractive] update -qq",
+                     f"apt-get [DEBIAN_FRONTEND=noninteractive] {INSTALL} chromium"]
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        (tmp_path / name).mkdir()
+        result, calls = run_setup(tmp_path / name, test=True, browser=name)
+        assert result.returncode == 0 and calls == [], (name, calls)
+    # without --test (make dataset) no browser is ever installed
+    (tmp_path / "plain").mkdir()
+    result, calls = run_setup(tmp_path / "plain")
+    assert result.returncode == 0 and calls == []
+
+
+def test_make_test_installs_the_browser_and_make_dataset_does_not():
+    make = (ROOT / "Makefile").read_text()
+    recipe = make.split("\nsyslibs-test:", 1)[1].split("\n\n", 1)[0]
+    assert "tools/setup_system.sh --test" in recipe
+    venv_test = next(ln for ln in make.splitlines() if ln.startswith("venv-test:"))
+    assert "syslibs-test" in venv_test
+    dataset = next(ln for ln in make.splitlines() if ln.startswith("dataset:"))
+    assert "test" not in dataset and "--test" not in make.split("\nsyslibs:", 1)[1].split("\n\n", 1)[0]
 
 
 def test_make_and_ci_go_through_the_script():

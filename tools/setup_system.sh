@@ -3,8 +3,11 @@
 # creates .venv (the `syslibs` target), and .ci/run goes through `make test`, so a fresh machine
 # needs nothing but the README's two commands.
 #
-#   sh tools/setup_system.sh [PYTHON]      (PYTHON: the interpreter make builds .venv with)
+#   sh tools/setup_system.sh [--test] [PYTHON]      (PYTHON: the interpreter make builds .venv with)
 #
+# --test (`make venv-test`, so `make test`; never `make dataset`): also a headless browser for the
+#   browser tests (the docs site's pictures, `carlaocc view`): Debian's chromium, unless a
+#   chromium, chromium-browser or google-chrome is already on PATH.
 # - open3d's wheel links libusb-1.0 and (0.20) libEGL; opencv-python (imported by the D2NT normal
 #   translator) links libGL, libgthread/libglib and libxcb: found with `ldconfig -p`.
 # - `PYTHON -m venv` needs ensurepip, which a bare Debian python3 lacks (python3-venv).
@@ -13,6 +16,11 @@
 # neither works does it print one line naming the packages and the command, and exit 1.
 set -eu
 
+TEST=0
+if [ "${1:-}" = "--test" ]; then
+  TEST=1
+  shift
+fi
 PYTHON=${1:-python3}
 
 # package name of the venv module for this interpreter: python3 -> python3-venv,
@@ -47,6 +55,11 @@ fi
 
 if ! "$PYTHON" -c 'import ensurepip, venv' >/dev/null 2>&1; then
   missing="$missing $venv_pkg"
+fi
+
+if [ "$TEST" = 1 ] && ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1 \
+   && ! command -v google-chrome >/dev/null 2>&1; then
+  missing="$missing chromium"
 fi
 
 [ -z "$missing" ] && exit 0

@@ -31,7 +31,7 @@ import sys
 import traceback
 
 # the command modules register their commands, in the order --help lists them
-from carlaocc.pipeline.cli import build, files, audit, query, scene_tools, show  # noqa: F401, I001
+from carlaocc.pipeline.cli import build, files, audit, query, scene_tools, show, view  # noqa: F401, I001
 from carlaocc.pipeline.cli.app import app
 from carlaocc.pipeline.cli.common import DEBUG_HINT, debug_enabled, one_line
 from carlaocc.pipeline.cli.exit import exit_code, leave

@@ -1,0 +1,390 @@
+"""``carlaocc view``: a sequence of a built root in a web viewer (viser: a Python server, a
+three.js client in the browser, usable through SSH port forwarding), and ``--save``: the same
+scene as one offline HTML page.
+
+Reading goes through :class:`carlaocc.catalog.samples.FrameSamples` (occupancy, cameras and their
+maps, LiDAR, actor boxes) and, for ``--pred``, the prediction files ``carlaocc eval ssc`` reads on
+our grid; what is drawn is prepared by the pure functions of :mod:`carlaocc.stages.render.viewer`.
+One scene node per class (``/voxels/<Class>``), so a class toggles without re-sending anything;
+a frame switch replaces the nodes' arrays.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from carlaocc.catalog.samples import DatasetError, FrameSamples
+from carlaocc.catalog.sensors import LidarStore, SensorStore
+from carlaocc.catalog.store import Store
+from carlaocc.schemas import taxonomy
+from carlaocc.stages.geometry import boxes_in_frame
+from carlaocc.stages.render.colours import height_ramp
+from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, box_edges, camera_frustum, class_colours,
+                                           flow_arrows, ghost, level_of_detail, linear_index, prediction_outcome,
+                                           surface_voxels, voxel_centres)
+
+DEFAULT_BUDGET = 400_000
+"""Surface voxels drawn per frame before the level of detail coarsens (x2 per step)."""
+COLOUR_MODES = ("semantic", "instance", "outcome")
+UNOBSERVED = ("show", "ghost", "hide")
+INITIAL_CAMERA = ((-22.0, 0.0, 18.0), (12.0, 0.0, 0.0))
+"""Position and target (m, LiDAR frame) of the first view: behind and above the ego, looking ahead."""
+IMAGE_WIDTH = 320  # camera images are sent at this width (the frustums are small on screen)
+
+
+class ViewerError(ValueError):
+    """A bad option or input of ``carlaocc view``; the message names it and what to do."""
+
+
+@dataclass
+class FrameView:
+    """One frame, prepared: surface voxels (after the level of detail) with their classes,
+    instances, masks, outcome against a prediction; the overlays; how long preparing took."""
+
+    centres: np.ndarray          # (N, 3) float32 m, LiDAR frame
+    semantic: np.ndarray         # (N,) uint8 (the prediction's class where it has one, with --pred)
+    instance: np.ndarray         # (N,) uint32
+    mask_camera: np.ndarray      # (N,) bool
+    mask_lidar: np.ndarray       # (N,) bool
+    outcome: np.ndarray | None   # (N,) uint8 codes of OUTCOMES, with --pred
+    point_size: float            # m: the voxel size times the level-of-detail factor
+    occupied: int                # occupied voxels of the frame (before surface and LOD)
+    arrows: tuple = ()           # (start, end) float32 (M, 3) m
+    boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3), np.float32))
+    box_labels: list = field(default_factory=list)   # (text, position)
+    points: np.ndarray | None = None                  # LiDAR (P, 3) m
+    points_semantic: np.ndarray | None = None
+    cameras: list = field(default_factory=list)       # dicts: name, fov, aspect, wxyz, position, rgb/semantic/depth
+    ego: np.ndarray | None = None                     # (4, 4) ego-to-LiDAR
+    seconds: float = 0.0
+
+
+def open_frames(root: str, seq: str | None, voxel_size: float | None) -> FrameSamples:
+    """The frames of sequence ``seq`` (the root's first when None) at ``voxel_size`` (its finest
+    when None), with cameras, camera maps and LiDAR where the root has them."""
+    try:
+        index = FrameSamples(root, voxel_size=voxel_size, occupancy="none", cameras=False, lidar=False, boxes=False,
+                             sequences=None if seq is None else [seq])
+    except DatasetError as exc:
+        raise ViewerError(str(exc)) from None
+    seqs = sorted({s for s, _ in index.samples})
+    if not seqs:
+        raise ViewerError(f"{root}: sequence {seq} has no frames")
+    seq = seqs[0] if seq is None else seq
+    store = Store(root)
+    cameras = bool(SensorStore(store).cameras(seq))
+    lidar = LidarStore(store).exists(seq, index.samples[0][1]) if index.samples else False
+    return FrameSamples(root, voxel_size=index.voxel_size, occupancy="sparse", cameras=cameras,
+                        camera_maps=("depth", "semantic") if cameras else (), lidar=lidar, boxes=True,
+                        sequences=[seq])
+
+
+def prediction_files(pred: Path, seq: str, frames: list[int]) -> dict[int, Path]:
+    """The prediction file of every frame: ``<pred>/<seq>/<frame:06d>.npz`` (the layout of
+    ``carlaocc export carlaocc-npz``, which ``carlaocc eval`` reads); a missing one is an error."""
+    if not pred.is_dir():
+        raise ViewerError(f"--pred {pred}: not a directory (a prediction tree <seq>/<frame:06d>.npz on the root's grid)")
+    out = {}
+    for f in frames:
+        p = pred / seq / f"{f:06d}.npz"
+        if not p.is_file():
+            raise ViewerError(f"--pred {pred}: no prediction for {seq} frame {f} (expected {p})")
+        out[f] = p
+    return out
+
+
+def load_prediction(path: Path, shape) -> tuple[np.ndarray, np.ndarray]:
+    """``(flat indices, classes)`` of the occupied voxels of one prediction file on a grid of
+    ``shape``: a CarlaOcc npz (``occupancy`` rows) or an npz whose ``semantics`` is the dense grid
+    in CarlaOcc ids (0 free), as ``carlaocc eval ssc --map carlaocc`` reads them."""
+    from carlaocc.catalog.formats import FormatError
+    from carlaocc.catalog.formats.carlaocc_npz import load_carlaocc_rows
+
+    shape = tuple(int(s) for s in shape)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            files = list(z.files)
+            sem = z["semantics"] if "semantics" in files and "occupancy" not in files else None
+    except (OSError, ValueError, EOFError) as exc:
+        raise ViewerError(f"--pred: {path} unreadable ({exc})") from None
+    if sem is None:
+        try:
+            rows = load_carlaocc_rows(path)
+        except (FormatError, ValueError) as exc:
+            raise ViewerError(f"--pred: {path}: {exc} (a CarlaOcc npz or an npz with 'semantics')") from None
+        if tuple(rows.volume_size) != shape:
+            raise ViewerError(f"--pred: {path} is a {tuple(rows.volume_size)} grid, the root's is {shape}")
+        return linear_index(rows.index, shape), rows.semantic.astype(np.uint8)
+    if sem.shape != shape or not np.issubdtype(sem.dtype, np.integer):
+        raise ViewerError(f"--pred: {path}: 'semantics' is {sem.dtype} {sem.shape}, the root's grid is {shape} "
+                          f"(integer CarlaOcc ids)")
+    flat = np.flatnonzero(sem)
+    return flat.astype(np.int64), sem.reshape(-1)[flat].astype(np.uint8)
+
+
+def _thumbnail(image: np.ndarray, width: int = IMAGE_WIDTH) -> np.ndarray:
+    step = max(1, image.shape[1] // width)
+    return np.ascontiguousarray(image[::step, ::step])
+
+
+def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
+                  budget: int = DEFAULT_BUDGET) -> FrameView:
+    """Reads sample ``index`` and prepares what the viewer draws (timed in ``seconds``)."""
+    t0 = time.perf_counter()
+    s = samples[index]
+    seq = s["sequence_id"]
+    shape = tuple(int(v) for v in s["grid_shape"])
+    rows = s["occ"]
+    ijk, sem = rows[:, :3].astype(np.int64), rows[:, 3].astype(np.uint8)
+    n = len(rows)
+    inst = s.get("occ_instance", np.zeros(n, np.uint32))
+    flow = s.get("occ_flow", np.zeros((n, 3), np.float32))
+    mcam = s.get("occ_mask_camera", np.ones(n, bool))
+    mlid = s.get("occ_mask_lidar", np.ones(n, bool))
+    outcome = None
+    occupied = n
+    if pred is not None:
+        # the union of both sides' occupied voxels, each with its outcome and the class shown
+        gt_flat = linear_index(ijk, shape)
+        p_flat, p_cls = load_prediction(pred, shape)
+        flat, outcome, shown = prediction_outcome(gt_flat, sem, p_flat, p_cls)
+        at = np.searchsorted(gt_flat, flat)
+        in_gt = (at < n) & (gt_flat[np.minimum(at, n - 1)] == flat)
+        take = np.minimum(at, n - 1)
+        inst = np.where(in_gt, inst[take], 0).astype(np.uint32)
+        flow = np.where(in_gt[:, None], flow[take], 0).astype(np.float32)
+        mcam, mlid = np.where(in_gt, mcam[take], True), np.where(in_gt, mlid[take], True)
+        ijk = np.column_stack(np.unravel_index(flat, shape)).astype(np.int64)
+        sem = shown
+        occupied = len(flat)
+    origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
+    # flow arrows from every voxel of a moving thing (before the surface is taken)
+    things = inst != 0
+    arrows = flow_arrows(voxel_centres(ijk[things], origin, voxel_size), inst[things], flow[things])[:2]
+    surf = np.flatnonzero(surface_voxels(ijk, shape))
+    keep, factor = level_of_detail(ijk[surf], budget)
+    sel = surf[keep]
+    view = FrameView(centres=voxel_centres(ijk[sel], origin, voxel_size), semantic=sem[sel], instance=inst[sel],
+                     mask_camera=mcam[sel], mask_lidar=mlid[sel], outcome=None if outcome is None else outcome[sel],
+                     point_size=voxel_size * factor, occupied=occupied, arrows=arrows)
+    boxes = boxes_in_frame(samples.actor_rows(index), np.linalg.inv(s["lidar_pose"]))
+    view.boxes = box_edges(boxes["box_pose"], boxes["boxes"][:, 3:6])
+    view.box_labels = [(f"{taxonomy.by_id(int(c)).name} #{int(i)}",
+                        boxes["boxes"][k, :3] + np.array([0, 0, boxes["boxes"][k, 5] / 2 + 0.3]))
+                       for k, (i, c) in enumerate(zip(boxes["box_instance"], boxes["box_semantic"]))]
+    if "points" in s:
+        view.points, view.points_semantic = s["points"], s["points_semantic"]
+    view.ego = np.linalg.inv(s["lidar_to_ego"])
+    for c, name in enumerate(s.get("camera_names", [])):
+        rgb = s["images"][c]
+        h, w = rgb.shape[:2]
+        cam = camera_frustum(s["cam_intrinsics"][c], s["cam_to_lidar"][c], w, h)
+        depth = s["cam_depth"][c]
+        cam.update(name=name, rgb=_thumbnail(rgb),
+                   semantic=_thumbnail(class_colours(s["cam_semantic"][c].reshape(-1)).reshape(h, w, 3)),
+                   depth=_thumbnail(np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8)))
+        view.cameras.append(cam)
+    view.seconds = time.perf_counter() - t0
+    return view
+
+
+def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(colours (N, 3) uint8, shown (N,) bool)`` of a frame's voxels: coloured by ``mode``, and
+    those ``mask`` (camera | lidar) marks unobserved shown, ghosted or hidden."""
+    if mode == "outcome" and view.outcome is not None:
+        col = OUTCOME_COLOURS[view.outcome]
+    else:
+        col = class_colours(view.semantic, view.instance, "instance" if mode == "instance" else "semantic")
+    observed = view.mask_camera if mask == "camera" else view.mask_lidar
+    shown = np.ones(len(col), bool)
+    if unobserved == "ghost":
+        col = ghost(col, observed)
+    elif unobserved == "hide":
+        shown = observed.copy()
+    return col, shown
+
+
+class Viewer:
+    """The live scene of one sequence on a viser server: a timeline, per-class toggles, colour
+    modes, masks and overlays (GUI on the right), one scene node per class."""
+
+    def __init__(self, server, samples: FrameSamples, preds: dict[int, Path] | None, budget: int,
+                 indices: list[int] | None = None, first: int = 0) -> None:
+        self.server, self.samples, self.preds, self.budget = server, samples, preds, budget
+        self.indices = list(range(len(samples))) if indices is None else list(indices)
+        self.frames = [samples.samples[k][1] for k in self.indices]
+        self.cache: dict[int, FrameView] = {}
+        self.nodes: dict[str, object] = {}
+        self.overlays: list = []
+        gui = server.gui
+        seq = samples.samples[0][0]
+        gui.add_markdown(f"**{seq}** at {samples.voxel_size:g} m" + (" against a prediction" if preds else ""))
+        if preds:
+            gui.add_markdown(legend_text(True))
+        self.frame = gui.add_slider("frame", min=0, max=max(len(self.frames) - 1, 0), step=1,
+                                    initial_value=min(max(first, 0), max(len(self.frames) - 1, 0)))
+        self.mode = gui.add_dropdown("colour", COLOUR_MODES if preds else COLOUR_MODES[:2],
+                                     initial_value="outcome" if preds else "semantic")
+        self.mask = gui.add_dropdown("mask", ("camera", "lidar"), initial_value="camera")
+        self.unobserved = gui.add_dropdown("unobserved", UNOBSERVED, initial_value="show")
+        with gui.add_folder("layers"):
+            self.show_flow = gui.add_checkbox("flow", True)
+            self.show_boxes = gui.add_checkbox("boxes", True)
+            self.show_lidar = gui.add_checkbox("LiDAR", False)
+            self.show_cameras = gui.add_checkbox("cameras", True)
+            self.image = gui.add_dropdown("camera image", ("rgb", "semantic", "depth"), initial_value="rgb")
+        self.status = gui.add_markdown("")
+        self.class_boxes: dict[int, object] = {}
+        self.class_folder = gui.add_folder("classes")
+        for handle in (self.frame, self.mode, self.mask, self.unobserved, self.show_flow, self.show_boxes,
+                       self.show_lidar, self.show_cameras, self.image):
+            handle.on_update(lambda _: self.draw())
+        self.draw()
+
+    def view(self, k: int) -> FrameView:
+        if k not in self.cache:
+            frame = self.frames[k]
+            self.cache[k] = prepare_frame(self.samples, self.indices[k], None if self.preds is None else self.preds[frame],
+                                          self.budget)
+            while len(self.cache) > 8:
+                self.cache.pop(next(iter(self.cache)))
+        return self.cache[k]
+
+    def _class_box(self, cid: int):
+        if cid not in self.class_boxes:
+            with self.class_folder:
+                box = self.server.gui.add_checkbox(taxonomy.by_id(cid).name, True)
+            box.on_update(lambda _, c=cid: self._toggle(c))
+            self.class_boxes[cid] = box
+        return self.class_boxes[cid]
+
+    def _toggle(self, cid: int) -> None:
+        node = self.nodes.get(taxonomy.by_id(cid).name)
+        if node is not None:
+            node.visible = bool(self.class_boxes[cid].value)
+
+    def draw(self) -> None:
+        """(Re)draws the current frame with the current settings."""
+        v = self.view(int(self.frame.value))
+        draw_frame(self.server.scene, v, self.mode.value, self.unobserved.value, self.mask.value, self.nodes,
+                   self.overlays, flow=self.show_flow.value, boxes=self.show_boxes.value, lidar=self.show_lidar.value,
+                   cameras=self.show_cameras.value, image=self.image.value,
+                   visible={c: bool(b.value) for c, b in self.class_boxes.items()})
+        for cid in np.unique(v.semantic):
+            self._class_box(int(cid))
+        for cid, box in self.class_boxes.items():
+            self._toggle(cid)
+        lod = "" if v.point_size <= self.samples.voxel_size * 1.01 else \
+            f", level of detail {v.point_size:g} m (budget {self.budget:,})"
+        self.status.content = (f"frame {self.frames[int(self.frame.value)]}: {len(v.centres):,} surface voxels of "
+                               f"{v.occupied:,}{lod}; prepared in {v.seconds:.2f} s")
+
+
+def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes: dict, overlays: list, *,
+               flow: bool = True, boxes: bool = True, lidar: bool = False, cameras: bool = True, image: str = "rgb",
+               visible: dict | None = None) -> None:
+    """Puts frame ``v`` into a viser scene: one point cloud per class (``nodes``, by class name:
+    replaced, or removed when the class is absent) and the overlays (removed and drawn again)."""
+    col, shown = voxel_colours(v, mode, unobserved, mask)
+    present = set()
+    for cid in np.unique(v.semantic):
+        name = taxonomy.by_id(int(cid)).name
+        sel = (v.semantic == cid) & shown
+        if not sel.any():
+            continue
+        present.add(name)
+        if name in nodes:
+            nodes[name].remove()
+        nodes[name] = scene.add_point_cloud(f"/voxels/{name}", v.centres[sel], col[sel], point_size=v.point_size,
+                                            point_shape="square", point_shading="flat", precision="float32",
+                                            visible=(visible or {}).get(int(cid), True))
+    for name in [n for n in nodes if n not in present]:
+        nodes.pop(name).remove()
+    for handle in overlays:
+        handle.remove()
+    overlays.clear()
+    if flow and len(v.arrows) and len(v.arrows[0]):
+        start, end = v.arrows
+        overlays.append(scene.add_line_segments("/flow", np.stack([start, end], 1), colors=(255, 0, 255),
+                                                thickness=0.08))
+    if boxes and len(v.boxes):
+        overlays.append(scene.add_line_segments("/boxes/edges", v.boxes, colors=(255, 255, 0), thickness=0.04))
+        for k, (text, pos) in enumerate(v.box_labels):
+            overlays.append(scene.add_label(f"/boxes/label_{k}", text, position=tuple(float(x) for x in pos)))
+    if lidar and v.points is not None:
+        overlays.append(scene.add_point_cloud("/lidar", v.points, class_colours(v.points_semantic), point_size=0.06,
+                                              point_shape="circle", point_shading="flat"))
+    if v.ego is not None:
+        from carlaocc.stages.geometry import quaternion_wxyz
+
+        overlays.append(scene.add_frame("/ego", axes_length=1.5, axes_radius=0.05,
+                                        wxyz=tuple(quaternion_wxyz(v.ego[:3, :3])), position=tuple(v.ego[:3, 3])))
+    if cameras:
+        for cam in v.cameras:
+            overlays.append(scene.add_camera_frustum(f"/cameras/{cam['name']}", fov=cam["fov"], aspect=cam["aspect"],
+                                                     scale=0.6, image=cam[image], wxyz=tuple(cam["wxyz"]),
+                                                     position=tuple(cam["position"]), color=(40, 40, 40)))
+
+
+def legend_text(preds: bool) -> str:
+    """The outcome legend (Markdown) shown with ``--pred``."""
+    if not preds:
+        return ""
+    names = [f"<span style='color:rgb{tuple(int(x) for x in c)}'>&#9632;</span> {o}" for o, c in zip(OUTCOMES, OUTCOME_COLOURS)]
+    return "outcome colours: " + ", ".join(names)
+
+
+def start_server(host: str = "127.0.0.1", port: int = 0):
+    """A viser server on ``host:port`` (0: a free port), its banner kept off stdout (the command
+    prints its own line); ``OSError`` when the port is taken. z is up; the first view looks
+    forward from behind and above the ego (LiDAR frame, metres)."""
+    import viser
+
+    # a browser's speculative connection closed before its handshake is logged as a traceback
+    # by websockets' server: not an error of ours, kept off the terminal
+    logging.getLogger("websockets.server").setLevel(logging.CRITICAL)
+    with contextlib.redirect_stdout(io.StringIO()):
+        server = viser.ViserServer(host=host, port=port, verbose=False)
+    server.scene.set_up_direction("+z")
+    server.initial_camera.position = INITIAL_CAMERA[0]
+    server.initial_camera.look_at = INITIAL_CAMERA[1]
+    server.initial_camera.up = (0.0, 0.0, 1.0)
+    return server
+
+
+def stop_server(server) -> None:
+    """Stops a server of :func:`start_server` (quietly)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        server.stop()
+
+
+def save_html(out: Path, samples: FrameSamples, preds: dict[int, Path] | None, budget: int, frames: list[int],
+              seconds_per_frame: float = 1.0) -> int:
+    """Writes the frames ``frames`` (sample indices) as one offline HTML page (viser's embedded
+    client and the scene, played back frame after frame); returns its size in bytes."""
+    server = start_server()
+    try:
+        nodes: dict = {}
+        overlays: list = []
+        mode = "outcome" if preds else "semantic"
+        serializer = None
+        for k in frames:
+            frame = samples.samples[k][1]
+            v = prepare_frame(samples, k, None if preds is None else preds[frame], budget)
+            draw_frame(server.scene, v, mode, "show", "camera", nodes, overlays)
+            if serializer is None:
+                serializer = server.get_scene_serializer()
+            serializer.insert_sleep(seconds_per_frame)
+        html = serializer.as_html() if serializer is not None else server.scene.as_html()
+    finally:
+        stop_server(server)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(html)
+    return out.stat().st_size

@@ -1,0 +1,207 @@
+"""What the interactive viewer (``carlaocc view``) draws, prepared as arrays: small pure numpy
+functions, testable without a browser or a store.
+
+Frames and units: voxels come as the sparse rows of :class:`carlaocc.catalog.samples.FrameSamples`
+(``i, j, k`` grid indices, a class id); positions are metres in the frame's LiDAR frame (x forward,
+y left, z up), ``centre = origin + (ijk + 0.5) * voxel_size``; cameras in the OpenCV optical frame
+(x right, y down, z forward); flow in m/s along the LiDAR axes (``docs/architecture.md`` "Frames
+and units").
+
+* :func:`surface_voxels`: the occupied voxels with a free face (what the eye can see of a solid
+  grid), and :func:`level_of_detail`: one voxel per ``factor**3`` block until a point budget holds,
+  so a 0.05 m frame stays interactive in a browser;
+* :func:`class_colours` / :func:`ghost`: colours from the one label table (instances hashed as
+  every other picture: :mod:`carlaocc.stages.render.colours`), unobserved voxels washed out;
+* :func:`prediction_outcome`: every voxel occupied in the ground truth or a prediction as true
+  positive, false positive, false negative or wrong class (:data:`OUTCOMES`);
+* :func:`flow_arrows`, :func:`box_edges`, :func:`camera_frustum`: the overlays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from carlaocc.schemas.taxonomy import palette
+from carlaocc.stages.geometry import quaternion_wxyz
+from carlaocc.stages.render.colours import voxel_colours
+
+__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "box_edges", "camera_frustum", "class_colours", "flow_arrows", "ghost",
+           "level_of_detail", "linear_index", "prediction_outcome", "surface_voxels", "voxel_centres"]
+
+OUTCOMES = ("true positive", "false positive", "false negative", "wrong class")
+"""The outcome of a voxel against the ground truth, by code 0..3: same class in both; occupied only
+in the prediction; occupied only in the ground truth; occupied in both with different classes (a
+false positive of the predicted class and a false negative of the true one, as SSC IoU counts it)."""
+OUTCOME_COLOURS = np.array([(60, 200, 75), (230, 40, 40), (40, 110, 240), (250, 170, 20)], np.uint8)
+"""Display colour of each outcome code (green, red, blue, orange)."""
+_PALETTE = np.asarray(palette() + ((0, 0, 0),) * (256 - len(palette())), np.uint8)
+
+
+def linear_index(ijk: np.ndarray, shape) -> np.ndarray:
+    """int64 C-order flat index of voxel indices ``ijk`` (N, 3) in a grid of ``shape`` (X, Y, Z)."""
+    ijk = np.asarray(ijk, np.int64)
+    X, Y, Z = (int(s) for s in shape)
+    return (ijk[:, 0] * Y + ijk[:, 1]) * Z + ijk[:, 2]
+
+
+@njit(cache=True)
+def _has_neighbour(flat: np.ndarray, offset: int) -> np.ndarray:
+    """For each value of the sorted unique int64 ``flat``, whether ``value + offset`` is in it: one
+    merge walk of a second pointer (O(N), no search)."""
+    n = len(flat)
+    out = np.zeros(n, np.bool_)
+    j = 0
+    for i in range(n):
+        target = flat[i] + offset
+        # the second pointer only moves forward: the targets are sorted too
+        while j < n and flat[j] < target:
+            j += 1
+        if j == n:
+            break
+        out[i] = flat[j] == target
+    return out
+
+
+def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
+    """Bool mask (N,) of the occupied voxels ``ijk`` (N, 3, unique, in a grid of ``shape``) that
+    have at least one free face neighbour; a face on the grid's border counts as free."""
+    ijk = np.asarray(ijk, np.int64)
+    n = len(ijk)
+    if n == 0:
+        return np.zeros(0, bool)
+    shape = np.asarray(shape, np.int64)
+    # the occupied set as sorted flat indices (the store's rows come in C order: no sort then)
+    flat = linear_index(ijk, shape)
+    order = None
+    if n > 1 and not bool(np.all(flat[1:] > flat[:-1])):
+        order = np.argsort(flat, kind="stable")
+        flat = flat[order]
+        ijk = ijk[order]
+    exposed = np.zeros(n, bool)
+    strides = (int(shape[1] * shape[2]), int(shape[2]), 1)
+    for axis in range(3):
+        for step in (-1, 1):
+            # a neighbour outside the grid is free space; inside, free unless it is in the set
+            edge = ijk[:, axis] == (0 if step < 0 else shape[axis] - 1)
+            exposed |= edge | ~_has_neighbour(flat, step * strides[axis])
+    if order is not None:
+        out = np.empty(n, bool)
+        out[order] = exposed
+        return out
+    return exposed
+
+
+def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
+    """``(keep, factor)``: indices into ``ijk`` of one voxel per ``factor``-cube block (the first
+    in the given order; ``factor`` the smallest power of two >= 1 leaving at most ``budget``
+    voxels) and that factor. Drawn ``factor`` times larger, the kept voxels cover the blocks."""
+    ijk = np.asarray(ijk, np.int64)
+    if budget < 1:
+        raise ValueError(f"budget {budget}: at least 1 voxel")
+    factor = 1
+    keep = np.arange(len(ijk))
+    if len(ijk) == 0:
+        return keep, factor
+    while len(keep) > budget:
+        factor *= 2
+        # the block of every voxel as one flat index, then the first voxel of each block
+        blocks = ijk // factor
+        _, first = np.unique(linear_index(blocks, blocks.max(axis=0) + 1), return_index=True)
+        keep = np.sort(first)
+    return keep, factor
+
+
+def voxel_centres(ijk: np.ndarray, origin, voxel_size: float) -> np.ndarray:
+    """float32 (N, 3) centres in metres of voxels ``ijk`` on a grid with minimum corner ``origin``."""
+    return (np.asarray(origin, np.float64) + (np.asarray(ijk, np.float64) + 0.5) * float(voxel_size)).astype(np.float32)
+
+
+def class_colours(semantic: np.ndarray, instance: np.ndarray | None = None, mode: str = "semantic") -> np.ndarray:
+    """uint8 RGB (N, 3): ``semantic`` the class's colour of the label table's palette; ``instance``
+    things (nonzero ``instance``) by their hashed instance colour, stuff by class."""
+    semantic = np.asarray(semantic, np.uint8)
+    if mode == "semantic" or instance is None:
+        return _PALETTE[semantic]
+    if mode != "instance":
+        raise ValueError(f"colour mode {mode!r}: semantic or instance")
+    z = np.zeros(len(semantic))
+    return np.round(voxel_colours(semantic, np.asarray(instance, np.uint32), z, "instance", (0.0, 1.0))).astype(np.uint8)
+
+
+def ghost(colours: np.ndarray, observed: np.ndarray, strength: float = 0.75) -> np.ndarray:
+    """``colours`` with the unobserved ones (``observed`` False) blended ``strength`` of the way to
+    white: what no sensor saw stays in place but fades."""
+    out = np.asarray(colours, np.float32).copy()
+    hidden = ~np.asarray(observed, bool)
+    out[hidden] += (255.0 - out[hidden]) * float(strength)
+    return np.round(out).astype(np.uint8)
+
+
+def prediction_outcome(gt_flat: np.ndarray, gt_class: np.ndarray, pred_flat: np.ndarray,
+                       pred_class: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(flat, outcome, class)`` of every voxel occupied in the ground truth or the prediction,
+    both given as unique flat indices and their classes (nonzero): the sorted flat indices, the
+    outcome code (:data:`OUTCOMES`), and the class shown (the prediction's, or the ground truth's
+    for a false negative)."""
+    gt_flat, pred_flat = np.asarray(gt_flat, np.int64), np.asarray(pred_flat, np.int64)
+    gt_class, pred_class = np.asarray(gt_class), np.asarray(pred_class)
+    flat = np.union1d(gt_flat, pred_flat)
+    # each side's class at every voxel of the union (0 where that side is free)
+    g = np.zeros(len(flat), np.int64)
+    p = np.zeros(len(flat), np.int64)
+    g[np.searchsorted(flat, gt_flat)] = gt_class
+    p[np.searchsorted(flat, pred_flat)] = pred_class
+    outcome = np.where(g == 0, 1, np.where(p == 0, 2, np.where(g == p, 0, 3))).astype(np.uint8)
+    return flat, outcome, np.where(p == 0, g, p).astype(np.uint8)
+
+
+def flow_arrows(centres: np.ndarray, instance: np.ndarray, flow: np.ndarray, min_speed: float = 0.1,
+                seconds: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One arrow per moving thing: ``(start, end, ids)``, float32 (M, 3) metres, from the centroid of
+    each instance's voxels (``centres`` (N, 3) m, ``instance`` (N,), ``flow`` (N, 3) m/s) to where
+    its mean flow carries it in ``seconds``; instances whose mean speed is under ``min_speed`` m/s
+    (and stuff, id 0) have none."""
+    instance = np.asarray(instance, np.int64)
+    things = instance != 0
+    if not things.any():
+        z = np.zeros((0, 3), np.float32)
+        return z, z, np.zeros(0, np.int64)
+    ids, inv = np.unique(instance[things], return_inverse=True)
+    count = np.bincount(inv, minlength=len(ids)).astype(np.float64)[:, None]
+    # per-instance means of position and flow by weighted bincounts, one column at a time
+    mean_c = np.stack([np.bincount(inv, centres[things, a], len(ids)) for a in range(3)], 1) / count
+    mean_f = np.stack([np.bincount(inv, flow[things, a], len(ids)) for a in range(3)], 1) / count
+    moving = np.linalg.norm(mean_f, axis=1) >= min_speed
+    start = mean_c[moving]
+    return start.astype(np.float32), (start + mean_f[moving] * seconds).astype(np.float32), ids[moving]
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
+_EDGES = np.array([[a, b] for a in range(8) for b in range(a + 1, 8)
+                   if np.abs(_CORNERS[a] - _CORNERS[b]).sum() == 1.0])  # the 12 cube edges
+
+
+def box_edges(box_pose: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """float32 (M * 12, 2, 3) line segments (metres, the poses' frame) of the edges of boxes with
+    box-to-frame poses ``box_pose`` (M, 4, 4) (origin at the box centre) and ``size`` (M, 3)
+    ``l, w, h`` along the box's x, y, z."""
+    box_pose, size = np.asarray(box_pose, np.float64), np.asarray(size, np.float64)
+    if len(box_pose) == 0:
+        return np.zeros((0, 2, 3), np.float32)
+    # the 8 corners in each box's frame, then in the target frame
+    local = _CORNERS[None] * size[:, None, :]
+    world = np.einsum("mij,mkj->mki", box_pose[:, :3, :3], local) + box_pose[:, None, :3, 3]
+    return world[:, _EDGES].reshape(-1, 2, 3).astype(np.float32)
+
+
+def camera_frustum(K: np.ndarray, cam_to_frame: np.ndarray, width: int, height: int) -> dict:
+    """A pinhole camera as the viewer draws it: ``fov`` (vertical, rad), ``aspect`` (width /
+    height), ``wxyz`` (the camera's rotation in the frame, a unit quaternion) and ``position`` (m)
+    of intrinsics ``K`` (3, 3) and the pose ``cam_to_frame`` (4, 4; OpenCV camera axes)."""
+    K = np.asarray(K, np.float64)
+    T = np.asarray(cam_to_frame, np.float64)
+    # the vertical field of view from the focal length in pixels and the image height
+    fov = 2.0 * np.arctan2(height / 2.0, K[1, 1])
+    return {"fov": float(fov), "aspect": float(width) / float(height),
+            "wxyz": np.asarray(quaternion_wxyz(T[:3, :3]), np.float64), "position": T[:3, 3].copy()}

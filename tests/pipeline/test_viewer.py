@@ -1,0 +1,122 @@
+"""``carlaocc view`` without a browser, on the shared 0.1 m root: the one-line refusals (no viewer
+extra, no root, a prediction on another grid or missing a frame), ``--save`` (one offline HTML
+page and the command that opens it), and a prediction tree with errors coloured by outcome,
+checked voxel by voxel against the dense grids."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from carlaocc.pipeline.cli import app
+
+pytest.importorskip("viser", reason="the viewer extra (pip install 'carlaocc[viewer]'; in the test extra)")
+
+
+def test_without_the_extra_one_line_naming_it(tmp_path):
+    # viser made unimportable in a fresh interpreter: the command names the extra, exit 2
+    code = ("import sys; sys.modules['viser'] = None; sys.argv = ['carlaocc', 'view', '--root', %r]\n"
+            "from carlaocc.pipeline.cli import main; main()" % str(tmp_path))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "error: carlaocc view needs the viewer extra (viser is not installed): pip install 'carlaocc[viewer]'"]
+
+
+def test_a_missing_root_is_refused(tmp_path):
+    r = CliRunner().invoke(app, ["view", "--root", str(tmp_path / "nothing")])
+    assert r.exit_code == 2 and "error:" in r.output and "nothing" in r.output
+    assert not (tmp_path / "nothing").exists()
+
+
+def test_save_writes_one_offline_page(default_01, tmp_path):
+    out = tmp_path / "share" / "frame.html"
+    r = CliRunner().invoke(app, ["view", "--root", default_01.url, "--save", str(out), "--frames", "0:1",
+                                 "--max-points", "20000"])
+    assert r.exit_code == 0, r.output
+    html = out.read_text()
+    assert html.startswith("<!") and "window.__VISER_EMBED_DATA__=" in html
+    assert f"python -m webbrowser -t {out.resolve().as_uri()}" in r.output
+    # the scene is inside the page, not fetched: no script or stylesheet from elsewhere
+    assert "<script src=\"http" not in html and "<link rel=\"stylesheet\" href=\"http" not in html
+    bad = CliRunner().invoke(app, ["view", "--root", default_01.url, "--save", str(tmp_path / "x.png")])
+    assert bad.exit_code == 2 and "--save" in bad.output and not (tmp_path / "x.png").exists()
+
+
+def _dense(s):
+    sem = np.zeros(tuple(s["grid_shape"]), np.uint8)
+    sem[tuple(s["occ"][:, :3].T)] = s["occ"][:, 3]
+    return sem
+
+
+def test_a_prediction_with_errors_is_coloured_by_outcome(default_01, tmp_path):
+    from carlaocc.pipeline.commands.viewer import open_frames, prediction_files, prepare_frame
+    from carlaocc.stages.render.viewer import OUTCOMES
+
+    samples = open_frames(default_01.url, None, 0.1)
+    seq, frame = samples.samples[0]
+    first = samples[0]
+    gt = _dense(first)
+    # the prediction: ground truth with some voxels dropped, some added, some relabelled
+    rng = np.random.default_rng(0)
+    pred = gt.copy()
+    occ = np.flatnonzero(gt)
+    pred.reshape(-1)[rng.choice(occ, 2000, replace=False)] = 0
+    pred.reshape(-1)[rng.choice(np.flatnonzero(gt == 0), 2000, replace=False)] = 14
+    relabel = rng.choice(occ, 2000, replace=False)
+    pred.reshape(-1)[relabel] = np.where(gt.reshape(-1)[relabel] == 9, 10, 9)
+    (tmp_path / "pred" / seq).mkdir(parents=True)
+    np.savez(tmp_path / "pred" / seq / f"{frame:06d}.npz", semantics=pred)
+    files = prediction_files(tmp_path / "pred", seq, [frame])
+    v = prepare_frame(samples, 0, files[frame], budget=10**9)
+    assert v.occupied == int(((gt > 0) | (pred > 0)).sum())
+    # every drawn voxel's outcome and class, against the dense grids at its centre
+    ijk = np.floor((v.centres - np.asarray(first["grid_origin"])) / 0.1).astype(int)
+    g, p = gt[tuple(ijk.T)], pred[tuple(ijk.T)]
+    expect = np.where(g == 0, 1, np.where(p == 0, 2, np.where(g == p, 0, 3)))
+    assert np.array_equal(v.outcome, expect)
+    assert np.array_equal(v.semantic, np.where(p == 0, g, p))
+    assert set(np.unique(v.outcome)) == set(range(len(OUTCOMES)))  # all four outcomes are drawn
+
+
+def test_prediction_refusals(default_01, tmp_path):
+    samples_seq = CliRunner().invoke(app, ["view", "--root", default_01.url, "--pred", str(tmp_path / "none"),
+                                           "--save", str(tmp_path / "a.html")])
+    assert samples_seq.exit_code == 2 and "--pred" in samples_seq.output and "not a directory" in samples_seq.output
+    from carlaocc.pipeline.commands.viewer import open_frames
+
+    seq, frame = open_frames(default_01.url, None, 0.1).samples[0]
+    (tmp_path / "p" / seq).mkdir(parents=True)
+    np.savez(tmp_path / "p" / seq / f"{frame:06d}.npz", semantics=np.zeros((200, 200, 16), np.uint8))
+    r = CliRunner().invoke(app, ["view", "--root", default_01.url, "--pred", str(tmp_path / "p"), "--frames", "0:1",
+                                 "--save", str(tmp_path / "b.html")])
+    assert r.exit_code == 2 and "(200, 200, 16)" in r.output and "root's grid" in r.output, r.output
+    r = CliRunner().invoke(app, ["view", "--root", default_01.url, "--pred", str(tmp_path / "p"), "--frames", "1:2",
+                                 "--save", str(tmp_path / "b.html")])
+    assert r.exit_code == 2 and "no prediction for" in r.output and not (tmp_path / "b.html").exists()
+
+
+def test_the_command_serves_on_a_free_port_and_stops_on_ctrl_c(default_01):
+    import os
+    import signal
+    import urllib.request
+
+    proc = subprocess.Popen([sys.executable, "-m", "carlaocc", "view", "--root", default_01.url, "--port", "0",
+                             "--max-points", "5000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("viewing ") and "http://localhost:" in line, (line, proc.stderr.read()[-2000:])
+        url = line.split(": ", 1)[1].split()[0]
+        with urllib.request.urlopen(url, timeout=30) as r:
+            assert r.status == 200 and b"<html" in r.read(2000).lower()
+        # Ctrl-C: the server stops, and the process ends as every command does on a stop signal
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 128 + signal.SIGINT
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()

@@ -1,0 +1,74 @@
+"""The viewer's pictures in the manual (docs/viewer.png, docs/viewer_pred.png): ``carlaocc view``
+served on loopback and photographed in headless Chromium (tools/headless_chromium.py).
+
+    python tools/make_viewer_figure.py --root R [--voxel-size 0.2] [--pred DIR] [--colour semantic]
+                                       [--out docs/viewer.png]
+
+docs/viewer.png: ``carlaocc run --root R --voxel-size 0.2 --limit-frames 3 --sequences
+town00_high_seq000``, frame 0, classes; docs/viewer_pred.png: the same with ``--pred`` a tree made
+from the ground truth with errors (the tutorial docs/tutorials/viewer.md says how).
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import headless_chromium  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--root", required=True)
+    ap.add_argument("--voxel-size", type=float, default=0.2)
+    ap.add_argument("--pred", type=Path)
+    ap.add_argument("--colour", default=None, help="semantic | instance | outcome (default: outcome with --pred)")
+    ap.add_argument("--out", type=Path, default=Path("docs/viewer.png"))
+    ap.add_argument("--size", default="1280x760")
+    args = ap.parse_args()
+    from carlaocc.pipeline.commands.viewer import Viewer, open_frames, prediction_files, start_server, stop_server
+
+    exe = headless_chromium.find_chromium()
+    if exe is None:
+        sys.exit("error: no Chromium on PATH: sh tools/setup_system.sh --test")
+    samples = open_frames(args.root, None, args.voxel_size)
+    preds = None
+    if args.pred is not None:
+        preds = prediction_files(args.pred, samples.samples[0][0], [f for _, f in samples.samples])
+    width, height = (int(v) for v in args.size.split("x"))
+    server = start_server()
+    try:
+        viewer = Viewer(server, samples, preds, 400_000)
+        if args.colour:
+            viewer.mode.value = args.colour
+            viewer.draw()
+        with headless_chromium.Browser(exe, width, height) as browser:
+            page = browser.open(f"http://127.0.0.1:{server.get_port()}")
+            page.wait_for("document.querySelector('canvas') !== null", 120)
+            # dismiss the software-rendering notice, then wait until two screenshots agree
+            time.sleep(3)
+            page.eval("document.querySelectorAll('.mantine-Notification-closeButton').forEach(b => b.click())")
+            last = None
+            for _ in range(60):
+                time.sleep(1.0)
+                png = page.screenshot()
+                img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+                if last is not None and np.array_equal(img, last) and img.std() > 20:
+                    break
+                last = img
+    finally:
+        stop_server(server)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    Image.open(io.BytesIO(png)).save(args.out, optimize=True)
+    print(f"-> {args.out}")
+
+
+if __name__ == "__main__":
+    main()
