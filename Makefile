@@ -12,6 +12,7 @@ CONFIG ?=
 WORKERS ?=
 PLAN   ?=
 STAGE  ?= voxelize
+TEST_JOBS ?= 2
 Q      ?= SELECT table_name FROM information_schema.tables ORDER BY 1
 SCHEDULER ?=
 SCHED_ARG := $(if $(SCHEDULER),--scheduler $(SCHEDULER),)
@@ -37,6 +38,7 @@ help: ## list the targets
 	@echo "  STAGE=<name>        make stage: the stage to run alone"
 	@echo "  Q=\"<sql>\"           make query: the SQL"
 	@echo "  SCHEDULER=<addr|synchronous>  a Dask scheduler instead of a LocalCluster"
+	@echo "  TEST_JOBS=<n>       make test: processes running the suite (default 2; 0: one, in make's)"
 	@echo "example: make dataset FRAMES=2        (a first build in about 2 minutes)"
 	@exit 0
 
@@ -89,11 +91,13 @@ info: venv ## what ROOT holds: sequences, frames, voxel sizes, splits, label tab
 query: venv ## read-only SQL over the catalog: make query Q="SELECT * FROM assets LIMIT 5"
 	$(BIN)/carlaocc catalog query "$(Q)" --root $(ROOT)
 
-test: venv-test ## the test suite (slow tests excluded; CI runs this)
-	$(BIN)/python -m pytest -q -m "not slow" --durations=15
+# the suite runs in TEST_JOBS processes (pytest-xdist), a test file per process at a time (its module
+# fixtures are built once); TEST_JOBS=0 runs it in this process
+test: venv-test ## the test suite (slow tests excluded; CI runs this): make test TEST_JOBS=2
+	$(BIN)/python -m pytest -q -m "not slow" --durations=15 $(if $(filter-out 0,$(TEST_JOBS)),-n $(TEST_JOBS) --dist loadfile,)
 
 test-all: venv-test ## every test, the slow 0.05 m end-to-end included
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(if $(filter-out 0,$(TEST_JOBS)),-n $(TEST_JOBS) --dist loadfile,)
 
 bench: venv-test ## speed benchmarks against the libraries a user would otherwise use
 	$(BIN)/python -m benchmarks
