@@ -243,6 +243,8 @@ class Viewer:
         self.status = gui.add_markdown("")
         self.class_boxes: dict[int, object] = {}
         self.class_folder = gui.add_folder("classes")
+        with self.class_folder:
+            self.class_legend = gui.add_markdown("")
         for handle in (self.frame, self.mode, self.mask, self.unobserved, self.show_flow, self.show_boxes,
                        self.show_lidar, self.show_cameras, self.image):
             handle.on_update(lambda _: self.draw())
@@ -281,6 +283,7 @@ class Viewer:
             self._class_box(int(cid))
         for cid, box in self.class_boxes.items():
             self._toggle(cid)
+        self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value)
         lod = "" if v.point_size <= self.samples.voxel_size * 1.01 else \
             f", level of detail {v.point_size:g} m (budget {self.budget:,})"
         self.status.content = (f"frame {self.frames[int(self.frame.value)]}: {len(v.centres):,} surface voxels of "
@@ -331,6 +334,22 @@ def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes
             overlays.append(scene.add_camera_frustum(f"/cameras/{cam['name']}", fov=cam["fov"], aspect=cam["aspect"],
                                                      scale=0.6, image=cam[image], wxyz=tuple(cam["wxyz"]),
                                                      position=tuple(cam["position"]), color=(40, 40, 40)))
+
+
+def class_legend_text(class_ids, mode: str) -> str:
+    """The classes' colour legend (Markdown) above their toggles: each class's swatch in the label
+    table's palette when voxels are coloured by class (``semantic``), the stuff classes' swatches
+    when things are coloured by instance, nothing in ``outcome`` mode (its legend is at the top)."""
+    if mode == "outcome":
+        return ""
+    pal = taxonomy.palette()
+    things = set(taxonomy.thing_ids())
+    shown = [c for c in class_ids if c and (mode == "semantic" or c not in things)]
+    swatches = ", ".join(f"<span style='color:rgb{tuple(int(x) for x in pal[c])}'>&#9632;</span> "
+                         f"{taxonomy.by_id(c).name}" for c in shown)
+    if mode == "semantic":
+        return f"class colours: {swatches}"
+    return f"things: a colour per instance; stuff: {swatches}" if swatches else "things: a colour per instance"
 
 
 def legend_text(preds: bool) -> str:

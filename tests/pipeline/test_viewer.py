@@ -120,3 +120,20 @@ def test_the_command_serves_on_a_free_port_and_stops_on_ctrl_c(default_01):
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def test_the_class_legend_gives_each_class_its_palette_colour():
+    from carlaocc.pipeline.commands.viewer import class_legend_text
+    from carlaocc.schemas import taxonomy
+
+    pal = taxonomy.palette()
+    road, car = taxonomy.by_name("Road").id, taxonomy.by_name("Car").id
+    sem = class_legend_text([0, road, car], "semantic")
+    for cid in (road, car):
+        swatch = f"<span style='color:rgb{tuple(int(x) for x in pal[cid])}'>&#9632;</span> {taxonomy.by_id(cid).name}"
+        assert swatch in sem
+    assert sem.count("&#9632;") == 2  # the empty class 0 has no swatch
+    # by instance: things have no class colour, stuff keeps its swatch
+    inst = class_legend_text([road, car], "instance")
+    assert "Road" in inst and "Car" not in inst and "a colour per instance" in inst
+    assert class_legend_text([road, car], "outcome") == ""
