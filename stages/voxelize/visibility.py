@@ -85,8 +85,8 @@ then costs a few word operations instead of a step per ray and voxel:
    that distance is already reached); its counts then move by the cells that changed (usually
    one). Rays that end, hit or leave the grid are taken out of the counts. The cells marked
    are those of steps 3-4 bit for bit (tested against every ray traced in every column); on
-   the default rig at 0.05 m this recomputes about 16 M ray-columns of the front cameras
-   instead of 150-180 M.
+   the default rig at 0.05 m, on an empty grid, the two front cameras' far fields recompute
+   about 32 M rays instead of 180 M ray-columns.
 
 The result equals the union of the rays' 3D DDA traversals except at ties, which the two resolve
 differently: a ray through a voxel edge, or a fan whose origin lies exactly on a horizontal voxel
