@@ -72,8 +72,21 @@ then costs a few word operations instead of a step per ray and voxel:
    stop at their first occupied voxel and leave the fan.
 4. Free rays mark their voxel ranges. Where neighbouring rays are less than a voxel apart over
    the whole column (``max gap between slopes * r_out < 1``: near the sensor) the union of a free
-   run's ranges is one interval, marked with a few word operations; farther out each free ray
-   sets its own bits (no occupancy test: the run is known to be free).
+   run's ranges is one interval, marked with a few word operations.
+5. Farther out (the *sparse* part of the fan, from the first column where that product reaches
+   1 to the fan's end) a free ray's cells differ from column to column, but slowly: a ray of
+   slope ``m`` changes cells about every ``1 / |m|`` voxels of ``r``. There each live ray keeps
+   its cells ``lo..hi``, a count per cell says how many live rays cover it, and the covered
+   cells are kept as column words ``U``: a column marks ``U`` (W word operations) instead of
+   recomputing every ray. A ray is recomputed -- with the very floor/ceil expressions of steps
+   1-3 -- only from the column where its cells may change: the distance where its lower end
+   reaches the next cell face or its upper end passes it, ``(face - oz) / m``, less a margin far
+   above rounding, files it in a bucket of one voxel of ``r`` (or in the next column's list when
+   that distance is already reached); its counts then move by the cells that changed (usually
+   one). Rays that end, hit or leave the grid are taken out of the counts. The cells marked
+   are those of steps 3-4 bit for bit (tested against every ray traced in every column); on
+   the default rig at 0.05 m, on an empty grid, the two front cameras' far fields recompute
+   about 32 M rays instead of 180 M ray-columns.
 
 The result equals the union of the rays' 3D DDA traversals except at ties, which the two resolve
 differently: a ray through a voxel edge, or a fan whose origin lies exactly on a horizontal voxel
@@ -567,49 +580,187 @@ def _rays_column(occ, acc, cb, nz, M, R, a, b, oz, r_in, r_out, sa, sb, ns):
     return ns
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cell_bounds(oz, m, r_in, r_out):
+    """A ray's z-interval ends in the column [r_in, r_out], clamped as :func:`_floor_cell` clamps:
+    (lower, upper); its cells are ``floor(lower) .. max(ceil(upper) - 1, floor(lower))``."""
+    za = oz + m * r_in
+    zb = oz + m * r_out
+    return min(max(min(za, zb), _Z_LOW), _Z_HIGH), min(max(max(za, zb), _Z_LOW), _Z_HIGH)
+
+
+# Rows of the sparse part's int64 state S (one row per name, max(rays, nz, buckets) wide): per ray
+# its lowest and highest cell in the current column, its successor in its bucket's list and
+# whether it has left the fan; the two column lists (rays to refresh now / in the next column);
+# per cell the number of live rays covering it; per bucket the first ray of its list.
+_LO, _HI, _NEXT, _DEAD, _LIST0, _LIST1, _COUNT, _HEAD = 0, 1, 2, 3, 4, 5, 6, 7
+_SPARSE_ROWS = 8
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _next_change(m, oz, lo, hu):
+    """The horizontal distance (voxels) up to which a ray of slope ``m`` keeps its cells
+    ``lo = floor(lower end)`` .. ``hu = ceil(upper end) - 1`` of a column, less a margin far above
+    rounding (so never beyond the change): a rising ray's lower end reaches ``lo + 1`` at
+    ``r_in = (lo + 1 - oz) / m`` and its upper end passes ``hu + 1`` at ``r_out = (hu + 1 - oz) /
+    m``; a falling ray's lower end passes below ``lo``, its upper end reaches ``hu``. +inf for a
+    level ray; NaN or less than the column's ``r_out`` for degenerate ones (checked every column)."""
+    if m > 0.0:
+        t = min(lo + 1.0 - oz, hu + 1.0 - oz) / m
+    elif m < 0.0:
+        t = max(lo - oz, hu - oz) / m
+    else:
+        return math.inf
+    return t - 1e-9 * (abs(t) + (abs(lo) + abs(hu) + abs(oz) + 2.0) / abs(m) + 1.0)
+
+
 @njit(cache=True, nogil=True)
-def _free_cells(acc, M, a, b, oz, r_in, r_out, nz, los, his):
-    """Mark the cells of rays a..b of a fan (known to cross no occupied voxel in this column and
-    to end beyond it) into ``acc``, clipped to the grid. ``los``, ``his`` (len(M)) are scratch."""
-    # 1. every ray's cell range, clipped (a branch-free loop the compiler vectorizes)
+def _move_cells(S, U, l0, h0, l1, h1, nz):
+    """Move one ray's counts (row ``_COUNT`` of S) from cells ``l0..h0`` to ``l1..h1`` (either
+    clipped to the grid here; an empty range counts nothing), keeping ``U`` (W words) the set of
+    cells whose count is positive. Only the cells that differ change."""
     top = nz - 1
-    for v in range(a, b + 1):
-        za = oz + M[v] * r_in
-        zb = oz + M[v] * r_out
-        lo = _floor_cell(min(za, zb))
-        los[v] = max(lo, 0)
-        his[v] = min(max(_ceil_cell(max(za, zb)) - 1, lo), top)
-    # 2. the ranges into words: lo ascends with the ray, so the rays starting in one word are
-    #    consecutive and gathered in a register (a rare range running past the word is marked
-    #    on its own); rays below/above the grid (empty ranges) are a prefix and a suffix
-    v = a
-    while v <= b:
-        lo = los[v]
-        hi = his[v]
-        if lo > hi:
-            v += 1
-            continue
-        q = lo >> 6
-        end = 64 * q + 63
-        w = np.uint64(0)
-        while True:
-            if hi <= end:
-                w |= _range_bits(lo & 63, hi & 63)
-            else:
-                w |= _range_bits(lo & 63, 63)
-                _mark_range(acc, end + 1, hi)
-            v += 1
-            if v > b:
-                break
-            lo = los[v]
-            hi = his[v]
-            if lo > end or lo > hi:
-                break
-        acc[q] |= w
+    l0 = max(l0, 0)
+    h0 = min(h0, top)
+    l1 = max(l1, 0)
+    h1 = min(h1, top)
+    if l0 > h0:
+        l0 = nz
+        h0 = top
+    if l1 > h1:
+        l1 = nz
+        h1 = top
+    # cells of the old range below and above the new one leave; cells of the new range below and
+    # above the old one arrive (a branch-free bit update per cell)
+    for part in range(4):
+        if part == 0:
+            c0, c1, d = l0, min(h0, l1 - 1), -1
+        elif part == 1:
+            c0, c1, d = max(l0, h1 + 1), h0, -1
+        elif part == 2:
+            c0, c1, d = l1, min(h1, l0 - 1), 1
+        else:
+            c0, c1, d = max(l1, h0 + 1), h1, 1
+        for c in range(c0, c1 + 1):
+            n = S[_COUNT, c] + d
+            S[_COUNT, c] = n
+            sh = np.uint64(c & 63)
+            U[c >> 6] = (U[c >> 6] & ~(np.uint64(1) << sh)) | (np.uint64(n > 0) << sh)
 
 
 @njit(cache=True, nogil=True)
-def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz, hx, hy, M, t_range):
+def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp):
+    """Bring the live rays whose cells may have changed up to this column, then count them.
+
+    Gathered into the list row ``now`` (which already holds the ``nt`` rays filed for this
+    column): every bucket below the column's far end ``r_out`` (from ``bp``, the first one not
+    yet emptied) and the rays of the bucket it ends in that are due by ``r_out``. Each one's
+    cells, exactly as :func:`_cell_lo` and :func:`_cell_hi` give them, move its counts if they
+    changed; then it is filed where they may change next: the bucket of that distance from
+    ``r0``, or the other list row (the next column), or nowhere beyond the footprint's end
+    ``r1``. Returns the next column's list length and the new ``bp``."""
+    nb = S.shape[1]
+    # 1. gather the due rays
+    kb = min(int(r_out - r0), nb - 1)  # noqa: RUF046
+    while bp < kb:
+        v = S[_HEAD, bp]
+        S[_HEAD, bp] = -1
+        while v >= 0:
+            S[now, nt] = v
+            nt += 1
+            v = S[_NEXT, v]
+        bp += 1
+    prev = -1
+    v = S[_HEAD, kb]
+    while v >= 0:
+        w = S[_NEXT, v]
+        if due[v] <= r_out:
+            if prev < 0:
+                S[_HEAD, kb] = w
+            else:
+                S[_NEXT, prev] = w
+            S[now, nt] = v
+            nt += 1
+        else:
+            prev = v
+        v = w
+    # 2. refresh them
+    nxt_row = _LIST1 if now == _LIST0 else _LIST0
+    nn = 0
+    top = nz - 1
+    for i in range(nt):
+        v = S[now, i]
+        if S[_DEAD, v]:
+            continue
+        m = M[v]
+        zl, zh = _cell_bounds(oz, m, r_in, r_out)
+        lo = int(math.floor(zl))  # noqa: RUF046
+        hu = int(math.ceil(zh)) - 1  # noqa: RUF046
+        hi = max(hu, lo)
+        l0 = S[_LO, v]
+        h0 = S[_HI, v]
+        if lo != l0 or hi != h0:
+            S[_LO, v] = lo
+            S[_HI, v] = hi
+            if 0 <= l0 <= h0 <= top and 0 <= lo <= hi <= top and abs(lo - l0) + abs(hi - h0) == 1:
+                # (the common case written out: one end moved by one cell inside the grid)
+                c = hi if hi > h0 else (h0 if hi < h0 else (l0 if lo > l0 else lo))
+                d = 1 if (hi > h0 or lo < l0) else -1
+                n = S[_COUNT, c] + d
+                S[_COUNT, c] = n
+                sh = np.uint64(c & 63)
+                U[c >> 6] = (U[c >> 6] & ~(np.uint64(1) << sh)) | (np.uint64(n > 0) << sh)
+            else:
+                _move_cells(S, U, l0, h0, lo, hi, nz)
+        t = _next_change(m, oz, lo, hu)
+        if t > r_out:
+            if t <= r1:
+                bk = int(t - r0)  # noqa: RUF046
+                due[v] = t
+                S[_NEXT, v] = S[_HEAD, bk]
+                S[_HEAD, bk] = v
+        else:  # (a change may come in the very next column; or a NaN)
+            S[nxt_row, nn] = v
+            nn += 1
+    return nn, bp
+
+
+@njit(cache=True, nogil=True)
+def _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz):
+    """Enter the sparse part of a fan (its rays at least a voxel apart from here on): no cell
+    counted, no bucket filled, then every live ray (runs ``ra``, ``rb``) refreshed as in
+    :func:`_sparse_column` from list row ``_LIST0``. Returns the next column's list length (in
+    row ``_LIST1``)."""
+    for c in range(nz):
+        S[_COUNT, c] = 0
+    for q in range(U.shape[0]):
+        U[q] = 0
+    for k in range(S.shape[1]):
+        S[_HEAD, k] = -1
+    nt = 0
+    for ru in range(nr):
+        for v in range(ra[ru], rb[ru] + 1):
+            S[_DEAD, v] = 0
+            S[_LO, v] = nz  # (no cells counted yet)
+            S[_HI, v] = nz - 1
+            S[_LIST0, nt] = v
+            nt += 1
+    # (every bucket lies beyond this column: bp = the last one, nothing gathered)
+    nn, _ = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, _LIST0, nt, S.shape[1])
+    return nn
+
+
+@njit(cache=True, nogil=True)
+def _retire(S, U, a, b, nz):
+    """Rays a..b leave the fan (traced one by one: they hit, or end, in this column): out of the
+    counts."""
+    for v in range(a, b + 1):
+        _move_cells(S, U, S[_LO, v], S[_HI, v], nz, nz - 1, nz)
+        S[_DEAD, v] = 1
+
+
+@njit(cache=True, nogil=True)
+def _fan(occ, mask, acc, R, S, due, U, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz, hx, hy, M, t_range):
     """Trace one vertical fan (see "Algorithm 2"): origin o and unit horizontal direction h in
     voxel units, slopes ``M`` ascending, rays ``t_range`` voxels long. ``acc`` (W), ``R``, ``ra``,
     ``rb``, ``sa``, ``sb`` (len(M)) are scratch."""
@@ -639,6 +790,10 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
     nr = ns
     r_in = r0
     col = i * ny + j
+    sparse = False
+    nc = 0
+    bp = 0
+    now = _LIST0
     # 3. column by column, while some ray is alive
     while nr > 0:
         # (a crossing computed below r_in -- the entry point on a lattice plane, up to rounding
@@ -648,6 +803,15 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
         for q in range(W):
             acc[q] = 0
         dense = gmax * r_out < 1.0
+        if not dense:
+            if sparse:
+                nc, bp = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nc, bp)
+                now = _LIST1 if now == _LIST0 else _LIST0
+            else:
+                nc = _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz)
+                now = _LIST1
+                bp = 0
+                sparse = True
         ns = 0
         for ru in range(nr):
             a = ra[ru]
@@ -657,16 +821,22 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
             while a <= b and R[a] <= r_out:
                 a += 1
             if a > a0:
+                if sparse:
+                    _retire(S, U, a0, a - 1, nz)
                 ns = _rays_column(occ, acc, cb, nz, M, R, a0, a - 1, oz, r_in, r_out, sa, sb, ns)
             b0 = b
             while a <= b and R[b] <= r_out:
                 b -= 1
             if b < b0:
+                if sparse:
+                    _retire(S, U, b + 1, b0, nz)
                 ns = _rays_column(occ, acc, cb, nz, M, R, b + 1, b0, oz, r_in, r_out, sa, sb, ns)
             # 3b. rays below the grid and not rising / above it and not falling are done
             while a <= b and M[a] <= 0.0 and _cell_hi(oz, M[a], r_in, r_out) < 0:
+                S[_DEAD, a] = 1  # (no cells in the grid: nothing counted)
                 a += 1
             while a <= b and M[b] >= 0.0 and _cell_lo(oz, M[b], r_in, r_out) >= nz:
+                S[_DEAD, b] = 1
                 b -= 1
             if a > b:
                 continue
@@ -690,13 +860,13 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
                         hi_c = min(_cell_hi(oz, M[F], r_in, r_out), nz - 1)
                         if lo_c <= hi_c:
                             _mark_range(acc, lo_c, hi_c)
-                    else:
-                        _free_cells(acc, M, cur, F, oz, r_in, r_out, nz, los, his)
                     ns = _append_run(sa, sb, ns, cur, F)
                 # the last ray G in [F, b] whose range starts at or below q: F + 1 .. G reach
                 # into [p, q]
                 G = _last_ray(oz, M, r_in, r_out, F, b, q, True)
                 if G > F:
+                    if sparse:
+                        _retire(S, U, F + 1, G, nz)
                     ns = _rays_column(occ, acc, cb, nz, M, R, F + 1, G, oz, r_in, r_out, sa, sb, ns)
                 cur = G + 1
                 k = q + 1
@@ -706,13 +876,12 @@ def _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz,
                     lo_c = max(_cell_lo(oz, M[cur], r_in, r_out), 0)
                     if lo_c <= HI:
                         _mark_range(acc, lo_c, HI)
-                else:
-                    _free_cells(acc, M, cur, b, oz, r_in, r_out, nz, los, his)
                 ns = _append_run(sa, sb, ns, cur, b)
         # 3e. the column's marks into the mask, the survivors become the runs
         for q in range(W):
-            if acc[q] != 0:
-                _or_word(mask, cb + q, acc[q])
+            w = acc[q] | U[q] if sparse else acc[q]
+            if w != 0:
+                _or_word(mask, cb + q, w)
         ra, sa = sa, ra
         rb, sb = sb, rb
         nr = ns
@@ -740,14 +909,17 @@ def _fan_stripe(occ, mask, nx, ny, nz, W, O, H, M, t_range, first, step):
     n = M.shape[1]
     acc = np.zeros(W, np.uint64)
     R = np.empty(n, np.float64)
-    los = np.empty(n, np.int64)
-    his = np.empty(n, np.int64)
+    # the sparse part's state (its rows: _LO ... _HEAD); buckets of one voxel of r over the
+    # footprint's longest chord
+    S = np.empty((_SPARSE_ROWS, max(n, nz, nx + ny + 4)), np.int64)
+    due = np.empty(n, np.float64)
+    U = np.zeros(W, np.uint64)
     ra = np.empty(n, np.int64)
     rb = np.empty(n, np.int64)
     sa = np.empty(n, np.int64)
     sb = np.empty(n, np.int64)
     for f in range(first, H.shape[0], step):
-        _fan(occ, mask, acc, R, los, his, ra, rb, sa, sb, nx, ny, nz, W, O[f, 0], O[f, 1], O[f, 2], H[f, 0], H[f, 1],
+        _fan(occ, mask, acc, R, S, due, U, ra, rb, sa, sb, nx, ny, nz, W, O[f, 0], O[f, 1], O[f, 2], H[f, 0], H[f, 1],
              M[f], t_range)
 
 
