@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 import trimesh
+from terminal import from_a_terminal
 from typer.testing import CliRunner
 
 from carlaocc.catalog.lineage import LineageLog
@@ -274,15 +275,6 @@ def _carlaocc() -> list[str]:
     return [sys.executable, "-c", "from carlaocc.pipeline.cli import main; main()"]
 
 
-def _default_stop_signals() -> None:
-    """In the child: SIGINT and SIGTERM back to their defaults. A suite started in the background
-    by a non-interactive shell (``make test &``) inherits SIGINT ignored, and the command rightly
-    keeps an ignored signal ignored (the nohup case, tested below): the test is of a terminal's
-    Ctrl-C, so its child starts as a terminal's would."""
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, signal.SIG_DFL)
-
-
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_a_stop_signal_ends_with_one_line_and_no_leaked_semaphores(tmp_path, sig):
     src = tmp_path / "src" / "cars"
@@ -293,7 +285,7 @@ def test_a_stop_signal_ends_with_one_line_and_no_leaked_semaphores(tmp_path, sig
     cmap.write_text("glob,category,subclass\ncars/*.glb,Car,sedan\n")
     proc = subprocess.Popen(_carlaocc() + ["ingest", "folder", str(src.parent), "--category-map", str(cmap),
                                            "--root", str(tmp_path / "data"), "--workers", "1"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_default_stop_signals)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=from_a_terminal)
     # once its cluster is up and planning is done, stop it
     deadline = time.monotonic() + 60
     seen = b""

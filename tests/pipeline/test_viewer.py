@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+from terminal import from_a_terminal
 from typer.testing import CliRunner
 
 from carlaocc.pipeline.cli import app
@@ -106,7 +107,8 @@ def test_the_command_serves_on_a_free_port_and_stops_on_ctrl_c(default_01):
     import urllib.request
 
     proc = subprocess.Popen([sys.executable, "-m", "carlaocc", "view", "--root", default_01.url, "--port", "0",
-                             "--max-points", "5000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--max-points", "5000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=from_a_terminal)
     try:
         line = proc.stdout.readline()
         assert line.startswith("viewing ") and "http://localhost:" in line, (line, proc.stderr.read()[-2000:])
