@@ -34,6 +34,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -326,20 +327,22 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args([] if argv is None else argv)
     sizes = [float(v) for v in args.voxel_sizes.split(",")]
     results: dict = {"frames": args.frames, "voxel_sizes": {}}
-    with default_scenes_root() as root:
+    codes = [(label, python) for label, python in (("after", sys.executable), ("before", args.before)) if python]
+    with contextlib.ExitStack() as stack:
+        # each code base on ingest and scenes it built itself (its tables may not read the other's)
+        roots = {label: stack.enter_context(default_scenes_root(None if label == "after" else python))
+                 for label, python in codes}
         for voxel_size in sizes:
             # the code bases alternate, ``--repeat`` times each; each stage keeps its cheapest run
             # (the machine's load only ever adds CPU time: cache and memory contention)
             runs: dict[str, dict] = {}
             for _ in range(args.repeat):
-                for label, python in (("after", sys.executable), ("before", args.before)):
-                    if python:
-                        runs[label] = _cheapest(runs.get(label), _case(python, root, voxel_size, args.frames))
+                for label, python in codes:
+                    runs[label] = _cheapest(runs.get(label), _case(python, roots[label], voxel_size, args.frames))
             results["voxel_sizes"][voxel_size] = runs
             if args.two_workers:
                 results.setdefault("two_workers", {})[voxel_size] = {
-                    label: _two_workers(python, root, voxel_size, args.two_workers)
-                    for label, python in (("after", sys.executable), ("before", args.before)) if python}
+                    label: _two_workers(python, roots[label], voxel_size, args.two_workers) for label, python in codes}
     report(results)
     if args.json:
         with open(args.json, "w") as fh:

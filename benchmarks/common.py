@@ -12,15 +12,18 @@ from collections.abc import Iterator
 
 
 @contextlib.contextmanager
-def default_scenes_root() -> Iterator[str]:
-    """A temporary store holding the embedded default's ingest and scenes stages (built
-    synchronously; the time is printed), removed afterwards."""
+def default_scenes_root(python: str | None = None) -> Iterator[str]:
+    """A temporary store holding the embedded default's ingest and scenes stages, built
+    synchronously by ``python`` (an installation of carlaocc; default: this one; the time is
+    printed), removed afterwards. Another code base builds its own: its tables may not read
+    another version's."""
     with tempfile.TemporaryDirectory() as tmp:
         root = f"{tmp}/data"
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "carlaocc", "run", "--stages", "ingest,scenes", "--root", root,
-                        "--scheduler", "synchronous"], check=True, capture_output=True)
-        print(f"ingest + scenes of the embedded default: {time.perf_counter() - t0:.1f} s")
+        subprocess.run([python or sys.executable, "-m", "carlaocc", "run", "--stages", "ingest,scenes", "--root", root,
+                        "--scheduler", "synchronous"], check=True, capture_output=True, cwd="/")
+        print(f"ingest + scenes of the embedded default{'' if python is None else ' by ' + python}: "
+              f"{time.perf_counter() - t0:.1f} s")
         yield root
 
 
