@@ -27,8 +27,10 @@ def catalog_query(
     root: RootOpt = "data",
     fmt: Annotated[str, typer.Option("--format", help="table, csv or json")] = "table",
 ) -> None:
-    """Run read-only SQL. Views: assets, parts, quarantine, placements, sequences, frames, actors,
-    runs, quality, quality_classes, statistics_classes, statistics_assets, classes."""
+    """Run read-only SQL. Views: assets, parts, quarantine, towns, placements, sequences, frames,
+    actors, ego_states, skeletons, sensor_poses, runs, quality, quality_classes, statistics_frames,
+    statistics_classes, statistics_assets, rectification, lidar_agreement, classes, label_tables
+    (`SELECT table_name FROM information_schema.tables` lists them)."""
     from carlaocc.catalog.sql import QueryError, QueryRefused, query
 
     if fmt not in ("table", "csv", "json"):

@@ -92,3 +92,15 @@ def test_duplicate_column_names_are_kept(store):
     cols, rows = query(store, "SELECT s.sequence_id, c.name, c.name FROM sequences s, classes c WHERE c.id = 14")
     assert cols[1:] == ["name", "name"] or len(cols) == 3
     assert rows == [("town00_seq000", "Car", "Car")]
+
+
+def test_the_query_command_names_every_view():
+    """`carlaocc catalog query --help` lists the views: each persisted table and the two label
+    tables (a new table is named there too)."""
+    import re
+
+    from carlaocc.pipeline.cli.query import catalog_query
+    from carlaocc.schemas import records
+
+    named = set(re.findall(r"[a-z_]+", catalog_query.__doc__.split("Views:", 1)[1].split("(", 1)[0]))
+    assert named == {m.TABLE for m in records.PERSISTED} | {"classes", "label_tables"}
