@@ -195,10 +195,15 @@ class DaskExecutor(Executor):
                 environ = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ", {}).items()
                            if k != "MALLOC_TRIM_THRESHOLD_"}
                 # one thread for each kernel library from the worker's start (distributed sets
-                # OpenMP's, OpenBLAS's and MKL's; numba's pool would start a thread per core)
-                environ.update({name: 1 for name in (*THREAD_ENV, "NUMBA_NUM_THREADS")})
+                # OpenMP's, OpenBLAS's and MKL's; numba's pool would start a thread per core).
+                # numba's variable goes to the workers' own environment only: a nanny writes its
+                # pre-spawn variables into the driver's os.environ, and a driver whose numba pool
+                # already runs then fails its next compilation (numba re-reads the variable)
+                environ.update({name: 1 for name in THREAD_ENV})
+                worker_environ = {**dask.config.get("distributed.nanny.environ", {}), "NUMBA_NUM_THREADS": 1}
                 ttl = os.environ.get("DASK_DISTRIBUTED__SCHEDULER__WORKER_TTL") or self.WORKER_TTL
                 with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
+                                      "distributed.nanny.environ": worker_environ,
                                       "distributed.scheduler.worker-ttl": ttl}):
                     self._cluster = LocalCluster(
                         n_workers=n, threads_per_worker=1, processes=self.processes,

@@ -86,3 +86,49 @@ def test_the_cap_reaches_runtimes_loaded_before_and_after_it(tmp_path):
     assert after["numba"] == 1 and after["cv2"] == 1 and after["open3d"] == 1
     assert len(after["pools"]) > len(r["before"]["pools"])  # OpenCV's BLAS joined, capped too
     assert all(p["threads"] == 1 for p in after["pools"]), after
+
+
+DRIVER_AFTER_A_CLUSTER = """
+import json, os, sys
+import numba
+import numpy as np
+from carlaocc.pipeline.engine.executors import DaskExecutor
+from carlaocc.pipeline.engine.spec import Partition, StageSpec
+
+@numba.njit(parallel=True)
+def total(a):
+    s = 0.0
+    for i in numba.prange(a.size):
+        s += a[i]
+    return s
+
+total(np.ones(8))  # the driver's numba pool is launched, at its default size
+before = os.environ.get("NUMBA_NUM_THREADS")
+ex = DaskExecutor(None, processes=True, workers=1)
+try:
+    ex.map(StageSpec("noop", "t", (), (), (), lambda ctx: [], lambda store, cfg, part: {}), sys.argv[1], None,
+           [Partition("t0")], lambda res: None)
+    after = os.environ.get("NUMBA_NUM_THREADS")
+finally:
+    ex.close()
+
+@numba.njit
+def plus_one(x):
+    return x + 1
+
+plus_one(1)  # compiling in the driver afterwards: numba re-reads its environment
+print(json.dumps({"before": before, "after": after, "pool": numba.get_num_threads()}))
+"""
+
+
+def test_a_local_cluster_leaves_the_drivers_numba_alone(tmp_path):
+    """Our LocalCluster's workers start with numba on one thread, but the driver's environment is
+    not changed: a driver whose numba pool was already running (a notebook, the Python API) went
+    on to fail its next compilation ("Cannot set NUMBA_NUM_THREADS to a different value once the
+    threads have been launched")."""
+    env = {k: v for k, v in __import__("os").environ.items() if k != "NUMBA_NUM_THREADS"}
+    out = subprocess.run([sys.executable, "-c", DRIVER_AFTER_A_CLUSTER, str(tmp_path / "root")], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert r["before"] is None and r["after"] is None, r
