@@ -67,10 +67,7 @@ LIDAR_COLUMNS: dict[str, tuple[str, str]] = {
 # them, lidar/ and semantic_lidar/ PLY) and our range along each recorded beam
 _RECORDED = "as recorded; NaN / the not-recorded value in the other scan"
 RECORDED_LIDAR_COLUMNS: dict[str, tuple[str, str]] = {
-    "x": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
-    "y": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
-    "z": ("float32", "metres, LiDAR frame (x forward, y left, z up)"),
-    "distance": ("float32", "metres from the LiDAR origin"),
+    **{name: LIDAR_COLUMNS[name] for name in ("x", "y", "z", "distance")},  # the points, as our scans hold them
     "scan": ("uint8", "0: the recording's lidar/ scan (CARLA ray_cast), 1: its semantic_lidar/ scan (ray_cast_semantic)"),
     "intensity": ("float32", "CARLA's intensity (scan 0); " + _RECORDED),
     "cos_angle": ("float32", "cosine of the incidence angle (scan 1); " + _RECORDED),
