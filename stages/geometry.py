@@ -13,6 +13,10 @@ import math
 
 import numpy as np
 
+DEGENERATE_REL = 1e-12
+"""A face is degenerate when twice its area is below this times the squared bbox diagonal (the
+ingest stage's rule, :mod:`carlaocc.stages.ingest.repair`; the standalone voxelizer's too)."""
+
 
 def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply a 4x4 homogeneous transform to (N, 3) points; returns (N, 3) float64."""

@@ -28,17 +28,20 @@ from carlaocc.schemas.grid import voxel_size_key
 def voxelize_files(
     meshes: Annotated[list[str], typer.Argument(help="mesh files (OBJ, PLY, STL, OFF, GLB...) or ADMesh asset ids")],
     voxel_size: Annotated[float, typer.Option("--voxel-size", "--res", help="voxel size (the voxel edge), metres (0.02 to 1.0 is the tested range; --res is the short alias)")],
-    out: Annotated[Path, typer.Option("--out", help="OUT.npz (semantic, instance, voxel_size, voxel_origin, shape) or OUT.zarr")],
+    out: Annotated[Path, typer.Option("--out", help="OUT.npz: the occupied voxels only (format_version 1: voxel_index, the linear indices (i*Y + j)*Z + k ascending, with voxel_semantic and voxel_instance; voxel_size, voxel_origin, shape); carlaocc.catalog.voxel_file.load_voxels(OUT).dense() gives the dense arrays. OUT.zarr: dense semantic and instance arrays, empty chunks not written")],
     class_name: Annotated[Optional[list[str]], typer.Option("--class", help="class of the mesh files: once for all, or once per file in order (e.g. Car)")] = None,
     fill: Annotated[str, typer.Option("--fill", help="auto: fill volumetric classes (vehicles, people, buildings, walls, poles, props, trunks); solid: fill every mesh; surface: fill nothing. Watertight meshes are filled by column parity, open ones by winding numbers")] = "auto",
     origin: Annotated[Optional[str], typer.Option("--origin", help="grid minimum corner x,y,z in metres (with --shape)")] = None,
     shape: Annotated[Optional[str], typer.Option("--shape", help="grid size nx,ny,nz in voxels (with --origin)")] = None,
     root: Annotated[Optional[str], typer.Option("--root", help="dataset root holding the ADMesh library, for asset ids")] = None,
+    dense: Annotated[bool, typer.Option("--dense", help="OUT.npz in the dense layout of earlier versions (semantic uint8 and instance uint32 of the whole grid, compressed; voxel_size, voxel_origin, shape): slower and as large in memory as the grid")] = False,
 ) -> None:
     """Voxelize mesh files or ADMesh assets exactly (triangle-box overlap, solids filled even when
     not watertight), without a dataset. Prints where the voxels came from: surface, fill, and
     hole handling (filled voxels a flood fill from outside would not have found). Things get instance ids 1, 2, ... in argument order. The grid defaults to
-    the meshes' bounding box snapped to multiples of the voxel size."""
+    the meshes' bounding box snapped to multiples of the voxel size. OUT.npz holds the occupied
+    voxels (numpy alone: semantic = np.zeros(d["shape"], np.uint8); semantic.flat[d["voxel_index"]]
+    = d["voxel_semantic"]; the same for instance); --dense writes the whole grids instead."""
     from carlaocc.pipeline.commands.standalone import (InputError, fill_summary, grid_for, load_inputs, save_result,
                                                        voxelize_inputs)
     from carlaocc.stages.voxelize.fill import FILL_MODES
@@ -47,21 +50,22 @@ def voxelize_files(
         fail(f"--fill must be one of {', '.join(FILL_MODES)}, got {fill!r}")
     if out.suffix.lower() not in (".npz", ".zarr"):
         fail(f"--out must end in .npz or .zarr, got {out}")
+    if dense and out.suffix.lower() != ".npz":
+        fail(f"--dense is a layout of OUT.npz; --out {out} is a Zarr group (always whole arrays)")
     store = open_store(root, writable=False) if root else None
     try:
-        scene = load_inputs(meshes, class_name or [], store)
+        scene = load_inputs(meshes, class_name or [], store, fill)
         grid = grid_for(scene, voxel_size, parse_floats(origin, "--origin"), parse_floats(shape, "--shape", int))
         result = voxelize_inputs(scene, grid, fill)
         seconds = result.seconds
-        save_result(result, out)
+        save_result(result, out, dense=dense)
     except (InputError, ValueError) as exc:
         fail(exc)
     except OSError as exc:
         fail(f"--out {out}: cannot write: {exc.strerror or exc}")
-    occupied = int((result.semantic > 0).sum())
     X, Y, Z = grid.shape
     typer.echo(f"wrote {out}: {X}x{Y}x{Z} grid at {voxel_size:g} m from origin "
-               f"({', '.join(f'{c:g}' for c in grid.origin)}), {occupied:,} occupied voxels, "
+               f"({', '.join(f'{c:g}' for c in grid.origin)}), {len(result.voxels):,} occupied voxels, "
                f"{sum(len(m.faces) for m in scene):,} triangles in {seconds:.2f} s")
     typer.echo(fill_summary(result, fill))
 

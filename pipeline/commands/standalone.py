@@ -23,20 +23,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
-import zarr
-from pydantic import ValidationError
 
-from carlaocc.catalog.store import Store, StoreError
-from carlaocc.pipeline.tasks.frame import load_geometry
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import SceneMesh
-from carlaocc.stages.geometry import is_watertight
-from carlaocc.stages.ingest.repair import DEGENERATE_REL
-from carlaocc.stages.voxelize import voxelize_scene
-from carlaocc.stages.voxelize.breakdown import fill_breakdown
+from carlaocc.schemas.voxels import SparseVoxels
+from carlaocc.stages.geometry import DEGENERATE_REL, is_watertight
 from carlaocc.stages.voxelize.fill import fill_method, fills
+
+# Imports: what only some runs need (trimesh for mesh files, the dataset store for asset ids,
+# scipy's flood fill for filled meshes' hole counts, Zarr for .zarr) is imported where used, so
+# a run imports only what it uses (``python -X importtime``: trimesh alone is ~0.8 s).
 
 MAX_VOXELS = 2**31  # a grid beyond this is almost always a unit mistake (millimetres as metres)
 
@@ -47,53 +44,67 @@ class InputError(ValueError):
 
 @dataclass(frozen=True)
 class VoxelizeResult:
-    grid: GridSpec
-    semantic: np.ndarray  # uint8 (X, Y, Z)
-    instance: np.ndarray  # uint32 (X, Y, Z)
+    voxels: SparseVoxels  # the occupied voxels and their labels (grid: voxels.grid)
     meshes: list[SceneMesh]
     seconds: float = 0.0  # the voxelization's wall time
+
+    @property
+    def grid(self) -> GridSpec:
+        return self.voxels.grid
 
 
 def fill_summary(result: VoxelizeResult, fill: str) -> str:
     """One line on where the voxels came from: surface, fill (and how: parity or winding
     numbers, per mesh), and hole handling (filled voxels a flood fill would not have found)."""
+    from carlaocc.stages.voxelize.breakdown import sparse_fill_breakdown
 
-    b = fill_breakdown(result.meshes, result.grid, fill, solid=result.semantic)
+    b = sparse_fill_breakdown(result.meshes, result.voxels, fill)
     methods = [fill_method(fills(m.semantic_id, m.part, fill), m.closed) for m in result.meshes]
     how = ", ".join(f"{methods.count(k)} by {k}" for k in ("parity", "winding") if methods.count(k))
     return (f"voxels: {b.surface:,} surface, {b.filled:,} filled ({how or 'no mesh filled'}), "
             f"{b.from_holes:,} of them from hole handling")
 
 
-def _load_file(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def _load_file(path: Path, weld: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The file's vertices and triangles; ``weld``: coincident vertices merged (STL and many
+    exporters repeat them per face), which only matters where closedness does (a filled mesh:
+    parity or winding numbers) -- the voxels of a surface are the same either way."""
+    from carlaocc.catalog.mesh_files import MeshFileError, read_mesh
+
     try:
-        loaded = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many kinds for a corrupt file
-        raise InputError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from exc
-    V = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    F = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
+        V, F = read_mesh(path)
+    except MeshFileError as exc:
+        raise InputError(str(exc)) from None
     if len(F) == 0:
         raise InputError(f"{path}: the file holds no triangles")
     if not np.isfinite(V).all():
         raise InputError(f"{path}: {int((~np.isfinite(V)).any(axis=1).sum())} vertices are NaN or infinite")
-    # weld coincident vertices (STL and many exporters repeat them per face) so closedness is seen
-    uniq, inverse = np.unique(V, axis=0, return_inverse=True)
-    F = inverse.reshape(-1)[F]
-    if not _has_area(uniq, F):
+    if weld:
+        uniq, inverse = np.unique(V, axis=0, return_inverse=True)
+        V, F = uniq, inverse.reshape(-1)[F]
+    if not _has_area(V, F):
         raise InputError(f"{path}: all {len(F)} faces have zero area (no triangle with an area): nothing "
                          "to voxelize; check or re-export the mesh")
-    return uniq, F
+    return V, F
 
 
 def _has_area(V: np.ndarray, F: np.ndarray) -> bool:
     """Whether any face is non-degenerate, by the ingest stage's rule (``DEGENERATE_REL``)."""
 
-    used = V[np.unique(F)]
+    # 1. the bounding box of the vertices the faces use (a mask: no sort)
+    mask = np.zeros(len(V), dtype=bool)
+    mask[F.reshape(-1)] = True
+    used = V[mask]
     diag2 = float(np.sum((used.max(axis=0) - used.min(axis=0)) ** 2))
-    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    twice_area2 = np.einsum("ij,ij->i", cross, cross)
-    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    return bool(np.any(~repeated & (twice_area2 > (DEGENERATE_REL * diag2) ** 2)))
+    # 2. faces in blocks until one has an area (usually the first block: no pass over them all)
+    for s in range(0, len(F), 65536):
+        f = F[s:s + 65536]
+        cross = np.cross(V[f[:, 1]] - V[f[:, 0]], V[f[:, 2]] - V[f[:, 0]])
+        twice_area2 = np.einsum("ij,ij->i", cross, cross)
+        repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+        if np.any(~repeated & (twice_area2 > (DEGENERATE_REL * diag2) ** 2)):
+            return True
+    return False
 
 
 def _classes(classes: list[str], n: int) -> list[taxonomy.SemanticClass]:
@@ -113,8 +124,11 @@ def _classes(classes: list[str], n: int) -> list[taxonomy.SemanticClass]:
     return found * n if len(found) == 1 else found
 
 
-def load_inputs(items: list[str], classes: list[str], store: Store | None) -> list[SceneMesh]:
-    """The SceneMeshes of the inputs: files labelled by ``classes``, asset ids from ``store``."""
+def load_inputs(items: list[str], classes: list[str], store=None, fill: str = "auto") -> list[SceneMesh]:
+    """The SceneMeshes of the inputs: files labelled by ``classes``, asset ids from ``store`` (a
+    :class:`carlaocc.catalog.store.Store`). A file's mesh is welded and its closedness found only
+    when ``fill`` fills it (closedness picks parity or winding numbers); otherwise it is used as
+    read, with ``closed`` False."""
     files = [Path(i) for i in items if os.path.exists(i)]
     missing = [i for i in items if not os.path.exists(i)]
     if missing and store is None:
@@ -122,6 +136,9 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     labels = iter(_classes(classes, len(files)))
     assets = {}
     if missing:
+        from carlaocc.catalog.store import StoreError
+        from carlaocc.pipeline.tasks.frame import load_geometry
+
         try:
             assets = load_geometry(store, set(missing), [])
         except StoreError as exc:
@@ -130,11 +147,12 @@ def load_inputs(items: list[str], classes: list[str], store: Store | None) -> li
     next_instance = 1
     for item in items:
         if os.path.exists(item):
-            V, F = _load_file(Path(item))
             cls = next(labels)
+            filled = fills(cls.id, Path(item).stem, fill)
+            V, F = _load_file(Path(item), weld=filled)
             thing = cls.kind == "thing"
-            out.append(SceneMesh(V, F, cls.id, next_instance if thing else 0, not thing, is_watertight(F),
-                                 name=str(item), part=Path(item).stem))
+            out.append(SceneMesh(V, F, cls.id, next_instance if thing else 0, not thing,
+                                 filled and is_watertight(F), name=str(item), part=Path(item).stem))
             next_instance += thing
         else:
             geom = assets[item]
@@ -175,6 +193,8 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
                          f"are the meshes in millimetres? give a larger --voxel-size or --origin/--shape")
     hi = tuple(o + n * voxel_size for o, n in zip(origin, shape))
 
+    from pydantic import ValidationError
+
     try:
         return GridSpec(region_min=tuple(origin), region_max=hi, voxel_size=voxel_size)
     except ValidationError as exc:  # one line naming the option the user typed
@@ -185,31 +205,21 @@ def grid_for(meshes: list[SceneMesh], voxel_size: float, origin=None, shape=None
 
 
 def voxelize_inputs(meshes: list[SceneMesh], grid: GridSpec, fill: str = "auto") -> VoxelizeResult:
+    """The occupied voxels of ``meshes`` on ``grid``, built tile by tile (memory: the occupied
+    voxels and one tile, not the dense grid)."""
+    from carlaocc.stages.voxelize.sparse import occupied_voxels
+
     t0 = time.perf_counter()
-    semantic, instance = voxelize_scene(meshes, grid, fill=fill)
-    return VoxelizeResult(grid, semantic, instance, meshes, time.perf_counter() - t0)
+    voxels = occupied_voxels(meshes, grid, fill=fill)
+    return VoxelizeResult(voxels, meshes, time.perf_counter() - t0)
 
 
-def save_result(result: VoxelizeResult, out: Path) -> None:
-    """``.npz`` (compressed: semantic, instance, voxel_size, voxel_origin, shape) or ``.zarr``
-    (a Zarr v3 group with ``semantic`` and ``instance`` arrays carrying the grid attributes)."""
-    suffix = out.suffix.lower()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    g = result.grid
-    if suffix == ".npz":
-        tmp = out.with_name(out.name + ".tmp.npz")
-        np.savez_compressed(tmp, semantic=result.semantic, instance=result.instance,
-                            voxel_size=np.float64(g.voxel_size), voxel_origin=np.asarray(g.origin, np.float64),
-                            shape=np.asarray(g.shape, np.int64))
-        tmp.replace(out)
-    elif suffix == ".zarr":
-        root = zarr.open_group(str(out), mode="w")
-        X, Y, Z = g.shape
-        chunks = (min(128, X), min(128, Y), Z)
-        attrs = {**g.attrs(), "dims": ["x", "y", "z"], "taxonomy_version": taxonomy.TAXONOMY_VERSION}
-        for name, data in (("semantic", result.semantic), ("instance", result.instance)):
-            arr = root.create_array(name, shape=data.shape, chunks=chunks, dtype=data.dtype, fill_value=0,
-                                    attributes=attrs)
-            arr[...] = data
-    else:
-        raise InputError(f"--out must end in .npz or .zarr, got {out}")
+def save_result(result: VoxelizeResult, out: Path, dense: bool = False) -> None:
+    """Write the voxels to ``out`` (:mod:`carlaocc.catalog.voxel_file`: a sparse ``.npz``, the
+    dense ``.npz`` layout with ``dense``, or ``.zarr``)."""
+    from carlaocc.catalog.voxel_file import VoxelFileError, save_voxels
+
+    try:
+        save_voxels(result.voxels, out, dense=dense)
+    except VoxelFileError as exc:
+        raise InputError(str(exc)) from None

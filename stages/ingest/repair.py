@@ -15,11 +15,11 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
+from carlaocc.stages.geometry import DEGENERATE_REL
+
 # vertices closer than this fraction of the asset's bounding-box diagonal are one vertex
 WELD_REL = 1e-9
 
-DEGENERATE_REL = 1e-12
-"""A face is degenerate when twice its area is below this times the squared bbox diagonal."""
 
 
 # --------------------------------------------------------------------------------------------

@@ -24,15 +24,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from carlaocc.schemas import taxonomy
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import AssetGeometry, SceneMesh
+from carlaocc.schemas.voxels import SparseVoxels
 from carlaocc.stages.voxelize.compose import voxelize_scene
+from carlaocc.stages.voxelize.sparse import occupied_voxels
 from carlaocc.stages.voxelize.fill import FillMethod, fill_method, fills
 
-__all__ = ["FillBreakdown", "fill_breakdown", "outside", "AssetFill", "asset_fill", "asset_meshes", "reference_grid",
+__all__ = ["FillBreakdown", "fill_breakdown", "sparse_fill_breakdown", "outside", "AssetFill", "asset_fill", "asset_meshes", "reference_grid",
            "reference_voxel_size", "FILL_REFERENCE_VOXEL", "FILL_REFERENCE_MAX_EDGE"]
 
 FILL_REFERENCE_VOXEL: float = 0.1
@@ -74,10 +75,30 @@ def fill_breakdown(meshes: Sequence[SceneMesh], grid: GridSpec, fill: str = "aut
     return FillBreakdown(int(surf.sum()), int(added.sum()), int(from_holes.sum()))
 
 
+def sparse_fill_breakdown(meshes: Sequence[SceneMesh], voxels: SparseVoxels, fill: str = "auto") -> FillBreakdown:
+    """:func:`fill_breakdown` of ``meshes`` given their voxelization under ``fill`` as occupied
+    voxels: the same counts, with memory proportional to the occupied voxels when no mesh is
+    filled or the fill adds nothing (a dense boolean grid only for the flood fill otherwise)."""
+    if not any(fills(m.semantic_id, m.part, fill) for m in meshes):
+        return FillBreakdown(len(voxels), 0, 0)  # no mesh filled: every voxel is a surface voxel
+    # 1. the surface-only voxelization, sparse too; the filled voxels are the others
+    surface = occupied_voxels(meshes, voxels.grid, fill="surface")
+    added = np.setdiff1d(voxels.index, surface.index, assume_unique=True)
+    if len(added) == 0:
+        return FillBreakdown(len(surface), 0, 0)
+    # 2. the flood fill from the boundary needs the whole grid: a boolean one
+    surf = np.zeros(tuple(int(s) for s in voxels.grid.shape), dtype=bool)
+    surf.reshape(-1)[surface.index] = True
+    from_holes = int(outside(surf).reshape(-1)[added].sum())
+    return FillBreakdown(len(surface), len(added), from_holes)
+
+
 def outside(surface: np.ndarray) -> np.ndarray:
     """Free voxels (not ``surface``) a flood fill from the grid's boundary reaches through free
     voxels (6-connectivity): ``~scipy.ndimage.binary_fill_holes(surface)``, by one labelling
     pass instead of iterated dilations (several times faster on an asset's grid)."""
+    from scipy import ndimage
+
     # 1. the 6-connected components of the free voxels
     labels, n = ndimage.label(~surface)
     # 2. the components that touch one of the grid's six faces

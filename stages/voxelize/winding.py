@@ -60,8 +60,6 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from scipy import ndimage
-
 from carlaocc.stages.voxelize.kernels import check_mesh, paint_surface, shape3, to_voxel_units
 
 __all__ = ["WindingTree", "winding_tree", "winding_numbers", "winding_interior", "paint_winding_interior",
@@ -482,6 +480,8 @@ def _classify(P: np.ndarray, F: np.ndarray, shape, tree: WindingTree | None, shi
     #    no triangle crosses: the winding number is continuous over each
     surface = np.zeros(ni * nj * nk, dtype=np.uint8)
     paint_surface(P - np.array([i0, j0, k0], dtype=np.float64), F, (ni, nj, nk), surface, None, 1, 0)
+    from scipy import ndimage  # imported here: a run that fills no open mesh does not need scipy
+
     labels, n_labels = ndimage.label(surface.reshape(ni, nj, nk) == 0)
     labels = labels.reshape(-1)
     # 3. a few winding numbers per component, evenly spread over it: agreeing samples decide the

@@ -9,6 +9,7 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
+from carlaocc.catalog.voxel_file import load_voxels
 from carlaocc.pipeline.cli import app
 from shared_data import require, shared_path
 
@@ -28,10 +29,10 @@ def test_cube_known_answer_filled_and_surface(tmp_path, cube_obj):
             "--origin", "-0.55,-0.55,-0.55", "--shape", "13,13,13"]
     r = cli.invoke(app, [*args, "--out", str(tmp_path / "solid.npz")])
     assert r.exit_code == 0, r.output
-    d = np.load(tmp_path / "solid.npz")
-    assert d["semantic"].shape == (13, 13, 13) and np.count_nonzero(d["semantic"]) == 1331
-    assert set(np.unique(d["instance"])) == {0, 1}
-    np.testing.assert_allclose(d["voxel_origin"], (-0.55, -0.55, -0.55))
+    semantic, instance = load_voxels(tmp_path / "solid.npz").dense()
+    assert semantic.shape == (13, 13, 13) and np.count_nonzero(semantic) == 1331
+    assert set(np.unique(instance)) == {0, 1}
+    np.testing.assert_allclose(np.load(tmp_path / "solid.npz")["voxel_origin"], (-0.55, -0.55, -0.55))
     r = cli.invoke(app, [*args, "--fill", "surface", "--out", str(tmp_path / "shell.zarr")])
     assert r.exit_code == 0, r.output
     import zarr
@@ -47,14 +48,15 @@ def test_per_file_classes_and_default_grid(tmp_path, cube_obj):
     r = cli.invoke(app, ["voxelize", str(cube_obj), str(MODELS / "chair_model.obj"), "--class", "Car",
                          "--class", "Sidewalk", "--voxel-size", "0.05", "--out", str(out)])
     assert r.exit_code == 0, r.output
-    d = np.load(out)
+    semantic, instance = load_voxels(out).dense()
     from carlaocc.schemas import taxonomy
 
     car, walk = taxonomy.by_name("Car").id, taxonomy.by_name("Sidewalk").id
-    assert {car, walk} <= set(np.unique(d["semantic"]))
-    assert (d["instance"][d["semantic"] == walk] == 0).all()  # stuff: instance 0
+    assert {car, walk} <= set(np.unique(semantic))
+    assert (instance[semantic == walk] == 0).all()  # stuff: instance 0
     # the default grid is the bounding box snapped to the 0.05 m lattice
-    assert np.allclose(d["voxel_origin"] / 0.05, np.round(d["voxel_origin"] / 0.05))
+    origin = np.load(out)["voxel_origin"]
+    assert np.allclose(origin / 0.05, np.round(origin / 0.05))
 
 
 @pytest.mark.parametrize("args, message", [
