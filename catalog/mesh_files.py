@@ -120,9 +120,8 @@ def read_binary_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
             if count and not np.all(rows["_n"] == 3):
                 return None
             F = rows["_i"].astype(np.int64)
-            break  # elements after the faces are not needed
-    if V is None or F is None:
-        return None
+    if V is None or F is None or offset != len(body):
+        return None  # (bytes left over: a corrupt file, which the general reader names)
     if len(F) and (F.min() < 0 or F.max() >= len(V)):
         raise MeshFileError(f"{path}: face indices outside the {len(V)} vertices")
     return V, F

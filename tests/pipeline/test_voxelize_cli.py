@@ -84,3 +84,54 @@ def test_wrong_units_and_corrupt_mesh(tmp_path, cube_obj):
     bad.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
     r = cli.invoke(app, ["voxelize", str(bad), "--class", "Car", "--voxel-size", "0.1", "--out", str(tmp_path / "x.npz")])
     assert r.exit_code == 2 and "bad.obj" in r.output, r.output
+
+
+def test_sparse_npz_holds_the_dense_layouts_voxels(tmp_path, cube_obj):
+    """The default npz (occupied voxels) against --dense (the layout before format 1) and the
+    dense voxelization itself, with a thing, stuff, a fill and a default grid."""
+    require(MODELS / "chair_model.obj")
+    args = ["voxelize", str(cube_obj), str(MODELS / "chair_model.obj"), "--class", "Car", "--class", "Building",
+            "--voxel-size", "0.05"]
+    assert cli.invoke(app, [*args, "--out", str(tmp_path / "sparse.npz")]).exit_code == 0
+    r = cli.invoke(app, [*args, "--dense", "--out", str(tmp_path / "dense.npz")])
+    assert r.exit_code == 0, r.output
+    d = np.load(tmp_path / "dense.npz")
+    assert set(d.files) == {"semantic", "instance", "voxel_size", "voxel_origin", "shape"}
+    semantic, instance = load_voxels(tmp_path / "sparse.npz").dense()
+    np.testing.assert_array_equal(semantic, d["semantic"])
+    np.testing.assert_array_equal(instance, d["instance"])
+    from carlaocc.pipeline.commands.standalone import grid_for, load_inputs
+    from carlaocc.stages.voxelize import voxelize_scene
+
+    meshes = load_inputs([str(cube_obj), str(MODELS / "chair_model.obj")], ["Car", "Building"])
+    want_semantic, want_instance = voxelize_scene(meshes, grid_for(meshes, 0.05))
+    np.testing.assert_array_equal(semantic, want_semantic)
+    np.testing.assert_array_equal(instance, want_instance)
+    assert np.count_nonzero(instance) > 0 and np.count_nonzero(semantic) > np.count_nonzero(instance)
+
+
+def test_dense_is_refused_for_zarr(tmp_path, cube_obj):
+    r = cli.invoke(app, ["voxelize", str(cube_obj), "--class", "Car", "--voxel-size", "0.1", "--dense",
+                         "--out", str(tmp_path / "x.zarr")])
+    assert r.exit_code == 2 and "--dense is a layout of OUT.npz" in r.output, r.output
+    assert not (tmp_path / "x.zarr").exists()
+
+
+def test_a_surface_run_imports_only_what_it_uses(tmp_path):
+    """A binary PLY voxelized as a surface needs neither trimesh (the PLY is read with numpy) nor
+    scipy's flood fill, Zarr, Dask or Arrow: checked in a fresh interpreter, by module."""
+    import json
+    import subprocess
+    import sys
+
+    ply = tmp_path / "box.ply"
+    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(ply)
+    code = ("import sys, json\nfrom carlaocc.pipeline.cli import app\n"
+            f"app(['voxelize', {str(ply)!r}, '--class', 'Road', '--voxel-size', '0.1', '--out', "
+            f"{str(tmp_path / 'x.npz')!r}], standalone_mode=False)\n"
+            "print(json.dumps(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    loaded = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert "numba" in loaded and (tmp_path / "x.npz").exists()  # the check sees what it ran
+    assert not loaded & {"trimesh", "zarr", "scipy.ndimage", "dask", "distributed", "pyarrow"}, sorted(
+        loaded & {"trimesh", "zarr", "scipy.ndimage", "dask", "distributed", "pyarrow"})
