@@ -166,8 +166,7 @@ def load_voxels(path: str | Path) -> SparseVoxels:
                                          f"reads {VOXEL_FILE_FORMAT!r} up to version {VOXEL_FILE_VERSION}; "
                                          f"update carlaocc")
                 grid = _grid(d["voxel_origin"], d["shape"], d["voxel_size"])
-                return SparseVoxels(grid, d["voxel_index"].astype(np.int64, copy=False), d["voxel_semantic"],
-                                    d["voxel_instance"])
+                return SparseVoxels(grid, d["voxel_index"], d["voxel_semantic"], d["voxel_instance"])
             if {"semantic", "instance", "voxel_origin", "voxel_size"} <= keys:
                 grid = _grid(d["voxel_origin"], d["semantic"].shape, d["voxel_size"])
                 return SparseVoxels.from_dense(grid, d["semantic"], d["instance"])

@@ -24,7 +24,7 @@ class SparseVoxels:
     """The occupied voxels of ``grid`` (see the module docstring)."""
 
     grid: GridSpec
-    index: np.ndarray  # (N,) integer, ascending, unique: linear C-order voxel indices
+    index: np.ndarray  # (N,) integer (uint32 or int64), ascending, unique: linear C-order voxel indices
     semantic: np.ndarray  # (N,) uint8, > 0
     instance: np.ndarray  # (N,) uint32, 0 = stuff
 

@@ -24,9 +24,9 @@ __all__ = ["occupied_voxels", "nonzero_bytes"]
 
 
 @njit(cache=True, nogil=True)
-def _nonzero_bytes(values, words, out_index, out_values):
-    """Write the positions and values of the non-zero bytes of ``values`` (uint8) into
-    ``out_index`` / ``out_values``, ascending; ``words`` views its first ``8 * len(words)``
+def _nonzero_bytes(values, words, base, out_index, out_values):
+    """Write the positions (plus ``base``) and values of the non-zero bytes of ``values`` (uint8)
+    into ``out_index`` / ``out_values``, ascending; ``words`` views its first ``8 * len(words)``
     bytes as uint64, so a zero word skips 8 bytes at once. Returns how many were written."""
     o = 0
     # 1. whole words: look at the bytes of non-zero words only
@@ -35,29 +35,30 @@ def _nonzero_bytes(values, words, out_index, out_values):
             for b in range(8 * w, 8 * w + 8):
                 v = values[b]
                 if v != 0:
-                    out_index[o] = b
+                    out_index[o] = base + b
                     out_values[o] = v
                     o += 1
     # 2. the bytes after the last whole word
     for b in range(8 * words.shape[0], values.shape[0]):
         v = values[b]
         if v != 0:
-            out_index[o] = b
+            out_index[o] = base + b
             out_values[o] = v
             o += 1
     return o
 
 
-def nonzero_bytes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(np.flatnonzero(values), values[that])`` of a contiguous 1-D uint8 array, at memory
-    speed on sparse data (8 bytes at a time where they are all zero)."""
+def nonzero_bytes(values: np.ndarray, base: int = 0, index_dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
+    """``(base + np.flatnonzero(values), values[that])`` of a contiguous 1-D uint8 array, at
+    memory speed on sparse data (8 bytes at a time where they are all zero); the indices as
+    ``index_dtype`` (the caller makes sure they fit)."""
     n = int(np.count_nonzero(values))  # a SIMD count sizes the output
-    index = np.empty(n, dtype=np.int64)
+    index = np.empty(n, dtype=index_dtype)
     out = np.empty(n, dtype=np.uint8)
     if n == 0:
         return index, out
     whole = len(values) // 8 if values.ctypes.data % 8 == 0 else 0  # unaligned: byte by byte
-    _nonzero_bytes(values, values[:8 * whole].view(np.uint64), index, out)
+    _nonzero_bytes(values, values[:8 * whole].view(np.uint64), index.dtype.type(base), index, out)
     return index, out
 
 
@@ -66,23 +67,29 @@ def occupied_voxels(meshes: Sequence[SceneMesh], grid: GridSpec, fill: FillMode 
     """The occupied voxels of ``meshes`` (grid frame, metres) on ``grid`` under ``fill``, with
     their semantic and instance labels; ``tile_x`` (x-slab width, voxels) only changes how the
     work is cut, never the result."""
-    Y, Z = int(grid.shape[1]), int(grid.shape[2])
+    X, Y, Z = (int(s) for s in grid.shape)
+    # linear indices as uint32 where they fit (every grid the standalone voxelizer accepts): half
+    # the memory, and what its file stores
+    index_dtype = np.uint32 if X * Y * Z <= 2**32 else np.int64
     plane = Y * Z  # voxels in one x-layer: a tile starting at x0 begins at linear index x0 * plane
-    index, semantic, instance = [], [], []
+    index, semantic, things = [], [], []
+    count = 0
     for tile in voxelize_tiles(meshes, grid, tile_x, fill, up):
-        # 1. the tile's occupied voxels (ascending within the tile; tiles come in ascending x)
-        local, sem = nonzero_bytes(tile.semantic.reshape(-1))
-        if len(local) == 0:
+        # 1. the tile's occupied voxels as grid linear indices (a tile holds whole x-layers;
+        #    ascending within the tile, and tiles come in ascending x)
+        base = tile.x0 * plane
+        found, sem = nonzero_bytes(tile.semantic.reshape(-1), base, index_dtype)
+        if len(found) == 0:
             continue
+        index.append(found)
         semantic.append(sem)
         # 2. instance ids: only things write nonzero ones; a tile no thing reached has none
         if len(tile.things):
-            instance.append(tile.instance.reshape(-1)[local])
-        else:
-            instance.append(np.zeros(len(local), dtype=np.uint32))
-        # 3. tile-local to grid linear indices (a tile holds whole x-layers)
-        local += tile.x0 * plane
-        index.append(local)
+            things.append((count, tile.instance.reshape(-1)[found - base]))
+        count += len(found)
+    instance = np.zeros(count, dtype=np.uint32)
+    for start, ids in things:
+        instance[start:start + len(ids)] = ids
     if not index:
-        return SparseVoxels(grid, np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint32))
-    return SparseVoxels(grid, np.concatenate(index), np.concatenate(semantic), np.concatenate(instance))
+        return SparseVoxels(grid, np.zeros(0, index_dtype), np.zeros(0, np.uint8), instance)
+    return SparseVoxels(grid, np.concatenate(index), np.concatenate(semantic), instance)

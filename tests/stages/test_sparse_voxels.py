@@ -78,13 +78,17 @@ def test_sparse_fill_breakdown_is_the_dense_one(fill):
 
 
 @settings(max_examples=60, deadline=None)
-@given(n=st.integers(0, 200), start=st.integers(0, 9), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16))
-def test_nonzero_bytes_is_flatnonzero(n, start, density, seed):
+@given(n=st.integers(0, 200), start=st.integers(0, 9), density=st.floats(0.0, 1.0), seed=st.integers(0, 2**16),
+       base=st.integers(0, 2**33))
+def test_nonzero_bytes_is_flatnonzero(n, start, density, seed, base):
     rng = np.random.default_rng(seed)
     buf = np.where(rng.random(n + start) < density, rng.integers(1, 256, n + start), 0).astype(np.uint8)
     values = buf[start:]  # unaligned starts too (then read byte by byte)
-    index, out = nonzero_bytes(values)
+    index, out = nonzero_bytes(values, base)
     want = np.flatnonzero(values)
-    np.testing.assert_array_equal(index, want)
+    np.testing.assert_array_equal(index, base + want)
     np.testing.assert_array_equal(out, values[want])
     assert index.dtype == np.int64 and out.dtype == np.uint8
+    if base + n < 2**32:
+        small, _ = nonzero_bytes(values, base, np.uint32)
+        assert small.dtype == np.uint32 and np.array_equal(small, index)
