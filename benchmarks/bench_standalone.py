@@ -82,9 +82,9 @@ def write_street_ply(path: Path) -> tuple[int, int]:
     """bench_voxelize's street culled to its region, as one binary PLY; (vertices, triangles)."""
     import trimesh
 
-    from benchmarks.bench_voxelize import REGION_MAX, REGION_MIN, _merged_culled, street_scene
+    from benchmarks.bench_voxelize import REGION_MAX, REGION_MIN, merged_culled, street_scene
 
-    V, F = _merged_culled(street_scene(), np.asarray(REGION_MIN), np.asarray(REGION_MAX))
+    V, F = merged_culled(street_scene(), np.asarray(REGION_MIN), np.asarray(REGION_MAX))
     trimesh.Trimesh(V, F, process=False).export(path)
     return len(V), len(F)
 

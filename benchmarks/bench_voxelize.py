@@ -125,7 +125,7 @@ def street_scene(seed: int = 0) -> list[SceneMesh]:
     return meshes
 
 
-def _merged_culled(meshes: list[SceneMesh], lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def merged_culled(meshes: list[SceneMesh], lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """All meshes as one soup, keeping the triangles whose bounding box touches the region."""
     verts, faces, off = [], [], 0
     for m in meshes:
@@ -239,7 +239,7 @@ def main(argv: list[str] | None = None) -> dict:
           f"numba threads: {numba.get_num_threads()} ({numba.threading_layer()})")
     meshes = street_scene()
     lo, hi = np.asarray(REGION_MIN), np.asarray(REGION_MAX)
-    V, F = _merged_culled(meshes, lo, hi)
+    V, F = merged_culled(meshes, lo, hi)
     print(f"scene: {len(meshes)} meshes, {sum(len(m.faces) for m in meshes):,} triangles; "
           f"{len(F):,} triangles / {len(V):,} vertices touch the region")
     results: dict = {"triangles_in_region": int(len(F)), "surface": [], "fill": None, "compose": []}
