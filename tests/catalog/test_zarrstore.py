@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from carlaocc.catalog.occupancy import OccupancyStore, parse_output_key
 from carlaocc.catalog.sensors import SensorStore
 from carlaocc.catalog.store import Store, StoreError
-from carlaocc.catalog.zarrio import ZSTD_LEVEL, frame_fingerprint, parse_frame_key, zarr_store
+from carlaocc.catalog.zarrio import ZSTD_LEVEL, encode_chunk, frame_fingerprint, parse_frame_key, zarr_store
 from carlaocc.catalog.zarrstore import FrameArrayStore, chunk_flags
 from carlaocc.pipeline.engine.runner import outputs_intact
 from carlaocc.schemas.grid import GridSpec
@@ -181,6 +181,19 @@ def test_fingerprints_follow_the_stored_chunks(store, kind):
     store.fs.rm(_frame_files(store, s, kind, name, 1)[-1])  # a lost chunk
     assert s.frame_fingerprint(path, 1) not in (fp, fp2)
     assert s.frame_fingerprint(s.array_path("nope", kind.group, name), 1) is None
+
+
+def test_a_chunk_is_encoded_as_the_bytes_of_its_contiguous_little_endian_copy():
+    from numcodecs import Zstd
+
+    rng = np.random.default_rng(5)
+    tile = rng.integers(0, 3, (6, 40, 9)).astype(np.uint32)
+    blocks = [tile[:, 8:24], tile[:, :16].astype(">u4"), tile[2:4, :16].astype(np.float64) * 1.5,
+              tile[:, 24:40], tile[:1, :2]]  # sliced, big-endian, cast (truncated), then smaller ones
+    for dtype in (np.uint32, np.int16):
+        for block in blocks:
+            want = Zstd(level=ZSTD_LEVEL).encode(np.ascontiguousarray(block, dtype=np.dtype(dtype).newbyteorder("<")))
+            assert encode_chunk(block, dtype) == want
 
 
 def test_a_frame_has_one_fingerprint_whether_listed_from_disk_or_through_fsspec(tmp_path):
