@@ -121,9 +121,13 @@ def get_object(store: Store, key: str) -> bytes | None:
         return None
 
 
-def put_object(store: Store, key: str, payload: bytes) -> None:
+def put_object(store: Store, key: str, payload: bytes, new_directory: bool = False) -> None:
     """Store one object (a chunk) under a store-relative key; a reader never sees half of it
-    (local: a temporary ``.chunk-*`` file renamed into place)."""
+    (local: a temporary ``.chunk-*`` file renamed into place). ``new_directory``: the caller
+    expects the object's directory not to exist yet (a frame written for the first time: in Zarr
+    v3's layout a chunk of a 4-d array is the only file of its directory), so it is created
+    before the write instead of after a failed one; either way an existing directory is used
+    without a ``mkdir``."""
     if store.is_local:
         path = store.path(key)
         directory = os.path.dirname(path)
@@ -131,10 +135,12 @@ def put_object(store: Store, key: str, payload: bytes) -> None:
         # umask, and another user of a shared root could not read it
         tmp = os.path.join(directory, f".chunk-{uuid.uuid4().hex}")
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL
+        if new_directory:
+            os.makedirs(directory, exist_ok=True)
         try:
             fd = os.open(tmp, flags, 0o666)
-        except FileNotFoundError:  # the chunk's directory is created by its first chunk only (not a
-            os.makedirs(directory, exist_ok=True)  # mkdir per chunk: ~500 a 0.05 m frame)
+        except FileNotFoundError:  # the directory is missing: made here, once, by its first chunk
+            os.makedirs(directory, exist_ok=True)
             fd = os.open(tmp, flags, 0o666)
         try:
             with os.fdopen(fd, "wb") as f:
