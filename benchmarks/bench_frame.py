@@ -144,6 +144,8 @@ STEPS = {
         ("carlaocc.catalog.occupancy", "OccupancyStore.write_tile", "encoding and writing"),
         ("carlaocc.catalog.occupancy", "OccupancyStore.write_chunks", "encoding and writing"),
         ("carlaocc.catalog.occupancy", "OccupancyStore.clear_tile", "encoding and writing"),
+        ("carlaocc.catalog.occupancy", "OccupancyStore.write_boxes", "encoding and writing"),
+        ("carlaocc.catalog.occupancy", "OccupancyStore.write_points", "encoding and writing"),
     ],
     "sensors": [
         ("carlaocc.pipeline.tasks.sensors", "frame_inputs", "scene assembly"),

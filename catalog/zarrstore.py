@@ -19,6 +19,7 @@ what a damaged store lost. Reading a damaged node is a :class:`StoreError` namin
 
 from __future__ import annotations
 
+import os
 from abc import ABC, abstractmethod
 
 from collections.abc import Callable, Iterable
@@ -322,11 +323,18 @@ class FrameArrayStore(ABC):
         :meth:`write_tile`), each from ``block(ci, cj)``: the chunk's elements (the chunk's
         shape, or what the array holds of it at its edges; encoded without a copy when
         C-contiguous), or None for a chunk that is all zero (then removed)."""
-        (_, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, x0, nx)
+        (shape, chunks, dtype), keys = self._tile_chunks(sequence_id, group, frame, name, x0, nx)
+        tail = "/0" * (len(shape) - 3)  # the key's axes beyond x and y (see _tile_chunks)
         little = dtype.newbyteorder("<")
         level = self.zstd_levels.get(name, ZSTD_LEVEL)
         padded = None
+        # a local frame's x rows of chunks (directories c/<frame>/<ci>) not there yet: their
+        # chunks' directories are made before writing rather than after a failed write
+        new_rows: dict[int, bool] = {}
         for ci, cj, key in keys:
+            if self.store.is_local and ci not in new_rows:
+                row = key[:len(key) - len(f"/{cj}{tail}")]  # <array>/c/<frame>/<ci>
+                new_rows[ci] = not os.path.isdir(self.store.path(row))
             data = block(ci, cj)
             if data is None:
                 remove_object(self.store, key)
@@ -337,7 +345,7 @@ class FrameArrayStore(ABC):
                 padded[...] = 0
                 padded[:data.shape[0], :data.shape[1]] = data
                 data = padded
-            put_object(self.store, key, encode_chunk(data, little, level))
+            put_object(self.store, key, encode_chunk(data, little, level), new_rows.get(ci, False))
 
     def clear_tile(self, sequence_id: str, group, frame: int, name: str, x0: int, nx: int) -> None:
         """Make ``[x0, x0 + nx)`` of one frame of one array all zero (its chunks are removed); the

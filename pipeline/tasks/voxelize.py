@@ -19,7 +19,6 @@ from carlaocc.schemas.configs import DatasetConfig, VoxelizeConfig
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.stages.geometry import pose_from_list
 from carlaocc.stages.scenes.assembly import region_of_grid
-from carlaocc.stages.scratch import scratch
 from carlaocc.stages.voxelize import voxelize_tiles
 from carlaocc.stages.voxelize.flow import actor_voxels, voxel_flow
 from carlaocc.stages.voxelize.observed import observed_columns, packed_block
@@ -115,9 +114,8 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
     for tile in voxelize_tiles(inputs.scene, grid, tile_x, cfg.fill, inputs.up):
         nx = tile.semantic.shape[0]
         occ.write_tile(seq_id, grid, frame_index, "semantic", tile.semantic, tile.x0)
-        shape = tile.instance.shape
-        occ.write_tile(seq_id, grid, frame_index, "instance", tile.instance, tile.x0,
-                       occ.chunks_of_boxes(seq_id, grid, "instance", tile.things, shape))
+        # instances are nonzero only inside things' boxes: chunks assembled from the boxes' parts
+        occ.write_boxes(seq_id, grid, frame_index, "instance", tile.instance, tile.x0, tile.things)
         if packed is not None:
             packed.pack_slab(tile.x0, tile.semantic)
         if flow is None:
@@ -126,16 +124,8 @@ def voxelize_task(store: Store, cfg: VoxelizeConfig, part: Partition) -> dict[st
         if v is None:
             occ.clear_tile(seq_id, grid, frame_index, "flow", tile.x0, nx)
             continue
-        # a sparse scatter into a zero buffer kept zero between uses (a dense tile is 200 MB at
-        # 0.05 m: zeroing it per tile costs more than the flow)
-        flat, values = v
-        buf = scratch("tile_flow", tile.instance.size * 3, np.float16).reshape(-1, 3)
-        try:
-            buf[flat] = values
-            occ.write_tile(seq_id, grid, frame_index, "flow", buf.reshape(*shape, 3), tile.x0,
-                           occ.chunks_of_indices(seq_id, grid, "flow", flat, shape))
-        finally:
-            buf[flat] = 0
+        # the flow's voxels scattered chunk by chunk (a dense tile is 200 MB at 0.05 m)
+        occ.write_points(seq_id, grid, frame_index, "flow", tile.x0, nx, *v)
     # 2. visibility: rays of the rig's LiDAR and cameras through the frame's occupancy, each
     #    mask's chunks unpacked from its bits one at a time (an empty one is known from its words)
     if packed is not None:

@@ -212,3 +212,66 @@ def test_chunk_bookkeeping_feeds_write_tile(store):
     np.testing.assert_array_equal(candidates, [[False, True]])
     occ.write_tile("s", grid, 0, "instance", tile, 16, candidates)
     np.testing.assert_array_equal(occ.read_tile("s", grid, 0, "instance", 16, 16), tile)
+
+
+def _stored_chunks(occ, grid, name, frame):
+    """{chunk name: stored bytes} of one frame of one array."""
+    from carlaocc.catalog.zarrio import get_object
+
+    shape, chunks, _ = occ.layout("s", grid, name)
+    tail = "/0" * (len(shape) - 3)
+    out = {}
+    for ci in range(-(-shape[1] // chunks[1])):
+        for cj in range(-(-shape[2] // chunks[2])):
+            key = f"occupancy.zarr/s/{grid.key}/{name}/c/{frame}/{ci}/{cj}{tail}"
+            payload = get_object(occ.store, key)
+            if payload is not None:
+                out[f"{ci}/{cj}{tail}"] = payload
+    return out
+
+
+@pytest.mark.parametrize("chunk_edge", [16, 7])
+def test_tiles_written_from_boxes_store_the_chunks_of_the_dense_tile(store, chunk_edge):
+    # write_boxes against write_tile of the same tile with chunks_of_boxes' candidates: the same
+    # chunk files with the same bytes (boxes overlapping, reaching no data, empty, at the edge)
+    occ, grid = _tile_grid_store(store, chunk_edge)
+    occ.create("s", grid, frame_count=2, chunk_edge=chunk_edge)
+    rng = np.random.default_rng(3 + chunk_edge)
+    x0 = chunk_edge * (grid.shape[0] // chunk_edge - 1)  # the last whole-chunk start: an edge tile
+    shape = (grid.shape[0] - x0, *grid.shape[1:])
+    for trial in range(12):
+        lo = rng.integers(0, shape, size=(4, 3))
+        hi = np.minimum(lo + rng.integers(0, 9, size=(4, 3)), shape)
+        things = np.column_stack([np.arange(1, 5), lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1], lo[:, 2], hi[:, 2]])
+        tile = np.zeros(shape, np.uint32)
+        for ident, i0, i1, j0, j1, k0, k1 in things[:3]:  # the fourth box holds nothing
+            part = tile[i0:i1, j0:j1, k0:k1]
+            part[rng.random(part.shape) < 0.5] = ident * 1000 + trial
+        occ.write_tile("s", grid, 0, "instance", tile, x0, occ.chunks_of_boxes("s", grid, "instance", things, shape))
+        occ.write_boxes("s", grid, 1, "instance", tile, x0, things)
+        assert _stored_chunks(occ, grid, "instance", 1) == _stored_chunks(occ, grid, "instance", 0)
+        np.testing.assert_array_equal(occ.read_tile("s", grid, 1, "instance", x0, shape[0]), tile)
+
+
+@pytest.mark.parametrize("chunk_edge", [16, 7])
+def test_tiles_written_from_points_store_the_chunks_of_the_dense_tile(store, chunk_edge):
+    # write_points against write_tile of the dense tile: the same chunk files and bytes; a chunk
+    # whose points are all +0.0 is not stored, one holding a -0.0 is
+    occ, grid = _tile_grid_store(store, chunk_edge)
+    occ.create("s", grid, frame_count=2, chunk_edge=chunk_edge)
+    rng = np.random.default_rng(11 + chunk_edge)
+    shape = (min(2 * chunk_edge, grid.shape[0] - chunk_edge), *grid.shape[1:])  # 16: up to the array's end
+    for n in (0, 1, 7, 300):
+        flat = rng.choice(int(np.prod(shape)), size=n, replace=False)
+        values = rng.normal(size=(n, 3)).astype(np.float16)
+        values[: n // 3] = 0.0
+        values[n // 3: n // 3 + 1] = -0.0
+        dense = np.zeros((int(np.prod(shape)), 3), np.float16)
+        dense[flat] = values
+        occ.write_tile("s", grid, 0, "flow", dense.reshape(*shape, 3), chunk_edge)
+        occ.write_points("s", grid, 1, "flow", chunk_edge, shape[0], flat, values)
+        assert _stored_chunks(occ, grid, "flow", 1) == _stored_chunks(occ, grid, "flow", 0)
+        got = occ.read_tile("s", grid, 1, "flow", chunk_edge, shape[0])
+        np.testing.assert_array_equal(got.view(np.uint16), dense.reshape(*shape, 3).view(np.uint16))
+    with pytest.raises(ValueError, match="outside the tile"):
+        occ.write_points("s", grid, 1, "flow", 0, chunk_edge, np.array([chunk_edge * 25 * 10]), np.ones((1, 3)))

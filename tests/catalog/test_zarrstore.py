@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 from carlaocc.catalog.occupancy import OccupancyStore, parse_output_key
 from carlaocc.catalog.sensors import SensorStore
-from carlaocc.catalog.store import StoreError
-from carlaocc.catalog.zarrio import ZSTD_LEVEL, frame_fingerprint, parse_frame_key, zarr_store
+from carlaocc.catalog.store import Store, StoreError
+from carlaocc.catalog.zarrio import ZSTD_LEVEL, encode_chunk, frame_fingerprint, parse_frame_key, zarr_store
 from carlaocc.catalog.zarrstore import FrameArrayStore, chunk_flags
 from carlaocc.pipeline.engine.runner import outputs_intact
 from carlaocc.schemas.grid import GridSpec
@@ -181,6 +181,37 @@ def test_fingerprints_follow_the_stored_chunks(store, kind):
     store.fs.rm(_frame_files(store, s, kind, name, 1)[-1])  # a lost chunk
     assert s.frame_fingerprint(path, 1) not in (fp, fp2)
     assert s.frame_fingerprint(s.array_path("nope", kind.group, name), 1) is None
+
+
+def test_a_chunk_is_encoded_as_the_bytes_of_its_contiguous_little_endian_copy():
+    from numcodecs import Zstd
+
+    rng = np.random.default_rng(5)
+    tile = rng.integers(0, 3, (6, 40, 9)).astype(np.uint32)
+    blocks = [tile[:, 8:24], tile[:, :16].astype(">u4"), tile[2:4, :16].astype(np.float64) * 1.5,
+              tile[:, 24:40], tile[:1, :2]]  # sliced, big-endian, cast (truncated), then smaller ones
+    for dtype in (np.uint32, np.int16):
+        for block in blocks:
+            want = Zstd(level=ZSTD_LEVEL).encode(np.ascontiguousarray(block, dtype=np.dtype(dtype).newbyteorder("<")))
+            assert encode_chunk(block, dtype) == want
+
+
+def test_a_frame_has_one_fingerprint_whether_listed_from_disk_or_through_fsspec(tmp_path):
+    # a local store walks its chunk directories itself, an object store lists through fsspec:
+    # the same frame (more than ten chunks a side: "/10" sorts before "/2") must hash the same
+    import fsspec
+    import uuid
+
+    url = f"memory://carlaocc-test-{uuid.uuid4().hex}"
+    fps = []
+    for store in (Store(str(tmp_path / "root")), Store(url)):
+        occ = OccupancyStore(store)
+        occ.create("seq", GRID, 1, 1, names=("semantic",))
+        data = _data(occ, KINDS[0], "semantic", np.random.default_rng(4))
+        fps.append(occ.write_frame("seq", GRID, 0, {"semantic": data}))
+        assert any("/c/0/10/" in f for f in _frame_files(store, occ, KINDS[0], "semantic", 0))
+    fsspec.filesystem("memory").rm(Store(url).root, recursive=True)
+    assert fps[0] == fps[1]
 
 
 def test_create_again_keeps_the_same_spec_and_replaces_a_changed_one(store, kind):

@@ -490,6 +490,17 @@ def test_zero_range_marks_the_origin_voxel_like_the_dda():
     assert np.argwhere(got).tolist() == [[1, 1, 2]]
 
 
+def test_a_block_unpacks_every_byte_of_bits_to_its_eight_voxels():
+    # one column of 2048 voxels whose bits, read as bytes, are 0, 1, ..., 255: every pattern of
+    # eight voxels the unpacking meets, checked against numpy's unpackbits
+    grid = GridSpec(region_min=(0.0, 0.0, 0.0), region_max=(1.0, 1.0, 2048.0), voxel_size=1.0)
+    packed = vis.pack_occupancy(np.zeros(grid.shape, bool), grid)
+    mask = np.arange(256, dtype=np.uint8).view(np.uint64).copy()
+    got = packed.block(mask, 0, 0, 1, 1)
+    want = np.unpackbits(np.arange(256, dtype=np.uint8), bitorder="little")
+    np.testing.assert_array_equal(got.reshape(-1), want)
+
+
 def test_blocks_of_a_mask_equal_the_whole_and_say_when_empty():
     rng = np.random.default_rng(9)
     for nz in (70, 72):  # bytes one by one, and four at a time
