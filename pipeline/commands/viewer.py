@@ -20,13 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.samples import DatasetError, FrameSamples
 from carlaocc.catalog.sensors import LidarStore, SensorStore
 from carlaocc.catalog.store import Store
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.geometry import boxes_in_frame
 from carlaocc.stages.render.colours import height_ramp
-from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, box_edges, camera_frustum, class_colours,
+from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, block_surface, box_edges, camera_frustum, class_colours,
                                            flow_arrows, ghost, level_of_detail, linear_index, prediction_outcome,
                                            surface_voxels, voxel_centres)
 
@@ -51,8 +52,8 @@ class FrameView:
     centres: np.ndarray          # (N, 3) float32 m, LiDAR frame
     semantic: np.ndarray         # (N,) uint8 (the prediction's class where it has one, with --pred)
     instance: np.ndarray         # (N,) uint32
-    mask_camera: np.ndarray      # (N,) bool
-    mask_lidar: np.ndarray       # (N,) bool
+    mask_camera: np.ndarray | None   # (N,) bool; None until a display needs it (read_masks)
+    mask_lidar: np.ndarray | None    # (N,) bool
     outcome: np.ndarray | None   # (N,) uint8 codes of OUTCOMES, with --pred
     point_size: float            # m: the voxel size times the level-of-detail factor
     occupied: int                # occupied voxels of the frame (before surface and LOD)
@@ -64,11 +65,13 @@ class FrameView:
     cameras: list = field(default_factory=list)       # dicts: name, fov, aspect, wxyz, position, rgb/semantic/depth
     ego: np.ndarray | None = None                     # (4, 4) ego-to-LiDAR
     seconds: float = 0.0
+    ijk: np.ndarray | None = None                     # (N, 3) int64 grid indices of the drawn voxels
 
 
 def open_frames(root: str, seq: str | None, voxel_size: float | None) -> FrameSamples:
     """The frames of sequence ``seq`` (the root's first when None) at ``voxel_size`` (its finest
-    when None), with cameras, camera maps and LiDAR where the root has them."""
+    when None), with cameras, camera maps and LiDAR where the root has them; the occupancy is
+    read by :func:`read_surface` (only the surface), or whole for a prediction."""
     try:
         index = FrameSamples(root, voxel_size=voxel_size, occupancy="none", cameras=False, lidar=False, boxes=False,
                              sequences=None if seq is None else [seq])
@@ -81,9 +84,101 @@ def open_frames(root: str, seq: str | None, voxel_size: float | None) -> FrameSa
     store = Store(root)
     cameras = bool(SensorStore(store).cameras(seq))
     lidar = LidarStore(store).exists(seq, index.samples[0][1]) if index.samples else False
-    return FrameSamples(root, voxel_size=index.voxel_size, occupancy="sparse", cameras=cameras,
+    return FrameSamples(root, voxel_size=index.voxel_size, occupancy="none", cameras=cameras,
                         camera_maps=("depth", "semantic") if cameras else (), lidar=lidar, boxes=True,
                         sequences=[seq])
+
+
+def read_surface(occ: OccupancyStore, seq: str, grid, frame: int, flow: bool = True) -> dict:
+    """The surface voxels of one stored frame (:func:`carlaocc.stages.render.viewer.block_surface`),
+    read chunk by chunk and never assembled: ``ijk`` (N, 3) int64 in C order, ``semantic``,
+    ``instance`` and, with ``flow``, ``flow`` (m/s; zero off things) at them, and ``occupied``
+    (the frame's occupied voxel count). Reads every semantic chunk once, an instance chunk where
+    the frame has one, a flow chunk only where a surface voxel is a thing's; the masks are read
+    by :func:`read_at` when a display needs them."""
+    shape, chunks, _ = occ.layout(seq, grid, "semantic")
+    X, Y = shape[1], shape[2]
+    cx, cy = chunks[1], chunks[2]
+    nx, ny = -(-X // cx), -(-Y // cy)
+    names = {n for n in ("instance", "flow") if _has_array(occ, seq, grid, n)}
+    rows: dict[int, list] = {}
+
+    def row(ci: int) -> list:
+        # a row of semantic chunks along y, read once and kept until the next row is done
+        if ci not in rows:
+            rows[ci] = [occ.read_chunk(seq, grid, frame, "semantic", ci, cj) for cj in range(ny)]
+        return rows[ci]
+
+    parts: dict[str, list] = {"ijk": [], "semantic": [], "instance": [], "flow": []}
+    occupied = 0
+    for ci in range(nx):
+        here, first = row(ci), len(parts["ijk"])
+        for cj, block in enumerate(here):
+            if block is None:
+                continue
+            count = int(np.count_nonzero(block))
+            occupied += count
+            # the neighbours' facing planes (a missing chunk or the grid's border: free)
+            prev = rows.get(ci - 1, [None] * ny)[cj] if ci > 0 else None
+            nxt = row(ci + 1)[cj] if ci + 1 < nx else None
+            flat = block_surface(block, None if prev is None else prev[-1], None if nxt is None else nxt[0],
+                                 None if cj == 0 or here[cj - 1] is None else here[cj - 1][:, -1],
+                                 None if cj + 1 == ny or here[cj + 1] is None else here[cj + 1][:, 0], count)
+            ii, jj, kk = np.unravel_index(flat, block.shape)
+            parts["ijk"].append(np.column_stack([ii + ci * cx, jj + cj * cy, kk]).astype(np.int64))
+            parts["semantic"].append(block[ii, jj, kk])
+            inst = occ.read_chunk(seq, grid, frame, "instance", ci, cj) if "instance" in names else None
+            inst = np.zeros(len(flat), np.uint32) if inst is None else inst[ii, jj, kk].astype(np.uint32)
+            parts["instance"].append(inst)
+            if flow:
+                things = np.flatnonzero(inst)
+                f = np.zeros((len(flat), 3), np.float32)
+                block_flow = occ.read_chunk(seq, grid, frame, "flow", ci, cj) \
+                    if len(things) and "flow" in names else None
+                if block_flow is not None:
+                    f[things] = block_flow[ii[things], jj[things], kk[things]]
+                parts["flow"].append(f)
+        rows.pop(ci - 1, None)
+        # C order over the grid: a row of chunks holds its voxels chunk after chunk along y, each
+        # in C order, so a stable sort on i alone orders them (i, j, k)
+        if len(parts["ijk"]) > first:
+            order = np.argsort(np.concatenate([a[:, 0] for a in parts["ijk"][first:]]), kind="stable")
+            for key in ("ijk", "semantic", "instance") + (("flow",) if flow else ()):
+                parts[key][first:] = [np.concatenate(parts[key][first:])[order]]
+    empty = {"ijk": np.zeros((0, 3), np.int64), "semantic": np.zeros(0, np.uint8),
+             "instance": np.zeros(0, np.uint32), "flow": np.zeros((0, 3), np.float32)}
+    out = {k: np.concatenate(v) if v else empty[k] for k, v in parts.items() if k != "flow" or flow}
+    out["occupied"] = occupied
+    return out
+
+
+def read_at(occ: OccupancyStore, seq: str, grid, frame: int, name: str, ijk: np.ndarray) -> np.ndarray:
+    """Array ``name`` of one stored frame at the voxels ``ijk`` (N, 3), reading only the chunks
+    they fall in (zero where a chunk is not stored)."""
+    shape, chunks, dtype = occ.layout(seq, grid, name)
+    cx, cy = chunks[1], chunks[2]
+    out = np.zeros((len(ijk), *shape[4:]), dtype)
+    if not len(ijk):
+        return out
+    # the voxels grouped by chunk, each group read from its one chunk
+    key = (ijk[:, 0] // cx) * (-(-shape[2] // cy)) + ijk[:, 1] // cy
+    order = np.argsort(key, kind="stable")
+    bounds = np.flatnonzero(np.diff(key[order])) + 1
+    for group in np.split(order, bounds):
+        i, j, k = ijk[group].T
+        ci, cj = int(i[0] // cx), int(j[0] // cy)
+        block = occ.read_chunk(seq, grid, frame, name, ci, cj)
+        if block is not None:
+            out[group] = block[i - ci * cx, j - cj * cy, k]
+    return out
+
+
+def _has_array(occ: OccupancyStore, seq: str, grid, name: str) -> bool:
+    try:
+        occ.layout(seq, grid, name)
+        return True
+    except ValueError:
+        return False
 
 
 def prediction_files(pred: Path, seq: str, frames: list[int]) -> dict[int, Path]:
@@ -129,6 +224,26 @@ def load_prediction(path: Path, shape) -> tuple[np.ndarray, np.ndarray]:
     return flat.astype(np.int64), sem.reshape(-1)[flat].astype(np.uint8)
 
 
+def _sparse_frame(samples: FrameSamples, index: int) -> dict:
+    """Sample ``index`` with its whole occupancy as sparse rows (what a prediction is scored on)."""
+    seq, frame = samples.samples[index]
+    full = FrameSamples(samples.root, voxel_size=samples.voxel_size, occupancy="sparse", cameras=False, lidar=False,
+                        boxes=False, sequences=[seq])
+    return full[full.samples.index((seq, frame))]
+
+
+def load_masks(samples: FrameSamples, index: int, view: FrameView) -> FrameView:
+    """``view`` with its voxels' camera and LiDAR masks (read once, when a display first needs them)."""
+    if view.mask_camera is None:
+        seq, frame = samples.samples[index]
+        occ, grid = OccupancyStore(Store(samples.root)), samples.grid(seq)
+        for name in ("mask_camera", "mask_lidar"):
+            m = read_at(occ, seq, grid, frame, name, view.ijk) if _has_array(occ, seq, grid, name) \
+                else np.ones(len(view.ijk), np.uint8)
+            setattr(view, name, m.astype(bool))
+    return view
+
+
 def _thumbnail(image: np.ndarray, width: int = IMAGE_WIDTH) -> np.ndarray:
     step = max(1, image.shape[1] // width)
     return np.ascontiguousarray(image[::step, ::step])
@@ -141,17 +256,22 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
     s = samples[index]
     seq = s["sequence_id"]
     shape = tuple(int(v) for v in s["grid_shape"])
-    rows = s["occ"]
-    ijk, sem = rows[:, :3].astype(np.int64), rows[:, 3].astype(np.uint8)
-    n = len(rows)
-    inst = s.get("occ_instance", np.zeros(n, np.uint32))
-    flow = s.get("occ_flow", np.zeros((n, 3), np.float32))
-    mcam = s.get("occ_mask_camera", np.ones(n, bool))
-    mlid = s.get("occ_mask_lidar", np.ones(n, bool))
-    outcome = None
-    occupied = n
-    if pred is not None:
+    origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
+    outcome, mcam, mlid = None, None, None
+    if pred is None:
+        # only the surface, read chunk by chunk; the masks wait until a display asks for them
+        surf = read_surface(OccupancyStore(Store(samples.root)), seq, samples.grid(seq), int(s["frame_index"]))
+        ijk, sem, inst, flow, occupied = surf["ijk"], surf["semantic"], surf["instance"], surf["flow"], surf["occupied"]
+    else:
         # the union of both sides' occupied voxels, each with its outcome and the class shown
+        full = _sparse_frame(samples, index)
+        rows = full["occ"]
+        ijk, sem = rows[:, :3].astype(np.int64), rows[:, 3].astype(np.uint8)
+        n = len(rows)
+        inst = full.get("occ_instance", np.zeros(n, np.uint32))
+        flow = full.get("occ_flow", np.zeros((n, 3), np.float32))
+        mcam = full.get("occ_mask_camera", np.ones(n, bool))
+        mlid = full.get("occ_mask_lidar", np.ones(n, bool))
         gt_flat = linear_index(ijk, shape)
         p_flat, p_cls = load_prediction(pred, shape)
         flat, outcome, shown = prediction_outcome(gt_flat, sem, p_flat, p_cls)
@@ -164,16 +284,17 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
         ijk = np.column_stack(np.unravel_index(flat, shape)).astype(np.int64)
         sem = shown
         occupied = len(flat)
-    origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
-    # flow arrows from every voxel of a moving thing (before the surface is taken)
+        # the surface of the union
+        surf = np.flatnonzero(surface_voxels(ijk, shape))
+        ijk, sem, inst, flow, mcam, mlid, outcome = (a[surf] for a in (ijk, sem, inst, flow, mcam, mlid, outcome))
+    # flow arrows from the surface voxels of each moving thing
     things = inst != 0
     arrows = flow_arrows(voxel_centres(ijk[things], origin, voxel_size), inst[things], flow[things])[:2]
-    surf = np.flatnonzero(surface_voxels(ijk, shape))
-    keep, factor = level_of_detail(ijk[surf], budget)
-    sel = surf[keep]
-    view = FrameView(centres=voxel_centres(ijk[sel], origin, voxel_size), semantic=sem[sel], instance=inst[sel],
-                     mask_camera=mcam[sel], mask_lidar=mlid[sel], outcome=None if outcome is None else outcome[sel],
-                     point_size=voxel_size * factor, occupied=occupied, arrows=arrows)
+    keep, factor = level_of_detail(ijk, budget)
+    view = FrameView(centres=voxel_centres(ijk[keep], origin, voxel_size), semantic=sem[keep], instance=inst[keep],
+                     mask_camera=None if mcam is None else mcam[keep], mask_lidar=None if mlid is None else mlid[keep],
+                     outcome=None if outcome is None else outcome[keep], point_size=voxel_size * factor,
+                     occupied=occupied, arrows=arrows, ijk=ijk[keep])
     boxes = boxes_in_frame(samples.actor_rows(index), np.linalg.inv(s["lidar_pose"]))
     view.boxes = box_edges(boxes["box_pose"], boxes["boxes"][:, 3:6])
     view.box_labels = [(f"{taxonomy.by_id(int(c)).name} #{int(i)}",
@@ -186,10 +307,11 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
         rgb = s["images"][c]
         h, w = rgb.shape[:2]
         cam = camera_frustum(s["cam_intrinsics"][c], s["cam_to_lidar"][c], w, h)
-        depth = s["cam_depth"][c]
+        # thumbnails first, then coloured: only the pixels sent are coloured
+        depth, semantic = _thumbnail(s["cam_depth"][c]), _thumbnail(s["cam_semantic"][c])
         cam.update(name=name, rgb=_thumbnail(rgb),
-                   semantic=_thumbnail(class_colours(s["cam_semantic"][c].reshape(-1)).reshape(h, w, 3)),
-                   depth=_thumbnail(np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8)))
+                   semantic=class_colours(semantic.reshape(-1)).reshape(*semantic.shape, 3),
+                   depth=np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8))
         view.cameras.append(cam)
     view.seconds = time.perf_counter() - t0
     return view
@@ -274,7 +396,10 @@ class Viewer:
 
     def draw(self) -> None:
         """(Re)draws the current frame with the current settings."""
-        v = self.view(int(self.frame.value))
+        k = int(self.frame.value)
+        v = self.view(k)
+        if self.unobserved.value != "show":
+            load_masks(self.samples, self.indices[k], v)
         draw_frame(self.server.scene, v, self.mode.value, self.unobserved.value, self.mask.value, self.nodes,
                    self.overlays, flow=self.show_flow.value, boxes=self.show_boxes.value, lidar=self.show_lidar.value,
                    cameras=self.show_cameras.value, image=self.image.value,

@@ -26,7 +26,7 @@ from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import quaternion_wxyz
 from carlaocc.stages.render.colours import voxel_colours
 
-__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "box_edges", "camera_frustum", "class_colours", "flow_arrows", "ghost",
+__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "block_surface", "box_edges", "camera_frustum", "class_colours", "flow_arrows", "ghost",
            "level_of_detail", "linear_index", "prediction_outcome", "surface_voxels", "voxel_centres"]
 
 OUTCOMES = ("true positive", "false positive", "false negative", "wrong class")
@@ -92,6 +92,50 @@ def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
     return exposed
 
 
+@njit(cache=True)
+def _block_surface_kernel(sem, x_lo, x_hi, y_lo, y_hi, occupied):  # pragma: no cover - jitted
+    bx, by, bz = sem.shape
+    out = np.empty(occupied, np.int64)  # at most every occupied voxel is on the surface
+    n = 0
+    for i in range(bx):
+        for j in range(by):
+            base = (i * by + j) * bz
+            for k in range(bz):
+                if sem[i, j, k] == 0:
+                    continue
+                # a free face: the grid's top or bottom (z is never cut into blocks), a free
+                # neighbour inside the block, or a free halo voxel across its x / y faces
+                if (k == 0 or k == bz - 1 or sem[i, j, k - 1] == 0 or sem[i, j, k + 1] == 0
+                        or (x_lo[j, k] == 0 if i == 0 else sem[i - 1, j, k] == 0)
+                        or (x_hi[j, k] == 0 if i == bx - 1 else sem[i + 1, j, k] == 0)
+                        or (y_lo[i, k] == 0 if j == 0 else sem[i, j - 1, k] == 0)
+                        or (y_hi[i, k] == 0 if j == by - 1 else sem[i, j + 1, k] == 0)):
+                    out[n] = base + k
+                    n += 1
+    return out[:n]
+
+
+def block_surface(block: np.ndarray, x_lo=None, x_hi=None, y_lo=None, y_hi=None, occupied: int | None = None) -> np.ndarray:
+    """Flat indices (C order in the block, int64, sorted) of the occupied voxels of one column
+    block of a grid (``block`` (bx, by, Z), nonzero = occupied, the grid's whole z range) that
+    have a free face neighbour, as :func:`surface_voxels` finds them on the whole grid.
+
+    ``x_lo`` / ``x_hi`` (by, Z) are the planes of the grid just before / after the block along x,
+    ``y_lo`` / ``y_hi`` (bx, Z) along y (nonzero = occupied); None where the block touches the
+    grid's border (outside the grid is free). So a grid read chunk by chunk never has to be
+    assembled: each block needs only its neighbours' facing planes. ``occupied``: the block's
+    nonzero count when the caller has it (else counted here)."""
+    block = np.asarray(block)
+    bx, by, bz = block.shape
+    free_x, free_y = np.zeros((by, bz), block.dtype), np.zeros((bx, bz), block.dtype)
+    planes = [free_x if x_lo is None else x_lo, free_x if x_hi is None else x_hi,
+              free_y if y_lo is None else y_lo, free_y if y_hi is None else y_hi]
+    for p, want in zip(planes, ((by, bz), (by, bz), (bx, bz), (bx, bz))):
+        if p.shape != want:
+            raise ValueError(f"a halo plane of shape {p.shape}; the block {block.shape} needs {want}")
+    return _block_surface_kernel(block, *(np.asarray(p, block.dtype) for p in planes), int(np.count_nonzero(block)) if occupied is None else int(occupied))
+
+
 def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     """``(keep, factor)``: indices into ``ijk`` of one voxel per ``factor``-cube block (the first
     in the given order; ``factor`` the smallest power of two >= 1 leaving at most ``budget``
@@ -103,11 +147,11 @@ def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     keep = np.arange(len(ijk))
     if len(ijk) == 0:
         return keep, factor
+    top = ijk.max(axis=0)
     while len(keep) > budget:
         factor *= 2
         # the block of every voxel as one flat index, then the first voxel of each block
-        blocks = ijk // factor
-        _, first = np.unique(linear_index(blocks, blocks.max(axis=0) + 1), return_index=True)
+        _, first = np.unique(linear_index(ijk // factor, top // factor + 1), return_index=True)
         keep = np.sort(first)
     return keep, factor
 

@@ -58,9 +58,12 @@ def test_a_prediction_with_errors_is_coloured_by_outcome(default_01, tmp_path):
     from carlaocc.pipeline.commands.viewer import open_frames, prediction_files, prepare_frame
     from carlaocc.stages.render.viewer import OUTCOMES
 
+    from carlaocc.catalog.samples import FrameSamples
+
     samples = open_frames(default_01.url, None, 0.1)
     seq, frame = samples.samples[0]
-    first = samples[0]
+    first = FrameSamples(default_01.url, voxel_size=0.1, occupancy="sparse", cameras=False, lidar=False, boxes=False,
+                         sequences=[seq])[0]
     gt = _dense(first)
     # the prediction: ground truth with some voxels dropped, some added, some relabelled
     rng = np.random.default_rng(0)
@@ -82,6 +85,36 @@ def test_a_prediction_with_errors_is_coloured_by_outcome(default_01, tmp_path):
     assert np.array_equal(v.outcome, expect)
     assert np.array_equal(v.semantic, np.where(p == 0, g, p))
     assert set(np.unique(v.outcome)) == set(range(len(OUTCOMES)))  # all four outcomes are drawn
+
+
+def test_the_surface_read_chunk_by_chunk_is_the_whole_frame_s(default_01):
+    # read_surface never assembles the frame; the reference: every occupied voxel read whole, then
+    # the surface of the whole set
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.samples import FrameSamples
+    from carlaocc.catalog.store import Store
+    from carlaocc.pipeline.commands.viewer import load_masks, open_frames, prepare_frame, read_surface
+    from carlaocc.stages.render.viewer import surface_voxels
+
+    samples = open_frames(default_01.url, None, 0.1)
+    seq, frame = samples.samples[0]
+    full = FrameSamples(default_01.url, voxel_size=0.1, occupancy="sparse", cameras=False, lidar=False, boxes=False,
+                        sequences=[seq])[0]
+    rows = full["occ"]
+    on = surface_voxels(rows[:, :3], full["grid_shape"])
+    got = read_surface(OccupancyStore(Store(default_01.url)), seq, samples.grid(seq), frame)
+    assert got["occupied"] == len(rows)
+    assert np.array_equal(got["ijk"], rows[on, :3])  # the same voxels, in the same (C) order
+    assert np.array_equal(got["semantic"], rows[on, 3]) and np.array_equal(got["instance"], full["occ_instance"][on])
+    things = full["occ_instance"][on] != 0
+    assert things.any() and np.array_equal(got["flow"][things], full["occ_flow"][on][things])
+    # the masks, read later at the drawn voxels only
+    v = prepare_frame(samples, 0, None, budget=10**9)
+    assert v.mask_camera is None and len(v.centres) == int(on.sum())
+    load_masks(samples, 0, v)
+    assert np.array_equal(v.mask_camera, full["occ_mask_camera"][on])
+    assert np.array_equal(v.mask_lidar, full["occ_mask_lidar"][on])
+    assert not v.mask_camera.all()  # some surface is unobserved: the comparison means something
 
 
 def test_prediction_refusals(default_01, tmp_path):

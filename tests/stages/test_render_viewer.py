@@ -10,7 +10,7 @@ from hypothesis.extra.numpy import arrays
 
 from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import pose_matrix, rotation_from_quaternion
-from carlaocc.stages.render.viewer import (OUTCOMES, box_edges, camera_frustum, class_colours, flow_arrows, ghost,
+from carlaocc.stages.render.viewer import (OUTCOMES, block_surface, box_edges, camera_frustum, class_colours, flow_arrows, ghost,
                                            level_of_detail, linear_index, prediction_outcome, surface_voxels,
                                            voxel_centres)
 
@@ -37,6 +37,31 @@ def test_surface_voxels_match_a_loop(occ):
     ijk = np.argwhere(occ)
     mask = surface_voxels(ijk, occ.shape)
     assert {tuple(int(v) for v in r) for r in ijk[mask]} == _surface_loop(occ)
+
+
+@settings(max_examples=60, deadline=None)
+@given(grids, st.integers(1, 4), st.integers(1, 4))
+def test_block_surface_cut_into_blocks_matches_the_whole_grid(occ, cx, cy):
+    # the grid cut into (cx, cy, Z) column blocks as the store chunks it, each given only its
+    # neighbours' facing planes: the union of the blocks' surfaces is the whole grid's
+    X, Y, _ = occ.shape
+    got = set()
+    for x0 in range(0, X, cx):
+        for y0 in range(0, Y, cy):
+            x1, y1 = min(x0 + cx, X), min(y0 + cy, Y)
+            block = occ[x0:x1, y0:y1]
+            flat = block_surface(block, occ[x0 - 1, y0:y1] if x0 else None, occ[x1, y0:y1] if x1 < X else None,
+                                 occ[x0:x1, y0 - 1] if y0 else None, occ[x0:x1, y1] if y1 < Y else None)
+            assert np.all(np.diff(flat) > 0)  # sorted, C order within the block
+            got |= {(x0 + int(i), y0 + int(j), int(k)) for i, j, k in zip(*np.unravel_index(flat, block.shape))}
+    assert got == _surface_loop(occ)
+
+
+def test_block_surface_refuses_a_halo_of_the_wrong_shape():
+    import pytest
+
+    with pytest.raises(ValueError, match="halo plane"):
+        block_surface(np.ones((2, 3, 4), np.uint8), x_lo=np.ones((2, 4), np.uint8))
 
 
 def test_a_solid_block_shows_only_its_shell():
