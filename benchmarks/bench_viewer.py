@@ -30,7 +30,7 @@ from PIL import Image
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 import headless_chromium  # noqa: E402
 
-from carlaocc.pipeline.commands.viewer import (DEFAULT_BUDGET, Viewer, open_frames, prepare_frame,  # noqa: E402
+from carlaocc.pipeline.commands.viewer import (DEFAULT_BUDGET, RootFrames, Viewer, open_frames, prepare_frame,  # noqa: E402
                                                 start_server, stop_server)
 from carlaocc.schemas.taxonomy import palette  # noqa: E402
 
@@ -48,8 +48,7 @@ def measure(root: str, voxel_size: float, budget: int, switches: int = 3) -> dic
            "prepare_s": float(np.mean([v.seconds for v in prep]))}
     server = start_server()
     try:
-        viewer = Viewer(server, samples, None, budget)
-        viewer.cache.update(dict(enumerate(prep)))
+        viewer = Viewer(server, RootFrames(samples), budget, prepared=dict(enumerate(prep)))
         ids, counts = np.unique(prep[0].semantic, return_counts=True)
         colour = np.array(palette()[int(ids[np.argmax(counts)])])
         with headless_chromium.Browser(headless_chromium.find_chromium(), 1280, 800) as browser:

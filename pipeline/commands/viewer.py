@@ -2,11 +2,21 @@
 three.js client in the browser, usable through SSH port forwarding), and ``--save``: the same
 scene as one offline HTML page.
 
-Reading goes through :class:`carlaocc.catalog.samples.FrameSamples` (occupancy, cameras and their
-maps, LiDAR, actor boxes) and, for ``--pred``, the prediction files ``carlaocc eval ssc`` reads on
-our grid; what is drawn is prepared by the pure functions of :mod:`carlaocc.stages.render.viewer`.
-One scene node per class (``/voxels/<Class>``), so a class toggles without re-sending anything;
-a frame switch replaces the nodes' arrays.
+Two sources of frames, one viewer (:class:`Viewer`, :func:`save_html`):
+
+* :class:`RootFrames`: a root's sequence. A frame's surface is read chunk by chunk
+  (:func:`read_surface`: never the dense or the whole sparse frame), its masks only when a display
+  asks (:func:`load_masks`); cameras, their maps, LiDAR and actor boxes through
+  :class:`carlaocc.catalog.samples.FrameSamples`. With ``--pred``, prediction files on the root's
+  grid.
+* :class:`PairFrames` (``--pred P --gt G``): a prediction tree against its ground-truth tree,
+  paired and read by ``carlaocc eval ssc``'s own functions (:mod:`carlaocc.pipeline.cli.evaluate`)
+  in its label space (``--map``), each frame on the grid and in the frame of the export's
+  ``grid.json`` (:mod:`carlaocc.catalog.formats.manifest`).
+
+What is drawn is prepared by the pure functions of :mod:`carlaocc.stages.render.viewer`. One scene
+node per class (``/voxels/<Class>``), so a class toggles without re-sending anything; a frame
+switch replaces the nodes' arrays.
 """
 
 from __future__ import annotations
@@ -27,9 +37,9 @@ from carlaocc.catalog.store import Store
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.geometry import boxes_in_frame
 from carlaocc.stages.render.colours import height_ramp
-from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, block_surface, box_edges, camera_frustum, class_colours,
-                                           flow_arrows, ghost, level_of_detail, linear_index, prediction_outcome,
-                                           surface_voxels, voxel_centres)
+from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, block_surface, box_edges, camera_frustum,
+                                           class_colours, flow_arrows, ghost, label_colours, level_of_detail,
+                                           linear_index, prediction_outcome, surface_voxels, voxel_centres)
 
 DEFAULT_BUDGET = 400_000
 """Surface voxels drawn per frame before the level of detail coarsens (x2 per step)."""
@@ -317,15 +327,39 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
     return view
 
 
-def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class Labels:
+    """A label space as the viewer shows it: ``names[id]``, ``colours`` (256, 3) uint8 by id,
+    the ``things`` ids (coloured by instance in ``instance`` mode)."""
+
+    names: tuple[str, ...]
+    colours: np.ndarray
+    things: frozenset
+
+    def name(self, cid: int) -> str:
+        return self.names[cid] if 0 <= cid < len(self.names) else f"label {cid}"
+
+
+ROOT_LABELS = Labels(tuple(c.name for c in taxonomy.label_table().classes), np.asarray(
+    taxonomy.palette() + ((0, 0, 0),) * (256 - len(taxonomy.palette())), np.uint8), frozenset(taxonomy.thing_ids()))
+"""A root's labels: the CarlaOcc classes in the label table's palette."""
+
+
+def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str,
+                  labels: Labels = ROOT_LABELS) -> tuple[np.ndarray, np.ndarray]:
     """``(colours (N, 3) uint8, shown (N,) bool)`` of a frame's voxels: coloured by ``mode``, and
     those ``mask`` (camera | lidar) marks unobserved shown, ghosted or hidden."""
     if mode == "outcome" and view.outcome is not None:
         col = OUTCOME_COLOURS[view.outcome]
     else:
-        col = class_colours(view.semantic, view.instance, "instance" if mode == "instance" else "semantic")
-    observed = view.mask_camera if mask == "camera" else view.mask_lidar
+        col = class_colours(view.semantic, view.instance, "instance" if mode == "instance" else "semantic",
+                            labels.colours)
     shown = np.ones(len(col), bool)
+    if unobserved == "show":
+        return col, shown
+    observed = view.mask_camera if mask == "camera" else view.mask_lidar
+    if observed is None:
+        raise ValueError("the frame's masks are not loaded (load_masks)")
     if unobserved == "ghost":
         col = ghost(col, observed)
     elif unobserved == "hide":
@@ -333,25 +367,177 @@ def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str) -> tup
     return col, shown
 
 
-class Viewer:
-    """The live scene of one sequence on a viser server: a timeline, per-class toggles, colour
-    modes, masks and overlays (GUI on the right), one scene node per class."""
+class RootFrames:
+    """The frames of a root's sequence the viewer shows (sample ``indices``), each optionally
+    against a prediction file on the root's grid (``preds`` by frame index)."""
 
-    def __init__(self, server, samples: FrameSamples, preds: dict[int, Path] | None, budget: int,
-                 indices: list[int] | None = None, first: int = 0) -> None:
-        self.server, self.samples, self.preds, self.budget = server, samples, preds, budget
+    def __init__(self, samples: FrameSamples, preds: dict[int, Path] | None = None,
+                 indices: list[int] | None = None) -> None:
+        self.samples, self.preds = samples, preds
         self.indices = list(range(len(samples))) if indices is None else list(indices)
-        self.frames = [samples.samples[k][1] for k in self.indices]
-        self.cache: dict[int, FrameView] = {}
-        self.nodes: dict[str, object] = {}
+        self.frame_ids = [samples.samples[k][1] for k in self.indices]
+        self.names = [str(f) for f in self.frame_ids]
+        self.labels, self.has_pred, self.voxel_size = ROOT_LABELS, preds is not None, samples.voxel_size
+        self.title = f"**{samples.samples[0][0]}** at {samples.voxel_size:g} m" + (" against a prediction" if preds else "")
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def prepare(self, k: int, budget: int) -> FrameView:
+        return prepare_frame(self.samples, self.indices[k], None if self.preds is None else self.preds[self.frame_ids[k]],
+                             budget)
+
+    def masks(self, k: int, view: FrameView) -> FrameView:
+        return load_masks(self.samples, self.indices[k], view)
+
+
+def pair_frames(pred: Path, gt: Path, map_name: str = "carlaocc", table: str | None = None,
+                ignore: tuple[int, ...] = (255,)) -> "PairFrames":
+    """A prediction tree against its ground-truth tree, paired and read as ``carlaocc eval ssc``
+    pairs and reads them (by relative path without suffix; labels in ``map_name``), each frame on
+    the grid its export's ``grid.json`` states."""
+    from carlaocc.pipeline.cli.evaluate import InputError, pair_files
+    from carlaocc.stages.evaluation import label_map
+
+    try:
+        lm = label_map(map_name, table)
+    except ValueError as exc:
+        raise ViewerError(f"--map / --taxonomy: {exc}") from None
+    try:
+        pairs = pair_files(pred, gt, (".npz", ".npy"))
+    except InputError as exc:
+        raise ViewerError(str(exc)) from None
+    return PairFrames(pairs, lm, tuple(ignore), gt)
+
+
+class PairFrames:
+    """Paired prediction / ground-truth files (``pairs``: key, prediction, ground truth) in the
+    label space ``lm``; ``gt`` the ground-truth tree, where ``grid.json`` is looked for."""
+
+    def __init__(self, pairs: list, lm, ignore: tuple[int, ...], gt: Path, indices: list[int] | None = None) -> None:
+        self.pairs, self.lm, self.ignore, self.gt = pairs, lm, ignore, Path(gt)
+        self.indices = list(range(len(pairs))) if indices is None else list(indices)
+        self.names = [pairs[k][0] for k in self.indices]
+        colours = label_colours(lm.from_carlaocc)
+        self.labels = Labels(tuple(lm.names), colours, frozenset(lm.things))
+        self.has_pred = True
+        self.grids = [self.grid(k) for k in range(len(self.indices))]
+        self.voxel_size = self.grids[0]["voxel_size"] if self.grids else 1.0
+        self.title = f"**{self.gt.name}** ({lm.name} labels) against a prediction"
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def select(self, indices: list[int]) -> "PairFrames":
+        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, indices)
+
+    def grid(self, k: int) -> dict:
+        """The grid of frame ``k`` from the grid.json nearest above its ground-truth file (the
+        export's); without one, voxel indices (origin 0, 1 m) in an unknown frame."""
+        from carlaocc.catalog.formats.manifest import find_grid_manifest, grid_of
+
+        gf = self.pairs[self.indices[k]][2]
+        try:
+            found = find_grid_manifest(gf)
+            if found is None:
+                return {"origin": (0.0, 0.0, 0.0), "voxel_size": 1.0, "shape": None, "frame": None}
+            doc, folder = found
+            return grid_of(doc, Path(gf).resolve().relative_to(folder))
+        except ValueError as exc:
+            raise ViewerError(f"--gt {self.gt}: {exc}") from None
+
+    def prepare(self, k: int, budget: int) -> FrameView:
+        from carlaocc.pipeline.cli.evaluate import InputError, load_occupancy
+
+        t0 = time.perf_counter()
+        _, pf, gf = self.pairs[self.indices[k]]
+        try:
+            p_sem, _, _ = load_occupancy(pf, self.lm, False)
+            g_sem, g_inst, masks = load_occupancy(gf, self.lm, False)
+        except InputError as exc:
+            raise ViewerError(str(exc)) from None
+        grid = self.grids[k]
+        if p_sem.shape != g_sem.shape:
+            raise ViewerError(f"--pred {pf}: shape {p_sem.shape} differs from the ground truth {gf} {g_sem.shape}")
+        if grid["shape"] is not None and tuple(g_sem.shape) != grid["shape"]:
+            raise ViewerError(f"--gt {gf}: shape {tuple(g_sem.shape)}, but its grid.json's grid is {grid['shape']}")
+        p_sem, g_sem = (self._labels(a, path) for a, path in ((p_sem, pf), (g_sem, gf)))
+        return prepare_pair(p_sem, g_sem, g_inst, masks, self.lm.free, self.ignore, grid, budget, t0)
+
+    def _labels(self, a: np.ndarray, path: Path) -> np.ndarray:
+        """``a`` as uint8 labels, every one an id of the map or an ignored id (else the one-line
+        error naming the file and the map)."""
+        lo, hi = (int(a.min()), int(a.max())) if a.size else (0, 0)
+        valid = np.zeros(256, bool)
+        valid[[i for i in (*range(self.lm.n), *self.ignore) if 0 <= i < 256]] = True
+        if lo < 0 or hi > 255:
+            bad = lo if lo < 0 else hi
+        else:
+            a = a.astype(np.uint8, copy=False)
+            # a lookup per voxel, no sort (a 0.1 m grid has 51 M voxels)
+            ok = valid[a]
+            bad = None if ok.all() else int(a.reshape(-1)[np.argmin(ok.reshape(-1))])
+        if bad is not None:
+            raise ViewerError(f"{path}: label {bad} is not an id of --map {self.lm.name} (0..{self.lm.n - 1}, "
+                              f"or --ignore); pick the map the tree is in")
+        return a
+
+    def masks(self, k: int, view: FrameView) -> FrameView:
+        return view
+
+
+def prepare_pair(p_sem: np.ndarray, g_sem: np.ndarray, g_inst: np.ndarray | None, masks: dict, free: int | None,
+                 ignore: tuple[int, ...], grid: dict, budget: int, t0: float | None = None) -> FrameView:
+    """A prediction against its ground truth, both dense uint8 label grids of one shape: the surface of
+    the voxels either side occupies (any label but ``free`` and ``ignore``: void ground truth and
+    an abstaining prediction are free), their outcome, the class shown, the ground truth's masks
+    (observed where it has none), placed by ``grid`` (origin, voxel size)."""
+    t0 = time.perf_counter() if t0 is None else t0
+    shape = g_sem.shape
+    void = np.zeros(256, bool)
+    void[[i for i in (*ignore, *(() if free is None else (free,))) if 0 <= i < 256]] = True
+    g_sem, p_sem = g_sem.reshape(-1), p_sem.reshape(-1)
+    # occupied on either side by one lookup per voxel, then each side's label at those voxels
+    g_occ, p_occ = ~void[g_sem], ~void[p_sem]
+    flat = np.flatnonzero(g_occ | p_occ)
+    g, p, g_on, p_on = g_sem[flat], p_sem[flat], g_occ[flat], p_occ[flat]
+    # the outcome codes of OUTCOMES, and the class shown: the prediction's, or the truth's it missed
+    outcome = np.where(~g_on, 1, np.where(~p_on, 2, np.where(g == p, 0, 3))).astype(np.uint8)
+    shown = np.where(p_on, p, g).astype(np.uint8)
+    ijk = np.column_stack(np.unravel_index(flat, shape)).astype(np.int64)
+    surf = np.flatnonzero(surface_voxels(ijk, shape))
+    ijk, outcome, sem = ijk[surf], outcome[surf], shown[surf]
+    inst = np.zeros(len(ijk), np.uint32) if g_inst is None else g_inst[tuple(ijk.T)].astype(np.uint32)
+    mcam, mlid = (masks[n][tuple(ijk.T)].astype(bool) if n in masks and masks[n].shape == shape
+                  else np.ones(len(ijk), bool) for n in ("mask_camera", "mask_lidar"))
+    keep, factor = level_of_detail(ijk, budget)
+    origin, voxel_size = np.asarray(grid["origin"], np.float64), float(grid["voxel_size"])
+    view = FrameView(centres=voxel_centres(ijk[keep], origin, voxel_size), semantic=sem[keep], instance=inst[keep],
+                     mask_camera=mcam[keep], mask_lidar=mlid[keep], outcome=outcome[keep],
+                     point_size=voxel_size * factor, occupied=len(flat), ijk=ijk[keep])
+    if grid.get("frame") == "ego":
+        view.ego = np.eye(4)
+    view.seconds = time.perf_counter() - t0
+    return view
+
+
+class Viewer:
+    """The live scene of one sequence or tree on a viser server: a timeline, per-class toggles,
+    colour modes, masks and overlays (GUI on the right), one scene node per class."""
+
+    def __init__(self, server, source, budget: int, first: int = 0, prepared: dict | None = None) -> None:
+        self.server, self.source, self.budget = server, source, budget
+        self.labels: Labels = source.labels
+        self.cache: dict[int, FrameView] = dict(prepared or {})  # frames prepared already, by index
+        self.nodes: dict[int, object] = {}
         self.overlays: list = []
         gui = server.gui
-        seq = samples.samples[0][0]
-        gui.add_markdown(f"**{seq}** at {samples.voxel_size:g} m" + (" against a prediction" if preds else ""))
+        preds = source.has_pred
+        gui.add_markdown(source.title)
         if preds:
             gui.add_markdown(legend_text(True))
-        self.frame = gui.add_slider("frame", min=0, max=max(len(self.frames) - 1, 0), step=1,
-                                    initial_value=min(max(first, 0), max(len(self.frames) - 1, 0)))
+        last = max(len(source) - 1, 0)
+        self.frame = gui.add_slider("frame", min=0, max=last, step=1, initial_value=min(max(first, 0), last))
         self.mode = gui.add_dropdown("colour", COLOUR_MODES if preds else COLOUR_MODES[:2],
                                      initial_value="outcome" if preds else "semantic")
         self.mask = gui.add_dropdown("mask", ("camera", "lidar"), initial_value="camera")
@@ -374,9 +560,7 @@ class Viewer:
 
     def view(self, k: int) -> FrameView:
         if k not in self.cache:
-            frame = self.frames[k]
-            self.cache[k] = prepare_frame(self.samples, self.indices[k], None if self.preds is None else self.preds[frame],
-                                          self.budget)
+            self.cache[k] = self.source.prepare(k, self.budget)
             while len(self.cache) > 8:
                 self.cache.pop(next(iter(self.cache)))
         return self.cache[k]
@@ -384,57 +568,62 @@ class Viewer:
     def _class_box(self, cid: int):
         if cid not in self.class_boxes:
             with self.class_folder:
-                box = self.server.gui.add_checkbox(taxonomy.by_id(cid).name, True)
+                box = self.server.gui.add_checkbox(self.labels.name(cid), True)
             box.on_update(lambda _, c=cid: self._toggle(c))
             self.class_boxes[cid] = box
         return self.class_boxes[cid]
 
     def _toggle(self, cid: int) -> None:
-        node = self.nodes.get(taxonomy.by_id(cid).name)
+        node = self.nodes.get(cid)
         if node is not None:
             node.visible = bool(self.class_boxes[cid].value)
 
     def draw(self) -> None:
-        """(Re)draws the current frame with the current settings."""
+        """(Re)draws the current frame with the current settings; a frame that cannot be read
+        (a prediction of another shape...) says why in the status line."""
         k = int(self.frame.value)
-        v = self.view(k)
+        try:
+            v = self.view(k)
+        except ViewerError as exc:
+            self.status.content = f"frame {self.source.names[k]}: error: {exc}"
+            return
         if self.unobserved.value != "show":
-            load_masks(self.samples, self.indices[k], v)
+            self.source.masks(k, v)
         draw_frame(self.server.scene, v, self.mode.value, self.unobserved.value, self.mask.value, self.nodes,
                    self.overlays, flow=self.show_flow.value, boxes=self.show_boxes.value, lidar=self.show_lidar.value,
                    cameras=self.show_cameras.value, image=self.image.value,
-                   visible={c: bool(b.value) for c, b in self.class_boxes.items()})
+                   visible={c: bool(b.value) for c, b in self.class_boxes.items()}, labels=self.labels)
         for cid in np.unique(v.semantic):
             self._class_box(int(cid))
-        for cid, box in self.class_boxes.items():
+        for cid in self.class_boxes:
             self._toggle(cid)
-        self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value)
-        lod = "" if v.point_size <= self.samples.voxel_size * 1.01 else \
+        self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value, self.labels)
+        lod = "" if v.point_size <= self.source.voxel_size * 1.01 else \
             f", level of detail {v.point_size:g} m (budget {self.budget:,})"
-        self.status.content = (f"frame {self.frames[int(self.frame.value)]}: {len(v.centres):,} surface voxels of "
+        self.status.content = (f"frame {self.source.names[k]}: {len(v.centres):,} surface voxels of "
                                f"{v.occupied:,}{lod}; prepared in {v.seconds:.2f} s")
 
 
 def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes: dict, overlays: list, *,
                flow: bool = True, boxes: bool = True, lidar: bool = False, cameras: bool = True, image: str = "rgb",
-               visible: dict | None = None) -> None:
-    """Puts frame ``v`` into a viser scene: one point cloud per class (``nodes``, by class name:
+               visible: dict | None = None, labels: Labels = ROOT_LABELS) -> None:
+    """Puts frame ``v`` into a viser scene: one point cloud per class (``nodes``, by label id:
     replaced, or removed when the class is absent) and the overlays (removed and drawn again)."""
-    col, shown = voxel_colours(v, mode, unobserved, mask)
+    col, shown = voxel_colours(v, mode, unobserved, mask, labels)
     present = set()
     for cid in np.unique(v.semantic):
-        name = taxonomy.by_id(int(cid)).name
+        cid = int(cid)
         sel = (v.semantic == cid) & shown
         if not sel.any():
             continue
-        present.add(name)
-        if name in nodes:
-            nodes[name].remove()
-        nodes[name] = scene.add_point_cloud(f"/voxels/{name}", v.centres[sel], col[sel], point_size=v.point_size,
-                                            point_shape="square", point_shading="flat", precision="float32",
-                                            visible=(visible or {}).get(int(cid), True))
-    for name in [n for n in nodes if n not in present]:
-        nodes.pop(name).remove()
+        present.add(cid)
+        if cid in nodes:
+            nodes[cid].remove()
+        nodes[cid] = scene.add_point_cloud(f"/voxels/{labels.name(cid).replace(' ', '_')}", v.centres[sel], col[sel],
+                                           point_size=v.point_size, point_shape="square", point_shading="flat",
+                                           precision="float32", visible=(visible or {}).get(cid, True))
+    for cid in [c for c in nodes if c not in present]:
+        nodes.pop(cid).remove()
     for handle in overlays:
         handle.remove()
     overlays.clear()
@@ -461,17 +650,15 @@ def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes
                                                      position=tuple(cam["position"]), color=(40, 40, 40)))
 
 
-def class_legend_text(class_ids, mode: str) -> str:
+def class_legend_text(class_ids, mode: str, labels: Labels = ROOT_LABELS) -> str:
     """The classes' colour legend (Markdown) above their toggles: each class's swatch in the label
-    table's palette when voxels are coloured by class (``semantic``), the stuff classes' swatches
+    space's colours when voxels are coloured by class (``semantic``), the stuff classes' swatches
     when things are coloured by instance, nothing in ``outcome`` mode (its legend is at the top)."""
     if mode == "outcome":
         return ""
-    pal = taxonomy.palette()
-    things = set(taxonomy.thing_ids())
-    shown = [c for c in class_ids if c and (mode == "semantic" or c not in things)]
-    swatches = ", ".join(f"<span style='color:rgb{tuple(int(x) for x in pal[c])}'>&#9632;</span> "
-                         f"{taxonomy.by_id(c).name}" for c in shown)
+    shown = [c for c in class_ids if (c or labels is not ROOT_LABELS) and (mode == "semantic" or c not in labels.things)]
+    swatches = ", ".join(f"<span style='color:rgb{tuple(int(x) for x in labels.colours[c])}'>&#9632;</span> "
+                         f"{labels.name(c)}" for c in shown)
     if mode == "semantic":
         return f"class colours: {swatches}"
     return f"things: a colour per instance; stuff: {swatches}" if swatches else "things: a colour per instance"
@@ -509,20 +696,19 @@ def stop_server(server) -> None:
         server.stop()
 
 
-def save_html(out: Path, samples: FrameSamples, preds: dict[int, Path] | None, budget: int, frames: list[int],
-              seconds_per_frame: float = 1.0) -> int:
-    """Writes the frames ``frames`` (sample indices) as one offline HTML page (viser's embedded
-    client and the scene, played back frame after frame); returns its size in bytes."""
+def save_html(out: Path, source, budget: int, seconds_per_frame: float = 1.0) -> int:
+    """Writes the frames of ``source`` (:class:`RootFrames` or :class:`PairFrames`) as one offline
+    HTML page (viser's embedded client and the scene, played back frame after frame); returns its
+    size in bytes."""
     server = start_server()
     try:
         nodes: dict = {}
         overlays: list = []
-        mode = "outcome" if preds else "semantic"
+        mode = "outcome" if source.has_pred else "semantic"
         serializer = None
-        for k in frames:
-            frame = samples.samples[k][1]
-            v = prepare_frame(samples, k, None if preds is None else preds[frame], budget)
-            draw_frame(server.scene, v, mode, "show", "camera", nodes, overlays)
+        for k in range(len(source)):
+            v = source.prepare(k, budget)
+            draw_frame(server.scene, v, mode, "show", "camera", nodes, overlays, labels=source.labels)
             if serializer is None:
                 serializer = server.get_scene_serializer()
             serializer.insert_sleep(seconds_per_frame)

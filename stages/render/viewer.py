@@ -8,10 +8,12 @@ y left, z up), ``centre = origin + (ijk + 0.5) * voxel_size``; cameras in the Op
 and units").
 
 * :func:`surface_voxels`: the occupied voxels with a free face (what the eye can see of a solid
-  grid), and :func:`level_of_detail`: one voxel per ``factor**3`` block until a point budget holds,
+  grid), :func:`block_surface`: the same of one stored column block given its neighbours' facing
+  planes (a frame read chunk by chunk), and :func:`level_of_detail`: one voxel per ``factor**3`` block until a point budget holds,
   so a 0.05 m frame stays interactive in a browser;
 * :func:`class_colours` / :func:`ghost`: colours from the one label table (instances hashed as
   every other picture: :mod:`carlaocc.stages.render.colours`), unobserved voxels washed out;
+  :func:`label_colours`: another label space's ids (Occ3D...) in the colours of their classes;
 * :func:`prediction_outcome`: every voxel occupied in the ground truth or a prediction as true
   positive, false positive, false negative or wrong class (:data:`OUTCOMES`);
 * :func:`flow_arrows`, :func:`box_edges`, :func:`camera_frustum`: the overlays.
@@ -26,8 +28,9 @@ from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import quaternion_wxyz
 from carlaocc.stages.render.colours import voxel_colours
 
-__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "block_surface", "box_edges", "camera_frustum", "class_colours", "flow_arrows", "ghost",
-           "level_of_detail", "linear_index", "prediction_outcome", "surface_voxels", "voxel_centres"]
+__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "block_surface", "box_edges", "camera_frustum", "class_colours",
+           "flow_arrows", "ghost", "label_colours", "level_of_detail", "linear_index", "prediction_outcome",
+           "surface_voxels", "voxel_centres"]
 
 OUTCOMES = ("true positive", "false positive", "false negative", "wrong class")
 """The outcome of a voxel against the ground truth, by code 0..3: same class in both; occupied only
@@ -161,16 +164,39 @@ def voxel_centres(ijk: np.ndarray, origin, voxel_size: float) -> np.ndarray:
     return (np.asarray(origin, np.float64) + (np.asarray(ijk, np.float64) + 0.5) * float(voxel_size)).astype(np.float32)
 
 
-def class_colours(semantic: np.ndarray, instance: np.ndarray | None = None, mode: str = "semantic") -> np.ndarray:
-    """uint8 RGB (N, 3): ``semantic`` the class's colour of the label table's palette; ``instance``
-    things (nonzero ``instance``) by their hashed instance colour, stuff by class."""
+def class_colours(semantic: np.ndarray, instance: np.ndarray | None = None, mode: str = "semantic",
+                  colours: np.ndarray | None = None) -> np.ndarray:
+    """uint8 RGB (N, 3): ``semantic`` the class's colour (``colours`` (256, 3) by label id, default
+    the label table's palette of CarlaOcc ids); ``instance`` things (nonzero ``instance``) by their
+    hashed instance colour, stuff by class."""
     semantic = np.asarray(semantic, np.uint8)
+    pal = _PALETTE if colours is None else np.asarray(colours, np.uint8)
     if mode == "semantic" or instance is None:
-        return _PALETTE[semantic]
+        return pal[semantic]
     if mode != "instance":
         raise ValueError(f"colour mode {mode!r}: semantic or instance")
     z = np.zeros(len(semantic))
-    return np.round(voxel_colours(semantic, np.asarray(instance, np.uint32), z, "instance", (0.0, 1.0))).astype(np.uint8)
+    instance = np.asarray(instance, np.uint32)
+    out = pal[semantic].copy()
+    things = instance != 0
+    out[things] = np.round(voxel_colours(semantic[things], instance[things], z[things], "instance", (0.0, 1.0))).astype(np.uint8)
+    return out
+
+
+def label_colours(from_carlaocc) -> np.ndarray:
+    """uint8 (256, 3) display colour of each id of another label space, given the id of every
+    CarlaOcc class there (``from_carlaocc[k]``, as :class:`carlaocc.stages.evaluation.LabelMap`
+    holds it): the palette colour of the first CarlaOcc class (by id, None excluded) mapped to
+    it, so Occ3D's ``car`` is drawn as Car and ``driveable_surface`` as Road; ids no class maps
+    to are grey."""
+    out = np.full((256, 3), 128, np.uint8)
+    seen = set()
+    for k, t in enumerate(from_carlaocc):
+        if k == 0 or t in seen or not 0 <= t < 255:  # 255: ignored, not a label
+            continue
+        seen.add(t)
+        out[t] = _PALETTE[k]
+    return out
 
 
 def ghost(colours: np.ndarray, observed: np.ndarray, strength: float = 0.75) -> np.ndarray:
