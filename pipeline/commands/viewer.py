@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -529,6 +530,7 @@ class Viewer:
         self.server, self.source, self.budget = server, source, budget
         self.labels: Labels = source.labels
         self.cache: dict[int, FrameView] = dict(prepared or {})  # frames prepared already, by index
+        self.lock = threading.Lock()  # guards the cache: GUI callbacks and the prefetch run in other threads
         self.nodes: dict[int, object] = {}
         self.overlays: list = []
         gui = server.gui
@@ -559,11 +561,28 @@ class Viewer:
         self.draw()
 
     def view(self, k: int) -> FrameView:
-        if k not in self.cache:
-            self.cache[k] = self.source.prepare(k, self.budget)
-            while len(self.cache) > 8:
-                self.cache.pop(next(iter(self.cache)))
-        return self.cache[k]
+        """Frame ``k``, prepared once and kept (the last 8)."""
+        with self.lock:
+            v = self.cache.get(k)
+        if v is None:
+            # prepared outside the lock: a redraw of a cached frame never waits for a prefetch
+            v = self.source.prepare(k, self.budget)
+            with self.lock:
+                v = self.cache.setdefault(k, v)
+                while len(self.cache) > 8:
+                    self.cache.pop(next(iter(self.cache)))
+        return v
+
+    def prefetch(self, k: int) -> None:
+        """Prepares frame ``k`` in the background (the next frame while the current one is looked
+        at), so stepping forward along the timeline finds it ready."""
+        if 0 <= k < len(self.source) and k not in self.cache:
+            def work() -> None:
+                try:
+                    self.view(k)
+                except ViewerError:
+                    pass  # said in the status line when that frame is shown
+            threading.Thread(target=work, daemon=True).start()
 
     def _class_box(self, cid: int):
         if cid not in self.class_boxes:
@@ -602,6 +621,7 @@ class Viewer:
             f", level of detail {v.point_size:g} m (budget {self.budget:,})"
         self.status.content = (f"frame {self.source.names[k]}: {len(v.centres):,} surface voxels of "
                                f"{v.occupied:,}{lod}; prepared in {v.seconds:.2f} s")
+        self.prefetch(k + 1)
 
 
 def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes: dict, overlays: list, *,

@@ -99,20 +99,28 @@ def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
 def _block_surface_kernel(sem, x_lo, x_hi, y_lo, y_hi, occupied):  # pragma: no cover - jitted
     bx, by, bz = sem.shape
     out = np.empty(occupied, np.int64)  # at most every occupied voxel is on the surface
+    col = np.empty(bz, np.uint8)
     n = 0
     for i in range(bx):
         for j in range(by):
+            # the column and its four side neighbours, each contiguous along z (a neighbour
+            # across the block's x / y faces comes from the halo planes)
+            c = sem[i, j]
+            xm = x_lo[j] if i == 0 else sem[i - 1, j]
+            xp = x_hi[j] if i == bx - 1 else sem[i + 1, j]
+            ym = y_lo[i] if j == 0 else sem[i, j - 1]
+            yp = y_hi[i] if j == by - 1 else sem[i, j + 1]
+            # occupied with a free side neighbour: branch-free, so the loop vectorises
+            for k in range(bz):
+                col[k] = (c[k] != 0) & ((xm[k] == 0) | (xp[k] == 0) | (ym[k] == 0) | (yp[k] == 0))
+            # or a free neighbour above or below; the grid's top and bottom faces are free
+            for k in range(1, bz - 1):
+                col[k] |= (c[k] != 0) & ((c[k - 1] == 0) | (c[k + 1] == 0))
+            col[0] = c[0] != 0
+            col[bz - 1] = c[bz - 1] != 0
             base = (i * by + j) * bz
             for k in range(bz):
-                if sem[i, j, k] == 0:
-                    continue
-                # a free face: the grid's top or bottom (z is never cut into blocks), a free
-                # neighbour inside the block, or a free halo voxel across its x / y faces
-                if (k == 0 or k == bz - 1 or sem[i, j, k - 1] == 0 or sem[i, j, k + 1] == 0
-                        or (x_lo[j, k] == 0 if i == 0 else sem[i - 1, j, k] == 0)
-                        or (x_hi[j, k] == 0 if i == bx - 1 else sem[i + 1, j, k] == 0)
-                        or (y_lo[i, k] == 0 if j == 0 else sem[i, j - 1, k] == 0)
-                        or (y_hi[i, k] == 0 if j == by - 1 else sem[i, j + 1, k] == 0)):
+                if col[k]:
                     out[n] = base + k
                     n += 1
     return out[:n]
@@ -139,10 +147,26 @@ def block_surface(block: np.ndarray, x_lo=None, x_hi=None, y_lo=None, y_hi=None,
     return _block_surface_kernel(block, *(np.asarray(p, block.dtype) for p in planes), int(np.count_nonzero(block)) if occupied is None else int(occupied))
 
 
+@njit(cache=True)
+def _first_per_block(ijk, factor, dims):  # pragma: no cover - jitted
+    # one flag per coarse block; a voxel is kept when its block is not flagged yet
+    seen = np.zeros(dims[0] * dims[1] * dims[2], np.bool_)
+    keep = np.empty(len(ijk), np.int64)
+    n = 0
+    for r in range(len(ijk)):
+        key = ((ijk[r, 0] // factor) * dims[1] + ijk[r, 1] // factor) * dims[2] + ijk[r, 2] // factor
+        if not seen[key]:
+            seen[key] = True
+            keep[n] = r
+            n += 1
+    return keep[:n]
+
+
 def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
-    """``(keep, factor)``: indices into ``ijk`` of one voxel per ``factor``-cube block (the first
-    in the given order; ``factor`` the smallest power of two >= 1 leaving at most ``budget``
-    voxels) and that factor. Drawn ``factor`` times larger, the kept voxels cover the blocks."""
+    """``(keep, factor)``: indices into ``ijk`` (N, 3 non-negative voxel indices) of one voxel per
+    ``factor``-cube block (the first in the given order; ``factor`` the smallest power of two >= 1
+    leaving at most ``budget`` voxels), ascending, and that factor. Drawn ``factor`` times larger,
+    the kept voxels cover the blocks."""
     ijk = np.asarray(ijk, np.int64)
     if budget < 1:
         raise ValueError(f"budget {budget}: at least 1 voxel")
@@ -153,9 +177,8 @@ def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     top = ijk.max(axis=0)
     while len(keep) > budget:
         factor *= 2
-        # the block of every voxel as one flat index, then the first voxel of each block
-        _, first = np.unique(linear_index(ijk // factor, top // factor + 1), return_index=True)
-        keep = np.sort(first)
+        # the first voxel of each block, in one pass over a flag per block (no sort)
+        keep = _first_per_block(ijk, factor, top // factor + 1)
     return keep, factor
 
 

@@ -44,8 +44,33 @@ def test_save_writes_one_offline_page(default_01, tmp_path):
     assert f"python -m webbrowser -t {out.resolve().as_uri()}" in r.output
     # the scene is inside the page, not fetched: no script or stylesheet from elsewhere
     assert "<script src=\"http" not in html and "<link rel=\"stylesheet\" href=\"http" not in html
+    # the recording inside: the scene, and the first view set where the live viewer sets it
+    # (behind and above the ego, looking ahead), not viser's default
+    messages = _recording(html)
+    from carlaocc.pipeline.commands.viewer import INITIAL_CAMERA
+
+    by_type = {}
+    for _, m in messages:
+        by_type.setdefault(m["type"], []).append(m)
+    assert [m["position"] for m in by_type["SetCameraPositionMessage"]] == [list(INITIAL_CAMERA[0])]
+    assert [m["look_at"] for m in by_type["SetCameraLookAtMessage"]] == [list(INITIAL_CAMERA[1])]
+    assert any(m["name"] == "/voxels/Road" for m in by_type["PointCloudMessage"])
     bad = CliRunner().invoke(app, ["view", "--root", default_01.url, "--save", str(tmp_path / "x.png")])
     assert bad.exit_code == 2 and "--save" in bad.output and not (tmp_path / "x.png").exists()
+
+
+def _recording(html: str) -> list:
+    """The messages of the viser recording a saved page embeds (base64 of viser's zstd framing
+    around msgpack: an 8-byte size, then the payload whose first 8 bytes size the metadata)."""
+    import base64
+
+    import msgspec
+    import zstandard
+
+    raw = base64.b64decode(html.split('window.__VISER_EMBED_DATA__="', 1)[1].split('"', 1)[0])
+    inner = zstandard.ZstdDecompressor().decompress(raw[8:], max_output_size=int.from_bytes(raw[:8], "little"))
+    n = int.from_bytes(inner[:8], "little")
+    return msgspec.msgpack.decode(inner[8:8 + n])["messages"]
 
 
 def _dense(s):
