@@ -140,6 +140,19 @@ def test_the_surface_read_chunk_by_chunk_is_the_whole_frame_s(default_01):
     assert np.array_equal(v.mask_camera, full["occ_mask_camera"][on])
     assert np.array_equal(v.mask_lidar, full["occ_mask_lidar"][on])
     assert not v.mask_camera.all()  # some surface is unobserved: the comparison means something
+    # the live viewer reads them when "unobserved" leaves "show", and ghosts what they mark
+    from carlaocc.pipeline.commands.viewer import RootFrames, Viewer, start_server, stop_server
+
+    server = start_server()
+    try:
+        viewer = Viewer(server, RootFrames(samples), 10**9, prepared={0: prepare_frame(samples, 0, None, 10**9)})
+        assert viewer.view(0).mask_camera is None
+        viewer.unobserved.value = "ghost"
+        viewer.draw()
+        assert np.array_equal(viewer.view(0).mask_camera, full["occ_mask_camera"][on])
+        assert "error" not in viewer.status.content
+    finally:
+        stop_server(server)
 
 
 def test_prediction_refusals(default_01, tmp_path):
