@@ -3,7 +3,7 @@ served on loopback and photographed in headless Chromium (tools/headless_chromiu
 
     python tools/make_viewer_figure.py --root R [--voxel-size 0.2] [--pred DIR] [--colour semantic]
                                        [--out docs/viewer.png]
-    python tools/make_viewer_figure.py --pred P --gt G [--map occ3d] [--out docs/viewer_pred.png]
+    python tools/make_viewer_figure.py --pred P --gt G [--map occ3d] [--root R] [--out docs/viewer_pred.png]
 
 docs/viewer.png: ``carlaocc run --root R --voxel-size 0.2 --limit-frames 3 --sequences
 town00_high_seq000``, frame 0, classes; docs/viewer_pred.png: ``--pred`` a tree made from the
@@ -45,6 +45,8 @@ def main() -> None:
         sys.exit("error: no Chromium on PATH: sh tools/setup_system.sh --test")
     if args.gt is not None:
         source = pair_frames(args.pred, args.gt, args.map)
+        if args.root:
+            source = source.with_root(args.root)
     else:
         samples = open_frames(args.root, None, args.voxel_size)
         preds = None

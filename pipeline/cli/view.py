@@ -40,11 +40,12 @@ def _frame_range(text: Optional[str], n: int) -> list[int]:
 
 @app.command("view")
 def view(
+    ctx: typer.Context,
     root: RootOpt = "data",
     seq: Annotated[Optional[str], typer.Option("--seq", help="sequence id (default: the root's first)")] = None,
     voxel_size: Annotated[Optional[float], typer.Option("--voxel-size", "--res", help="a built voxel size, m (default: the finest built)")] = None,
     pred: Annotated[Optional[Path], typer.Option("--pred", help="predictions: voxels coloured true positive / false positive / false negative / wrong class. Without --gt: a tree <seq>/<frame:06d>.npz on the root's grid (carlaocc-npz's layout, or npz with 'semantics' in CarlaOcc ids); with --gt: any prediction file or tree carlaocc eval ssc reads")] = None,
-    gt: Annotated[Optional[Path], typer.Option("--gt", help="the ground-truth file or tree of --pred, paired as carlaocc eval ssc pairs them (by relative path without suffix), e.g. an export of carlaocc export; each frame drawn on the grid (and in the frame) of the export's grid.json; no root needed")] = None,
+    gt: Annotated[Optional[Path], typer.Option("--gt", help="the ground-truth file or tree of --pred, paired as carlaocc eval ssc pairs them (by relative path without suffix), e.g. an export of carlaocc export; each frame drawn on the grid (and in the frame) of the export's grid.json; no root needed (given --root: its cameras, boxes and LiDAR where the paths name its sequence and frame)")] = None,
     map_name: Annotated[str, typer.Option("--map", help="with --gt: the label space of both trees, as carlaocc eval ssc's --map: carlaocc | benchmark | occ3d | sscbench | semantickitti")] = "carlaocc",
     table: Annotated[str, typer.Option("--taxonomy", help="with --gt: the label table of CarlaOcc ids (release | carlaocc-v1), as carlaocc eval's")] = "release",
     ignore: Annotated[str, typer.Option("--ignore", help="with --gt: comma-separated label ids drawn as free (ground truth: void; prediction: abstain), as carlaocc eval's")] = "255",
@@ -79,6 +80,11 @@ def view(
                 fail(f"--ignore {ignore!r}: comma-separated integer label ids")
             source = pair_frames(pred, gt, map_name, table, ignored)
             source = source.select(_frame_range(frames, len(source)))
+            # (compared by name: typer's click is its own copy, not the click package)
+            if getattr(ctx.get_parameter_source("root"), "name", "DEFAULT") != "DEFAULT":
+                # the root's cameras, boxes and LiDAR on the frames the trees' paths name
+                open_store(root, writable=False)
+                source = source.with_root(root)
             what = f"{gt} against {pred} ({map_name} labels)"
         else:
             open_store(root, writable=False)

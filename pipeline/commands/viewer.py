@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -306,24 +307,7 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
                      mask_camera=None if mcam is None else mcam[keep], mask_lidar=None if mlid is None else mlid[keep],
                      outcome=None if outcome is None else outcome[keep], point_size=voxel_size * factor,
                      occupied=occupied, arrows=arrows, ijk=ijk[keep])
-    boxes = boxes_in_frame(samples.actor_rows(index), np.linalg.inv(s["lidar_pose"]))
-    view.boxes = box_edges(boxes["box_pose"], boxes["boxes"][:, 3:6])
-    view.box_labels = [(f"{taxonomy.by_id(int(c)).name} #{int(i)}",
-                        boxes["boxes"][k, :3] + np.array([0, 0, boxes["boxes"][k, 5] / 2 + 0.3]))
-                       for k, (i, c) in enumerate(zip(boxes["box_instance"], boxes["box_semantic"]))]
-    if "points" in s:
-        view.points, view.points_semantic = s["points"], s["points_semantic"]
-    view.ego = np.linalg.inv(s["lidar_to_ego"])
-    for c, name in enumerate(s.get("camera_names", [])):
-        rgb = s["images"][c]
-        h, w = rgb.shape[:2]
-        cam = camera_frustum(s["cam_intrinsics"][c], s["cam_to_lidar"][c], w, h)
-        # thumbnails first, then coloured: only the pixels sent are coloured
-        depth, semantic = _thumbnail(s["cam_depth"][c]), _thumbnail(s["cam_semantic"][c])
-        cam.update(name=name, rgb=_thumbnail(rgb),
-                   semantic=class_colours(semantic.reshape(-1)).reshape(*semantic.shape, 3),
-                   depth=np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8))
-        view.cameras.append(cam)
+    add_overlays(view, samples, index, s, "lidar")
     view.seconds = time.perf_counter() - t0
     return view
 
@@ -344,6 +328,57 @@ class Labels:
 ROOT_LABELS = Labels(tuple(c.name for c in taxonomy.label_table().classes), np.asarray(
     taxonomy.palette() + ((0, 0, 0),) * (256 - len(taxonomy.palette())), np.uint8), frozenset(taxonomy.thing_ids()))
 """A root's labels: the CarlaOcc classes in the label table's palette."""
+
+
+def add_overlays(view: FrameView, samples: FrameSamples, index: int, s: dict, frame: str = "lidar") -> FrameView:
+    """Puts the root's overlays of sample ``index`` (``s`` = ``samples[index]``) into ``view``, in
+    ``frame`` (``"lidar"``, the root's grids; ``"ego"``, Occ3D's): the actor boxes with their class
+    and id, the LiDAR points, the ego's axes, the cameras with their images."""
+    if frame not in ("lidar", "ego"):
+        raise ValueError(f"frame {frame!r}: lidar or ego")
+    lidar_to_frame = np.eye(4) if frame == "lidar" else s["lidar_to_ego"]
+    world_to_frame = np.linalg.inv(s["lidar_pose"] if frame == "lidar" else s["ego_pose"])
+    boxes = boxes_in_frame(samples.actor_rows(index), world_to_frame)
+    view.boxes = box_edges(boxes["box_pose"], boxes["boxes"][:, 3:6])
+    view.box_labels = [(f"{taxonomy.by_id(int(c)).name} #{int(i)}",
+                        boxes["boxes"][k, :3] + np.array([0, 0, boxes["boxes"][k, 5] / 2 + 0.3]))
+                       for k, (i, c) in enumerate(zip(boxes["box_instance"], boxes["box_semantic"]))]
+    if "points" in s:
+        pts = s["points"].astype(np.float64) @ lidar_to_frame[:3, :3].T + lidar_to_frame[:3, 3]
+        view.points, view.points_semantic = pts.astype(np.float32), s["points_semantic"]
+    view.ego = lidar_to_frame @ np.linalg.inv(s["lidar_to_ego"])  # ego-to-frame
+    view.cameras = []
+    for c, name in enumerate(s.get("camera_names", [])):
+        rgb = s["images"][c]
+        h, w = rgb.shape[:2]
+        cam = camera_frustum(s["cam_intrinsics"][c], lidar_to_frame @ s["cam_to_lidar"][c], w, h)
+        # thumbnails first, then coloured: only the pixels sent are coloured
+        depth, semantic = _thumbnail(s["cam_depth"][c]), _thumbnail(s["cam_semantic"][c])
+        cam.update(name=name, rgb=_thumbnail(rgb),
+                   semantic=class_colours(semantic.reshape(-1)).reshape(*semantic.shape, 3),
+                   depth=np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8))
+        view.cameras.append(cam)
+    return view
+
+
+def sample_of_key(key: str, samples: FrameSamples) -> int | None:
+    """The sample of ``samples`` a paired file's key names (``gts/<seq>/<seq>_<frame:06d>/labels``
+    of an Occ3D tree, ``<seq>/<frame:06d>`` of a carlaocc-npz one): a path component that is one
+    of the root's sequence ids, and the frame the last component after it ending in digits
+    gives; None when the key names none (the release layout renames sequences)."""
+    parts = key.split("/")
+    seqs = {seq for seq, _ in samples.samples}
+    at = next((k for k, p in enumerate(parts) if p in seqs), None)
+    if at is None:
+        return None
+    for p in reversed(parts[at + 1:]):
+        m = re.search(r"(\d+)$", p)
+        if m:
+            try:
+                return samples.samples.index((parts[at], int(m.group(1))))
+            except ValueError:
+                return None
+    return None
 
 
 def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str,
@@ -415,8 +450,9 @@ class PairFrames:
     """Paired prediction / ground-truth files (``pairs``: key, prediction, ground truth) in the
     label space ``lm``; ``gt`` the ground-truth tree, where ``grid.json`` is looked for."""
 
-    def __init__(self, pairs: list, lm, ignore: tuple[int, ...], gt: Path, indices: list[int] | None = None) -> None:
-        self.pairs, self.lm, self.ignore, self.gt = pairs, lm, ignore, Path(gt)
+    def __init__(self, pairs: list, lm, ignore: tuple[int, ...], gt: Path, indices: list[int] | None = None,
+                 root: FrameSamples | None = None) -> None:
+        self.pairs, self.lm, self.ignore, self.gt, self.root = pairs, lm, ignore, Path(gt), root
         self.indices = list(range(len(pairs))) if indices is None else list(indices)
         self.names = [pairs[k][0] for k in self.indices]
         colours = label_colours(lm.from_carlaocc)
@@ -430,7 +466,21 @@ class PairFrames:
         return len(self.indices)
 
     def select(self, indices: list[int]) -> "PairFrames":
-        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, indices)
+        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, indices, self.root)
+
+    def with_root(self, root: str) -> "PairFrames":
+        """The same pairs with a root's overlays (cameras, boxes, LiDAR) on the frames whose keys
+        name one of its samples, in the grid's frame (ego or LiDAR)."""
+        try:
+            samples = FrameSamples(root, occupancy="none", cameras=False, lidar=False, boxes=False)
+            cams = {seq: bool(SensorStore(Store(root)).cameras(seq)) for seq in {q for q, _ in samples.samples}}
+            lidar = bool(samples.samples) and LidarStore(Store(root)).exists(*samples.samples[0])
+            samples = FrameSamples(root, voxel_size=samples.voxel_size, occupancy="none", cameras=all(cams.values()),
+                                   camera_maps=("depth", "semantic") if all(cams.values()) else (), lidar=lidar,
+                                   boxes=True)
+        except DatasetError as exc:
+            raise ViewerError(str(exc)) from None
+        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, self.indices, samples)
 
     def grid(self, k: int) -> dict:
         """The grid of frame ``k`` from the grid.json nearest above its ground-truth file (the
@@ -463,7 +513,13 @@ class PairFrames:
         if grid["shape"] is not None and tuple(g_sem.shape) != grid["shape"]:
             raise ViewerError(f"--gt {gf}: shape {tuple(g_sem.shape)}, but its grid.json's grid is {grid['shape']}")
         p_sem, g_sem = (self._labels(a, path) for a, path in ((p_sem, pf), (g_sem, gf)))
-        return prepare_pair(p_sem, g_sem, g_inst, masks, self.lm.free, self.ignore, grid, budget, t0)
+        view = prepare_pair(p_sem, g_sem, g_inst, masks, self.lm.free, self.ignore, grid, budget, t0)
+        at = None if self.root is None or grid["frame"] not in ("ego", "lidar") else \
+            sample_of_key(self.pairs[self.indices[k]][0], self.root)
+        if at is not None:
+            add_overlays(view, self.root, at, self.root[at], grid["frame"])
+            view.seconds = time.perf_counter() - t0
+        return view
 
     def _labels(self, a: np.ndarray, path: Path) -> np.ndarray:
         """``a`` as uint8 labels, every one an id of the map or an ignored id (else the one-line

@@ -77,6 +77,24 @@ def test_occ3d_tree_on_the_ego_grid_with_its_masks(default_01, tmp_path):
     from carlaocc.schemas.taxonomy import by_name, palette
 
     assert tuple(src.labels.colours[4]) == tuple(palette()[by_name("Car").id])
+    # with the root: its boxes and cameras on the frame the path names, moved into the ego frame
+    from carlaocc.catalog.samples import FrameSamples
+    from carlaocc.pipeline.commands.viewer import RootFrames, open_frames, sample_of_key
+
+    samples = open_frames(default_01.url, SEQ, 0.1)
+    key = src.names[0]  # gts/<seq>/<seq>_<frame:06d>/labels
+    at = sample_of_key(key, samples)
+    assert samples.samples[at] == (SEQ, int(key.split("/")[2].rsplit("_", 1)[1]))
+    rooted = src.with_root(default_01.url).prepare(0, 10**9)
+    plain = RootFrames(samples).prepare(at, 10**9)  # the same frame in the LiDAR frame
+    to_ego = FrameSamples(default_01.url, occupancy="none", cameras=False, lidar=False, boxes=False,
+                          sequences=[SEQ])[at]["lidar_to_ego"]
+    assert len(plain.boxes) and len(rooted.cameras) == len(plain.cameras) > 0
+    np.testing.assert_allclose(rooted.boxes, plain.boxes @ to_ego[:3, :3].T + to_ego[:3, 3], atol=1e-4)
+    np.testing.assert_allclose([c["position"] for c in rooted.cameras],
+                               [to_ego[:3, :3] @ c["position"] + to_ego[:3, 3] for c in plain.cameras], atol=1e-9)
+    np.testing.assert_allclose(rooted.ego, np.eye(4), atol=1e-9)  # the ego at the Occ3D grid's origin
+    assert np.array_equal(rooted.outcome, v.outcome)  # the voxels are the trees' whatever the root
     # the command: one offline page of the pair
     page = tmp_path / "pair.html"
     r = CliRunner().invoke(app, ["view", "--pred", str(tmp_path / "pred"), "--gt", str(out), "--map", "occ3d",
@@ -158,6 +176,8 @@ def test_pair_refusals_are_one_line(default_01, tmp_path):
     assert "--map" in refused("--pred", str(pred), "--gt", str(out), "--map", "nuscenes")
     assert "needs --pred" in refused("--gt", str(out))
     assert "applies to --pred with --gt" in refused("--root", default_01.url, "--map", "occ3d")
+    # a --root given with --gt is read (its overlays), so a wrong one is refused
+    assert "--root" in refused("--pred", str(pred), "--gt", str(out), "--map", "occ3d", "--root", str(tmp_path / "none"))
     # a prediction of another shape
     np.savez(pred / files[0].relative_to(out), semantics=np.zeros((100, 100, 8), np.uint8))
     assert "differs from the ground truth" in refused("--pred", str(pred), "--gt", str(out), "--map", "occ3d")
