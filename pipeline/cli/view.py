@@ -100,9 +100,10 @@ def view(
             typer.echo(f"open it (no dataset needed): python -m webbrowser -t {save.resolve().as_uri()}")
             return
         first = source.prepare(0, max_points)  # a bad first frame is refused before serving
-        server = start_server(host, port)
     except ViewerError as exc:
         fail(str(exc))
+    try:
+        server = start_server(host, port)
     except OSError as exc:
         fail(f"--port {port}: cannot serve on {host}:{port} ({exc.strerror or exc}); pick another with --port, or 0")
     try:
