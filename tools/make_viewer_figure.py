@@ -3,10 +3,12 @@ served on loopback and photographed in headless Chromium (tools/headless_chromiu
 
     python tools/make_viewer_figure.py --root R [--voxel-size 0.2] [--pred DIR] [--colour semantic]
                                        [--out docs/viewer.png]
+    python tools/make_viewer_figure.py --pred P --gt G [--map occ3d] [--root R] [--out docs/viewer_pred.png]
 
 docs/viewer.png: ``carlaocc run --root R --voxel-size 0.2 --limit-frames 3 --sequences
-town00_high_seq000``, frame 0, classes; docs/viewer_pred.png: the same with ``--pred`` a tree made
-from the ground truth with errors (the tutorial docs/tutorials/viewer.md says how).
+town00_high_seq000``, frame 0, classes; docs/viewer_pred.png: ``--pred`` a tree made from the
+root's Occ3D export with errors against that export (``--gt``, ``--map occ3d``; the tutorial
+docs/tutorials/viewer.md says how).
 """
 
 from __future__ import annotations
@@ -26,26 +28,35 @@ import headless_chromium  # noqa: E402
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--root", required=True)
+    ap.add_argument("--root")
+    ap.add_argument("--gt", type=Path)
+    ap.add_argument("--map", default="carlaocc")
     ap.add_argument("--voxel-size", type=float, default=0.2)
     ap.add_argument("--pred", type=Path)
     ap.add_argument("--colour", default=None, help="semantic | instance | outcome (default: outcome with --pred)")
     ap.add_argument("--out", type=Path, default=Path("docs/viewer.png"))
     ap.add_argument("--size", default="1280x760")
     args = ap.parse_args()
-    from carlaocc.pipeline.commands.viewer import Viewer, open_frames, prediction_files, start_server, stop_server
+    from carlaocc.pipeline.commands.viewer import (RootFrames, Viewer, open_frames, pair_frames, prediction_files,
+                                                    start_server, stop_server)
 
     exe = headless_chromium.find_chromium()
     if exe is None:
         sys.exit("error: no Chromium on PATH: sh tools/setup_system.sh --test")
-    samples = open_frames(args.root, None, args.voxel_size)
-    preds = None
-    if args.pred is not None:
-        preds = prediction_files(args.pred, samples.samples[0][0], [f for _, f in samples.samples])
+    if args.gt is not None:
+        source = pair_frames(args.pred, args.gt, args.map)
+        if args.root:
+            source = source.with_root(args.root)
+    else:
+        samples = open_frames(args.root, None, args.voxel_size)
+        preds = None
+        if args.pred is not None:
+            preds = prediction_files(args.pred, samples.samples[0][0], [f for _, f in samples.samples])
+        source = RootFrames(samples, preds)
     width, height = (int(v) for v in args.size.split("x"))
     server = start_server()
     try:
-        viewer = Viewer(server, samples, preds, 400_000)
+        viewer = Viewer(server, source, 400_000)
         if args.colour:
             viewer.mode.value = args.colour
             viewer.draw()

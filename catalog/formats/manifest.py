@@ -50,3 +50,43 @@ def save_split_lists(out: Path, lines: Mapping[str, Sequence[str]]) -> int:
     for split, rows in lines.items():
         atomic_write(Path(out) / "splits" / f"{split}.txt", lambda fh, b="".join(f"{r}\n" for r in rows).encode(): fh.write(b))
     return len(lines)
+
+
+def find_grid_manifest(file: Path) -> tuple[dict, Path] | None:
+    """The ``grid.json`` nearest above ``file`` (its own folder first, then each parent: a file
+    deep in an export's tree finds the export's) and the folder holding it, or None;
+    ``ValueError`` naming a grid.json that is not a JSON object."""
+    file = Path(file).resolve()
+    for folder in [file.parent, *file.parent.parents]:
+        path = folder / "grid.json"
+        if path.is_file():
+            try:
+                doc = json.loads(path.read_text())
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise ValueError(f"{path}: unreadable ({exc})") from None
+            if not isinstance(doc, dict):
+                raise ValueError(f"{path}: not a grid.json (a JSON object)")
+            return doc, folder
+    return None
+
+
+def grid_of(manifest: Mapping, relative: Path) -> dict:
+    """``{"origin", "voxel_size", "shape", "frame"}`` of the grid a file at ``relative`` (to the
+    grid.json's folder) indexes: the manifest's one grid, or the grid whose ``folder`` is one of
+    the path's folders (an export writing a grid per folder); ``frame`` is ``"ego"`` or
+    ``"lidar"``. ``ValueError`` when no grid fits or a key is missing."""
+    grids = manifest.get("grids")
+    if grids:
+        parts = set(Path(relative).parts[:-1])
+        hit = [g for g in grids if g.get("folder") in parts]
+        if len(hit) != 1:
+            raise ValueError(f"no grid of grid.json's {[g.get('folder') for g in grids]} is a folder of {relative}")
+        g = hit[0]
+    else:
+        g = manifest
+    try:
+        frame = str(manifest["frame"]).split()[0]
+        return {"origin": tuple(float(v) for v in g["origin"]), "voxel_size": float(g["voxel_size"]),
+                "shape": tuple(int(v) for v in g["shape"]), "frame": frame}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"grid.json: no usable grid for {relative} ({type(exc).__name__}: {exc})") from None

@@ -2,11 +2,21 @@
 three.js client in the browser, usable through SSH port forwarding), and ``--save``: the same
 scene as one offline HTML page.
 
-Reading goes through :class:`carlaocc.catalog.samples.FrameSamples` (occupancy, cameras and their
-maps, LiDAR, actor boxes) and, for ``--pred``, the prediction files ``carlaocc eval ssc`` reads on
-our grid; what is drawn is prepared by the pure functions of :mod:`carlaocc.stages.render.viewer`.
-One scene node per class (``/voxels/<Class>``), so a class toggles without re-sending anything;
-a frame switch replaces the nodes' arrays.
+Two sources of frames, one viewer (:class:`Viewer`, :func:`save_html`):
+
+* :class:`RootFrames`: a root's sequence. A frame's surface is read chunk by chunk
+  (:func:`read_surface`: never the dense or the whole sparse frame), its masks only when a display
+  asks (:func:`load_masks`); cameras, their maps, LiDAR and actor boxes through
+  :class:`carlaocc.catalog.samples.FrameSamples`. With ``--pred``, prediction files on the root's
+  grid.
+* :class:`PairFrames` (``--pred P --gt G``): a prediction tree against its ground-truth tree,
+  paired and read by ``carlaocc eval ssc``'s own functions (:mod:`carlaocc.pipeline.cli.evaluate`)
+  in its label space (``--map``), each frame on the grid and in the frame of the export's
+  ``grid.json`` (:mod:`carlaocc.catalog.formats.manifest`).
+
+What is drawn is prepared by the pure functions of :mod:`carlaocc.stages.render.viewer`. One scene
+node per class (``/voxels/<Class>``), so a class toggles without re-sending anything; a frame
+switch replaces the nodes' arrays.
 """
 
 from __future__ import annotations
@@ -14,21 +24,24 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import re
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from carlaocc.catalog.occupancy import OccupancyStore
 from carlaocc.catalog.samples import DatasetError, FrameSamples
 from carlaocc.catalog.sensors import LidarStore, SensorStore
 from carlaocc.catalog.store import Store
 from carlaocc.schemas import taxonomy
 from carlaocc.stages.geometry import boxes_in_frame
 from carlaocc.stages.render.colours import height_ramp
-from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, box_edges, camera_frustum, class_colours,
-                                           flow_arrows, ghost, level_of_detail, linear_index, prediction_outcome,
-                                           surface_voxels, voxel_centres)
+from carlaocc.stages.render.viewer import (OUTCOME_COLOURS, OUTCOMES, block_surface, box_edges, camera_frustum,
+                                           class_colours, flow_arrows, ghost, label_colours, level_of_detail,
+                                           linear_index, prediction_outcome, surface_voxels, voxel_centres)
 
 DEFAULT_BUDGET = 400_000
 """Surface voxels drawn per frame before the level of detail coarsens (x2 per step)."""
@@ -51,8 +64,8 @@ class FrameView:
     centres: np.ndarray          # (N, 3) float32 m, LiDAR frame
     semantic: np.ndarray         # (N,) uint8 (the prediction's class where it has one, with --pred)
     instance: np.ndarray         # (N,) uint32
-    mask_camera: np.ndarray      # (N,) bool
-    mask_lidar: np.ndarray       # (N,) bool
+    mask_camera: np.ndarray | None   # (N,) bool; None until a display needs it (read_masks)
+    mask_lidar: np.ndarray | None    # (N,) bool
     outcome: np.ndarray | None   # (N,) uint8 codes of OUTCOMES, with --pred
     point_size: float            # m: the voxel size times the level-of-detail factor
     occupied: int                # occupied voxels of the frame (before surface and LOD)
@@ -64,11 +77,13 @@ class FrameView:
     cameras: list = field(default_factory=list)       # dicts: name, fov, aspect, wxyz, position, rgb/semantic/depth
     ego: np.ndarray | None = None                     # (4, 4) ego-to-LiDAR
     seconds: float = 0.0
+    ijk: np.ndarray | None = None                     # (N, 3) int64 grid indices of the drawn voxels
 
 
 def open_frames(root: str, seq: str | None, voxel_size: float | None) -> FrameSamples:
     """The frames of sequence ``seq`` (the root's first when None) at ``voxel_size`` (its finest
-    when None), with cameras, camera maps and LiDAR where the root has them."""
+    when None), with cameras, camera maps and LiDAR where the root has them; the occupancy is
+    read by :func:`read_surface` (only the surface), or whole for a prediction."""
     try:
         index = FrameSamples(root, voxel_size=voxel_size, occupancy="none", cameras=False, lidar=False, boxes=False,
                              sequences=None if seq is None else [seq])
@@ -81,9 +96,101 @@ def open_frames(root: str, seq: str | None, voxel_size: float | None) -> FrameSa
     store = Store(root)
     cameras = bool(SensorStore(store).cameras(seq))
     lidar = LidarStore(store).exists(seq, index.samples[0][1]) if index.samples else False
-    return FrameSamples(root, voxel_size=index.voxel_size, occupancy="sparse", cameras=cameras,
+    return FrameSamples(root, voxel_size=index.voxel_size, occupancy="none", cameras=cameras,
                         camera_maps=("depth", "semantic") if cameras else (), lidar=lidar, boxes=True,
                         sequences=[seq])
+
+
+def read_surface(occ: OccupancyStore, seq: str, grid, frame: int, flow: bool = True) -> dict:
+    """The surface voxels of one stored frame (:func:`carlaocc.stages.render.viewer.block_surface`),
+    read chunk by chunk and never assembled: ``ijk`` (N, 3) int64 in C order, ``semantic``,
+    ``instance`` and, with ``flow``, ``flow`` (m/s; zero off things) at them, and ``occupied``
+    (the frame's occupied voxel count). Reads every semantic chunk once, an instance chunk where
+    the frame has one, a flow chunk only where a surface voxel is a thing's; the masks are read
+    by :func:`read_at` when a display needs them."""
+    shape, chunks, _ = occ.layout(seq, grid, "semantic")
+    X, Y = shape[1], shape[2]
+    cx, cy = chunks[1], chunks[2]
+    nx, ny = -(-X // cx), -(-Y // cy)
+    names = {n for n in ("instance", "flow") if _has_array(occ, seq, grid, n)}
+    rows: dict[int, list] = {}
+
+    def row(ci: int) -> list:
+        # a row of semantic chunks along y, read once and kept until the next row is done
+        if ci not in rows:
+            rows[ci] = [occ.read_chunk(seq, grid, frame, "semantic", ci, cj) for cj in range(ny)]
+        return rows[ci]
+
+    parts: dict[str, list] = {"ijk": [], "semantic": [], "instance": [], "flow": []}
+    occupied = 0
+    for ci in range(nx):
+        here, first = row(ci), len(parts["ijk"])
+        for cj, block in enumerate(here):
+            if block is None:
+                continue
+            count = int(np.count_nonzero(block))
+            occupied += count
+            # the neighbours' facing planes (a missing chunk or the grid's border: free)
+            prev = rows.get(ci - 1, [None] * ny)[cj] if ci > 0 else None
+            nxt = row(ci + 1)[cj] if ci + 1 < nx else None
+            flat = block_surface(block, None if prev is None else prev[-1], None if nxt is None else nxt[0],
+                                 None if cj == 0 or here[cj - 1] is None else here[cj - 1][:, -1],
+                                 None if cj + 1 == ny or here[cj + 1] is None else here[cj + 1][:, 0], count)
+            ii, jj, kk = np.unravel_index(flat, block.shape)
+            parts["ijk"].append(np.column_stack([ii + ci * cx, jj + cj * cy, kk]).astype(np.int64))
+            parts["semantic"].append(block[ii, jj, kk])
+            inst = occ.read_chunk(seq, grid, frame, "instance", ci, cj) if "instance" in names else None
+            inst = np.zeros(len(flat), np.uint32) if inst is None else inst[ii, jj, kk].astype(np.uint32)
+            parts["instance"].append(inst)
+            if flow:
+                things = np.flatnonzero(inst)
+                f = np.zeros((len(flat), 3), np.float32)
+                block_flow = occ.read_chunk(seq, grid, frame, "flow", ci, cj) \
+                    if len(things) and "flow" in names else None
+                if block_flow is not None:
+                    f[things] = block_flow[ii[things], jj[things], kk[things]]
+                parts["flow"].append(f)
+        rows.pop(ci - 1, None)
+        # C order over the grid: a row of chunks holds its voxels chunk after chunk along y, each
+        # in C order, so a stable sort on i alone orders them (i, j, k)
+        if len(parts["ijk"]) > first:
+            order = np.argsort(np.concatenate([a[:, 0] for a in parts["ijk"][first:]]), kind="stable")
+            for key in ("ijk", "semantic", "instance") + (("flow",) if flow else ()):
+                parts[key][first:] = [np.concatenate(parts[key][first:])[order]]
+    empty = {"ijk": np.zeros((0, 3), np.int64), "semantic": np.zeros(0, np.uint8),
+             "instance": np.zeros(0, np.uint32), "flow": np.zeros((0, 3), np.float32)}
+    out = {k: np.concatenate(v) if v else empty[k] for k, v in parts.items() if k != "flow" or flow}
+    out["occupied"] = occupied
+    return out
+
+
+def read_at(occ: OccupancyStore, seq: str, grid, frame: int, name: str, ijk: np.ndarray) -> np.ndarray:
+    """Array ``name`` of one stored frame at the voxels ``ijk`` (N, 3), reading only the chunks
+    they fall in (zero where a chunk is not stored)."""
+    shape, chunks, dtype = occ.layout(seq, grid, name)
+    cx, cy = chunks[1], chunks[2]
+    out = np.zeros((len(ijk), *shape[4:]), dtype)
+    if not len(ijk):
+        return out
+    # the voxels grouped by chunk, each group read from its one chunk
+    key = (ijk[:, 0] // cx) * (-(-shape[2] // cy)) + ijk[:, 1] // cy
+    order = np.argsort(key, kind="stable")
+    bounds = np.flatnonzero(np.diff(key[order])) + 1
+    for group in np.split(order, bounds):
+        i, j, k = ijk[group].T
+        ci, cj = int(i[0] // cx), int(j[0] // cy)
+        block = occ.read_chunk(seq, grid, frame, name, ci, cj)
+        if block is not None:
+            out[group] = block[i - ci * cx, j - cj * cy, k]
+    return out
+
+
+def _has_array(occ: OccupancyStore, seq: str, grid, name: str) -> bool:
+    try:
+        occ.layout(seq, grid, name)
+        return True
+    except ValueError:
+        return False
 
 
 def prediction_files(pred: Path, seq: str, frames: list[int]) -> dict[int, Path]:
@@ -129,6 +236,26 @@ def load_prediction(path: Path, shape) -> tuple[np.ndarray, np.ndarray]:
     return flat.astype(np.int64), sem.reshape(-1)[flat].astype(np.uint8)
 
 
+def _sparse_frame(samples: FrameSamples, index: int) -> dict:
+    """Sample ``index`` with its whole occupancy as sparse rows (what a prediction is scored on)."""
+    seq, frame = samples.samples[index]
+    full = FrameSamples(samples.root, voxel_size=samples.voxel_size, occupancy="sparse", cameras=False, lidar=False,
+                        boxes=False, sequences=[seq])
+    return full[full.samples.index((seq, frame))]
+
+
+def load_masks(samples: FrameSamples, index: int, view: FrameView) -> FrameView:
+    """``view`` with its voxels' camera and LiDAR masks (read once, when a display first needs them)."""
+    if view.mask_camera is None:
+        seq, frame = samples.samples[index]
+        occ, grid = OccupancyStore(Store(samples.root)), samples.grid(seq)
+        for name in ("mask_camera", "mask_lidar"):
+            m = read_at(occ, seq, grid, frame, name, view.ijk) if _has_array(occ, seq, grid, name) \
+                else np.ones(len(view.ijk), np.uint8)
+            setattr(view, name, m.astype(bool))
+    return view
+
+
 def _thumbnail(image: np.ndarray, width: int = IMAGE_WIDTH) -> np.ndarray:
     step = max(1, image.shape[1] // width)
     return np.ascontiguousarray(image[::step, ::step])
@@ -141,17 +268,22 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
     s = samples[index]
     seq = s["sequence_id"]
     shape = tuple(int(v) for v in s["grid_shape"])
-    rows = s["occ"]
-    ijk, sem = rows[:, :3].astype(np.int64), rows[:, 3].astype(np.uint8)
-    n = len(rows)
-    inst = s.get("occ_instance", np.zeros(n, np.uint32))
-    flow = s.get("occ_flow", np.zeros((n, 3), np.float32))
-    mcam = s.get("occ_mask_camera", np.ones(n, bool))
-    mlid = s.get("occ_mask_lidar", np.ones(n, bool))
-    outcome = None
-    occupied = n
-    if pred is not None:
+    origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
+    outcome, mcam, mlid = None, None, None
+    if pred is None:
+        # only the surface, read chunk by chunk; the masks wait until a display asks for them
+        surf = read_surface(OccupancyStore(Store(samples.root)), seq, samples.grid(seq), int(s["frame_index"]))
+        ijk, sem, inst, flow, occupied = surf["ijk"], surf["semantic"], surf["instance"], surf["flow"], surf["occupied"]
+    else:
         # the union of both sides' occupied voxels, each with its outcome and the class shown
+        full = _sparse_frame(samples, index)
+        rows = full["occ"]
+        ijk, sem = rows[:, :3].astype(np.int64), rows[:, 3].astype(np.uint8)
+        n = len(rows)
+        inst = full.get("occ_instance", np.zeros(n, np.uint32))
+        flow = full.get("occ_flow", np.zeros((n, 3), np.float32))
+        mcam = full.get("occ_mask_camera", np.ones(n, bool))
+        mlid = full.get("occ_mask_lidar", np.ones(n, bool))
         gt_flat = linear_index(ijk, shape)
         p_flat, p_cls = load_prediction(pred, shape)
         flat, outcome, shown = prediction_outcome(gt_flat, sem, p_flat, p_cls)
@@ -164,46 +296,106 @@ def prepare_frame(samples: FrameSamples, index: int, pred: Path | None = None,
         ijk = np.column_stack(np.unravel_index(flat, shape)).astype(np.int64)
         sem = shown
         occupied = len(flat)
-    origin, voxel_size = np.asarray(s["grid_origin"], np.float64), float(s["voxel_size"])
-    # flow arrows from every voxel of a moving thing (before the surface is taken)
+        # the surface of the union
+        surf = np.flatnonzero(surface_voxels(ijk, shape))
+        ijk, sem, inst, flow, mcam, mlid, outcome = (a[surf] for a in (ijk, sem, inst, flow, mcam, mlid, outcome))
+    # flow arrows from the surface voxels of each moving thing
     things = inst != 0
     arrows = flow_arrows(voxel_centres(ijk[things], origin, voxel_size), inst[things], flow[things])[:2]
-    surf = np.flatnonzero(surface_voxels(ijk, shape))
-    keep, factor = level_of_detail(ijk[surf], budget)
-    sel = surf[keep]
-    view = FrameView(centres=voxel_centres(ijk[sel], origin, voxel_size), semantic=sem[sel], instance=inst[sel],
-                     mask_camera=mcam[sel], mask_lidar=mlid[sel], outcome=None if outcome is None else outcome[sel],
-                     point_size=voxel_size * factor, occupied=occupied, arrows=arrows)
-    boxes = boxes_in_frame(samples.actor_rows(index), np.linalg.inv(s["lidar_pose"]))
+    keep, factor = level_of_detail(ijk, budget)
+    view = FrameView(centres=voxel_centres(ijk[keep], origin, voxel_size), semantic=sem[keep], instance=inst[keep],
+                     mask_camera=None if mcam is None else mcam[keep], mask_lidar=None if mlid is None else mlid[keep],
+                     outcome=None if outcome is None else outcome[keep], point_size=voxel_size * factor,
+                     occupied=occupied, arrows=arrows, ijk=ijk[keep])
+    add_overlays(view, samples, index, s, "lidar")
+    view.seconds = time.perf_counter() - t0
+    return view
+
+
+@dataclass(frozen=True)
+class Labels:
+    """A label space as the viewer shows it: ``names[id]``, ``colours`` (256, 3) uint8 by id,
+    the ``things`` ids (coloured by instance in ``instance`` mode)."""
+
+    names: tuple[str, ...]
+    colours: np.ndarray
+    things: frozenset
+
+    def name(self, cid: int) -> str:
+        return self.names[cid] if 0 <= cid < len(self.names) else f"label {cid}"
+
+
+ROOT_LABELS = Labels(tuple(c.name for c in taxonomy.label_table().classes), np.asarray(
+    taxonomy.palette() + ((0, 0, 0),) * (256 - len(taxonomy.palette())), np.uint8), frozenset(taxonomy.thing_ids()))
+"""A root's labels: the CarlaOcc classes in the label table's palette."""
+
+
+def add_overlays(view: FrameView, samples: FrameSamples, index: int, s: dict, frame: str = "lidar") -> FrameView:
+    """Puts the root's overlays of sample ``index`` (``s`` = ``samples[index]``) into ``view``, in
+    ``frame`` (``"lidar"``, the root's grids; ``"ego"``, Occ3D's): the actor boxes with their class
+    and id, the LiDAR points, the ego's axes, the cameras with their images."""
+    if frame not in ("lidar", "ego"):
+        raise ValueError(f"frame {frame!r}: lidar or ego")
+    lidar_to_frame = np.eye(4) if frame == "lidar" else s["lidar_to_ego"]
+    world_to_frame = np.linalg.inv(s["lidar_pose"] if frame == "lidar" else s["ego_pose"])
+    boxes = boxes_in_frame(samples.actor_rows(index), world_to_frame)
     view.boxes = box_edges(boxes["box_pose"], boxes["boxes"][:, 3:6])
     view.box_labels = [(f"{taxonomy.by_id(int(c)).name} #{int(i)}",
                         boxes["boxes"][k, :3] + np.array([0, 0, boxes["boxes"][k, 5] / 2 + 0.3]))
                        for k, (i, c) in enumerate(zip(boxes["box_instance"], boxes["box_semantic"]))]
     if "points" in s:
-        view.points, view.points_semantic = s["points"], s["points_semantic"]
-    view.ego = np.linalg.inv(s["lidar_to_ego"])
+        pts = s["points"].astype(np.float64) @ lidar_to_frame[:3, :3].T + lidar_to_frame[:3, 3]
+        view.points, view.points_semantic = pts.astype(np.float32), s["points_semantic"]
+    view.ego = lidar_to_frame @ np.linalg.inv(s["lidar_to_ego"])  # ego-to-frame
+    view.cameras = []
     for c, name in enumerate(s.get("camera_names", [])):
         rgb = s["images"][c]
         h, w = rgb.shape[:2]
-        cam = camera_frustum(s["cam_intrinsics"][c], s["cam_to_lidar"][c], w, h)
-        depth = s["cam_depth"][c]
+        cam = camera_frustum(s["cam_intrinsics"][c], lidar_to_frame @ s["cam_to_lidar"][c], w, h)
+        # thumbnails first, then coloured: only the pixels sent are coloured
+        depth, semantic = _thumbnail(s["cam_depth"][c]), _thumbnail(s["cam_semantic"][c])
         cam.update(name=name, rgb=_thumbnail(rgb),
-                   semantic=_thumbnail(class_colours(s["cam_semantic"][c].reshape(-1)).reshape(h, w, 3)),
-                   depth=_thumbnail(np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8)))
+                   semantic=class_colours(semantic.reshape(-1)).reshape(*semantic.shape, 3),
+                   depth=np.round(height_ramp(np.nan_to_num(depth, posinf=80.0) / 80.0)).astype(np.uint8))
         view.cameras.append(cam)
-    view.seconds = time.perf_counter() - t0
     return view
 
 
-def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str) -> tuple[np.ndarray, np.ndarray]:
+def sample_of_key(key: str, samples: FrameSamples) -> int | None:
+    """The sample of ``samples`` a paired file's key names (``gts/<seq>/<seq>_<frame:06d>/labels``
+    of an Occ3D tree, ``<seq>/<frame:06d>`` of a carlaocc-npz one): a path component that is one
+    of the root's sequence ids, and the frame the last component after it ending in digits
+    gives; None when the key names none (the release layout renames sequences)."""
+    parts = key.split("/")
+    seqs = {seq for seq, _ in samples.samples}
+    at = next((k for k, p in enumerate(parts) if p in seqs), None)
+    if at is None:
+        return None
+    for p in reversed(parts[at + 1:]):
+        m = re.search(r"(\d+)$", p)
+        if m:
+            try:
+                return samples.samples.index((parts[at], int(m.group(1))))
+            except ValueError:
+                return None
+    return None
+
+
+def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str,
+                  labels: Labels = ROOT_LABELS) -> tuple[np.ndarray, np.ndarray]:
     """``(colours (N, 3) uint8, shown (N,) bool)`` of a frame's voxels: coloured by ``mode``, and
     those ``mask`` (camera | lidar) marks unobserved shown, ghosted or hidden."""
     if mode == "outcome" and view.outcome is not None:
         col = OUTCOME_COLOURS[view.outcome]
     else:
-        col = class_colours(view.semantic, view.instance, "instance" if mode == "instance" else "semantic")
-    observed = view.mask_camera if mask == "camera" else view.mask_lidar
+        col = class_colours(view.semantic, view.instance, "instance" if mode == "instance" else "semantic",
+                            labels.colours)
     shown = np.ones(len(col), bool)
+    if unobserved == "show":
+        return col, shown
+    observed = view.mask_camera if mask == "camera" else view.mask_lidar
+    if observed is None:
+        raise ValueError("the frame's masks are not loaded (load_masks)")
     if unobserved == "ghost":
         col = ghost(col, observed)
     elif unobserved == "hide":
@@ -211,25 +403,199 @@ def voxel_colours(view: FrameView, mode: str, unobserved: str, mask: str) -> tup
     return col, shown
 
 
-class Viewer:
-    """The live scene of one sequence on a viser server: a timeline, per-class toggles, colour
-    modes, masks and overlays (GUI on the right), one scene node per class."""
+class RootFrames:
+    """The frames of a root's sequence the viewer shows (sample ``indices``), each optionally
+    against a prediction file on the root's grid (``preds`` by frame index)."""
 
-    def __init__(self, server, samples: FrameSamples, preds: dict[int, Path] | None, budget: int,
-                 indices: list[int] | None = None, first: int = 0) -> None:
-        self.server, self.samples, self.preds, self.budget = server, samples, preds, budget
+    def __init__(self, samples: FrameSamples, preds: dict[int, Path] | None = None,
+                 indices: list[int] | None = None) -> None:
+        self.samples, self.preds = samples, preds
         self.indices = list(range(len(samples))) if indices is None else list(indices)
-        self.frames = [samples.samples[k][1] for k in self.indices]
-        self.cache: dict[int, FrameView] = {}
-        self.nodes: dict[str, object] = {}
+        self.frame_ids = [samples.samples[k][1] for k in self.indices]
+        self.names = [str(f) for f in self.frame_ids]
+        self.labels, self.has_pred, self.voxel_size = ROOT_LABELS, preds is not None, samples.voxel_size
+        self.title = f"**{samples.samples[0][0]}** at {samples.voxel_size:g} m" + (" against a prediction" if preds else "")
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def prepare(self, k: int, budget: int) -> FrameView:
+        return prepare_frame(self.samples, self.indices[k], None if self.preds is None else self.preds[self.frame_ids[k]],
+                             budget)
+
+    def masks(self, k: int, view: FrameView) -> FrameView:
+        return load_masks(self.samples, self.indices[k], view)
+
+
+def pair_frames(pred: Path, gt: Path, map_name: str = "carlaocc", table: str | None = None,
+                ignore: tuple[int, ...] = (255,)) -> "PairFrames":
+    """A prediction tree against its ground-truth tree, paired and read as ``carlaocc eval ssc``
+    pairs and reads them (by relative path without suffix; labels in ``map_name``), each frame on
+    the grid its export's ``grid.json`` states."""
+    from carlaocc.pipeline.cli.evaluate import InputError, pair_files
+    from carlaocc.stages.evaluation import label_map
+
+    try:
+        lm = label_map(map_name, table)
+    except ValueError as exc:
+        raise ViewerError(f"--map / --taxonomy: {exc}") from None
+    try:
+        pairs = pair_files(pred, gt, (".npz", ".npy"))
+    except InputError as exc:
+        raise ViewerError(str(exc)) from None
+    return PairFrames(pairs, lm, tuple(ignore), gt)
+
+
+class PairFrames:
+    """Paired prediction / ground-truth files (``pairs``: key, prediction, ground truth) in the
+    label space ``lm``; ``gt`` the ground-truth tree, where ``grid.json`` is looked for."""
+
+    def __init__(self, pairs: list, lm, ignore: tuple[int, ...], gt: Path, indices: list[int] | None = None,
+                 root: FrameSamples | None = None) -> None:
+        self.pairs, self.lm, self.ignore, self.gt, self.root = pairs, lm, ignore, Path(gt), root
+        self.indices = list(range(len(pairs))) if indices is None else list(indices)
+        self.names = [pairs[k][0] for k in self.indices]
+        colours = label_colours(lm.from_carlaocc)
+        self.labels = Labels(tuple(lm.names), colours, frozenset(lm.things))
+        self.has_pred = True
+        self.grids = [self.grid(k) for k in range(len(self.indices))]
+        self.voxel_size = self.grids[0]["voxel_size"] if self.grids else 1.0
+        self.title = f"**{self.gt.name}** ({lm.name} labels) against a prediction"
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def select(self, indices: list[int]) -> "PairFrames":
+        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, indices, self.root)
+
+    def with_root(self, root: str) -> "PairFrames":
+        """The same pairs with a root's overlays (cameras, boxes, LiDAR) on the frames whose keys
+        name one of its samples, in the grid's frame (ego or LiDAR)."""
+        try:
+            samples = FrameSamples(root, occupancy="none", cameras=False, lidar=False, boxes=False)
+            cams = {seq: bool(SensorStore(Store(root)).cameras(seq)) for seq in {q for q, _ in samples.samples}}
+            lidar = bool(samples.samples) and LidarStore(Store(root)).exists(*samples.samples[0])
+            samples = FrameSamples(root, voxel_size=samples.voxel_size, occupancy="none", cameras=all(cams.values()),
+                                   camera_maps=("depth", "semantic") if all(cams.values()) else (), lidar=lidar,
+                                   boxes=True)
+        except DatasetError as exc:
+            raise ViewerError(str(exc)) from None
+        return PairFrames(self.pairs, self.lm, self.ignore, self.gt, self.indices, samples)
+
+    def grid(self, k: int) -> dict:
+        """The grid of frame ``k`` from the grid.json nearest above its ground-truth file (the
+        export's); without one, voxel indices (origin 0, 1 m) in an unknown frame."""
+        from carlaocc.catalog.formats.manifest import find_grid_manifest, grid_of
+
+        gf = self.pairs[self.indices[k]][2]
+        try:
+            found = find_grid_manifest(gf)
+            if found is None:
+                return {"origin": (0.0, 0.0, 0.0), "voxel_size": 1.0, "shape": None, "frame": None}
+            doc, folder = found
+            return grid_of(doc, Path(gf).resolve().relative_to(folder))
+        except ValueError as exc:
+            raise ViewerError(f"--gt {self.gt}: {exc}") from None
+
+    def prepare(self, k: int, budget: int) -> FrameView:
+        from carlaocc.pipeline.cli.evaluate import InputError, load_occupancy
+
+        t0 = time.perf_counter()
+        _, pf, gf = self.pairs[self.indices[k]]
+        try:
+            p_sem, _, _ = load_occupancy(pf, self.lm, False)
+            g_sem, g_inst, masks = load_occupancy(gf, self.lm, False)
+        except InputError as exc:
+            raise ViewerError(str(exc)) from None
+        grid = self.grids[k]
+        if p_sem.shape != g_sem.shape:
+            raise ViewerError(f"--pred {pf}: shape {p_sem.shape} differs from the ground truth {gf} {g_sem.shape}")
+        if grid["shape"] is not None and tuple(g_sem.shape) != grid["shape"]:
+            raise ViewerError(f"--gt {gf}: shape {tuple(g_sem.shape)}, but its grid.json's grid is {grid['shape']}")
+        p_sem, g_sem = (self._labels(a, path) for a, path in ((p_sem, pf), (g_sem, gf)))
+        view = prepare_pair(p_sem, g_sem, g_inst, masks, self.lm.free, self.ignore, grid, budget, t0)
+        at = None if self.root is None or grid["frame"] not in ("ego", "lidar") else \
+            sample_of_key(self.pairs[self.indices[k]][0], self.root)
+        if at is not None:
+            add_overlays(view, self.root, at, self.root[at], grid["frame"])
+            view.seconds = time.perf_counter() - t0
+        return view
+
+    def _labels(self, a: np.ndarray, path: Path) -> np.ndarray:
+        """``a`` as uint8 labels, every one an id of the map or an ignored id (else the one-line
+        error naming the file and the map)."""
+        lo, hi = (int(a.min()), int(a.max())) if a.size else (0, 0)
+        valid = np.zeros(256, bool)
+        valid[[i for i in (*range(self.lm.n), *self.ignore) if 0 <= i < 256]] = True
+        if lo < 0 or hi > 255:
+            bad = lo if lo < 0 else hi
+        else:
+            a = a.astype(np.uint8, copy=False)
+            # a lookup per voxel, no sort (a 0.1 m grid has 51 M voxels)
+            ok = valid[a]
+            bad = None if ok.all() else int(a.reshape(-1)[np.argmin(ok.reshape(-1))])
+        if bad is not None:
+            raise ViewerError(f"{path}: label {bad} is not an id of --map {self.lm.name} (0..{self.lm.n - 1}, "
+                              f"or --ignore); pick the map the tree is in")
+        return a
+
+    def masks(self, k: int, view: FrameView) -> FrameView:
+        return view
+
+
+def prepare_pair(p_sem: np.ndarray, g_sem: np.ndarray, g_inst: np.ndarray | None, masks: dict, free: int | None,
+                 ignore: tuple[int, ...], grid: dict, budget: int, t0: float | None = None) -> FrameView:
+    """A prediction against its ground truth, both dense uint8 label grids of one shape: the surface of
+    the voxels either side occupies (any label but ``free`` and ``ignore``: void ground truth and
+    an abstaining prediction are free), their outcome, the class shown, the ground truth's masks
+    (observed where it has none), placed by ``grid`` (origin, voxel size)."""
+    t0 = time.perf_counter() if t0 is None else t0
+    shape = g_sem.shape
+    void = np.zeros(256, bool)
+    void[[i for i in (*ignore, *(() if free is None else (free,))) if 0 <= i < 256]] = True
+    g_sem, p_sem = g_sem.reshape(-1), p_sem.reshape(-1)
+    # occupied on either side by one lookup per voxel, then each side's label at those voxels
+    g_occ, p_occ = ~void[g_sem], ~void[p_sem]
+    flat = np.flatnonzero(g_occ | p_occ)
+    g, p, g_on, p_on = g_sem[flat], p_sem[flat], g_occ[flat], p_occ[flat]
+    # the outcome codes of OUTCOMES, and the class shown: the prediction's, or the truth's it missed
+    outcome = np.where(~g_on, 1, np.where(~p_on, 2, np.where(g == p, 0, 3))).astype(np.uint8)
+    shown = np.where(p_on, p, g).astype(np.uint8)
+    ijk = np.column_stack(np.unravel_index(flat, shape)).astype(np.int64)
+    surf = np.flatnonzero(surface_voxels(ijk, shape))
+    ijk, outcome, sem = ijk[surf], outcome[surf], shown[surf]
+    inst = np.zeros(len(ijk), np.uint32) if g_inst is None else g_inst[tuple(ijk.T)].astype(np.uint32)
+    mcam, mlid = (masks[n][tuple(ijk.T)].astype(bool) if n in masks and masks[n].shape == shape
+                  else np.ones(len(ijk), bool) for n in ("mask_camera", "mask_lidar"))
+    keep, factor = level_of_detail(ijk, budget)
+    origin, voxel_size = np.asarray(grid["origin"], np.float64), float(grid["voxel_size"])
+    view = FrameView(centres=voxel_centres(ijk[keep], origin, voxel_size), semantic=sem[keep], instance=inst[keep],
+                     mask_camera=mcam[keep], mask_lidar=mlid[keep], outcome=outcome[keep],
+                     point_size=voxel_size * factor, occupied=len(flat), ijk=ijk[keep])
+    if grid.get("frame") == "ego":
+        view.ego = np.eye(4)
+    view.seconds = time.perf_counter() - t0
+    return view
+
+
+class Viewer:
+    """The live scene of one sequence or tree on a viser server: a timeline, per-class toggles,
+    colour modes, masks and overlays (GUI on the right), one scene node per class."""
+
+    def __init__(self, server, source, budget: int, first: int = 0, prepared: dict | None = None) -> None:
+        self.server, self.source, self.budget = server, source, budget
+        self.labels: Labels = source.labels
+        self.cache: dict[int, FrameView] = dict(prepared or {})  # frames prepared already, by index
+        self.lock = threading.Lock()  # guards the cache: GUI callbacks and the prefetch run in other threads
+        self.nodes: dict[int, object] = {}
         self.overlays: list = []
         gui = server.gui
-        seq = samples.samples[0][0]
-        gui.add_markdown(f"**{seq}** at {samples.voxel_size:g} m" + (" against a prediction" if preds else ""))
+        preds = source.has_pred
+        gui.add_markdown(source.title)
         if preds:
             gui.add_markdown(legend_text(True))
-        self.frame = gui.add_slider("frame", min=0, max=max(len(self.frames) - 1, 0), step=1,
-                                    initial_value=min(max(first, 0), max(len(self.frames) - 1, 0)))
+        last = max(len(source) - 1, 0)
+        self.frame = gui.add_slider("frame", min=0, max=last, step=1, initial_value=min(max(first, 0), last))
         self.mode = gui.add_dropdown("colour", COLOUR_MODES if preds else COLOUR_MODES[:2],
                                      initial_value="outcome" if preds else "semantic")
         self.mask = gui.add_dropdown("mask", ("camera", "lidar"), initial_value="camera")
@@ -251,65 +617,89 @@ class Viewer:
         self.draw()
 
     def view(self, k: int) -> FrameView:
-        if k not in self.cache:
-            frame = self.frames[k]
-            self.cache[k] = prepare_frame(self.samples, self.indices[k], None if self.preds is None else self.preds[frame],
-                                          self.budget)
-            while len(self.cache) > 8:
-                self.cache.pop(next(iter(self.cache)))
-        return self.cache[k]
+        """Frame ``k``, prepared once and kept (the last 8)."""
+        with self.lock:
+            v = self.cache.get(k)
+        if v is None:
+            # prepared outside the lock: a redraw of a cached frame never waits for a prefetch
+            v = self.source.prepare(k, self.budget)
+            with self.lock:
+                v = self.cache.setdefault(k, v)
+                while len(self.cache) > 8:
+                    self.cache.pop(next(iter(self.cache)))
+        return v
+
+    def prefetch(self, k: int) -> None:
+        """Prepares frame ``k`` in the background (the next frame while the current one is looked
+        at), so stepping forward along the timeline finds it ready."""
+        if 0 <= k < len(self.source) and k not in self.cache:
+            def work() -> None:
+                try:
+                    self.view(k)
+                except ViewerError:
+                    pass  # said in the status line when that frame is shown
+            threading.Thread(target=work, daemon=True).start()
 
     def _class_box(self, cid: int):
         if cid not in self.class_boxes:
             with self.class_folder:
-                box = self.server.gui.add_checkbox(taxonomy.by_id(cid).name, True)
+                box = self.server.gui.add_checkbox(self.labels.name(cid), True)
             box.on_update(lambda _, c=cid: self._toggle(c))
             self.class_boxes[cid] = box
         return self.class_boxes[cid]
 
     def _toggle(self, cid: int) -> None:
-        node = self.nodes.get(taxonomy.by_id(cid).name)
+        node = self.nodes.get(cid)
         if node is not None:
             node.visible = bool(self.class_boxes[cid].value)
 
     def draw(self) -> None:
-        """(Re)draws the current frame with the current settings."""
-        v = self.view(int(self.frame.value))
+        """(Re)draws the current frame with the current settings; a frame that cannot be read
+        (a prediction of another shape...) says why in the status line."""
+        k = int(self.frame.value)
+        try:
+            v = self.view(k)
+        except ViewerError as exc:
+            self.status.content = f"frame {self.source.names[k]}: error: {exc}"
+            return
+        if self.unobserved.value != "show":
+            self.source.masks(k, v)
         draw_frame(self.server.scene, v, self.mode.value, self.unobserved.value, self.mask.value, self.nodes,
                    self.overlays, flow=self.show_flow.value, boxes=self.show_boxes.value, lidar=self.show_lidar.value,
                    cameras=self.show_cameras.value, image=self.image.value,
-                   visible={c: bool(b.value) for c, b in self.class_boxes.items()})
+                   visible={c: bool(b.value) for c, b in self.class_boxes.items()}, labels=self.labels)
         for cid in np.unique(v.semantic):
             self._class_box(int(cid))
-        for cid, box in self.class_boxes.items():
+        for cid in self.class_boxes:
             self._toggle(cid)
-        self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value)
-        lod = "" if v.point_size <= self.samples.voxel_size * 1.01 else \
+        self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value, self.labels)
+        lod = "" if v.point_size <= self.source.voxel_size * 1.01 else \
             f", level of detail {v.point_size:g} m (budget {self.budget:,})"
-        self.status.content = (f"frame {self.frames[int(self.frame.value)]}: {len(v.centres):,} surface voxels of "
+        self.status.content = (f"frame {self.source.names[k]}: {len(v.centres):,} surface voxels of "
                                f"{v.occupied:,}{lod}; prepared in {v.seconds:.2f} s")
+        self.prefetch(k + 1)
 
 
 def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes: dict, overlays: list, *,
                flow: bool = True, boxes: bool = True, lidar: bool = False, cameras: bool = True, image: str = "rgb",
-               visible: dict | None = None) -> None:
-    """Puts frame ``v`` into a viser scene: one point cloud per class (``nodes``, by class name:
+               visible: dict | None = None, labels: Labels = ROOT_LABELS) -> None:
+    """Puts frame ``v`` into a viser scene: one point cloud per class (``nodes``, by label id:
     replaced, or removed when the class is absent) and the overlays (removed and drawn again)."""
-    col, shown = voxel_colours(v, mode, unobserved, mask)
+    col, shown = voxel_colours(v, mode, unobserved, mask, labels)
     present = set()
     for cid in np.unique(v.semantic):
-        name = taxonomy.by_id(int(cid)).name
+        cid = int(cid)
         sel = (v.semantic == cid) & shown
         if not sel.any():
             continue
-        present.add(name)
-        if name in nodes:
-            nodes[name].remove()
-        nodes[name] = scene.add_point_cloud(f"/voxels/{name}", v.centres[sel], col[sel], point_size=v.point_size,
-                                            point_shape="square", point_shading="flat", precision="float32",
-                                            visible=(visible or {}).get(int(cid), True))
-    for name in [n for n in nodes if n not in present]:
-        nodes.pop(name).remove()
+        present.add(cid)
+        if cid in nodes:
+            nodes[cid].remove()
+        nodes[cid] = scene.add_point_cloud(f"/voxels/{labels.name(cid).replace(' ', '_')}", v.centres[sel], col[sel],
+                                           point_size=v.point_size, point_shape="square", point_shading="flat",
+                                           precision="float32", visible=(visible or {}).get(cid, True))
+    for cid in [c for c in nodes if c not in present]:
+        nodes.pop(cid).remove()
     for handle in overlays:
         handle.remove()
     overlays.clear()
@@ -336,17 +726,15 @@ def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes
                                                      position=tuple(cam["position"]), color=(40, 40, 40)))
 
 
-def class_legend_text(class_ids, mode: str) -> str:
+def class_legend_text(class_ids, mode: str, labels: Labels = ROOT_LABELS) -> str:
     """The classes' colour legend (Markdown) above their toggles: each class's swatch in the label
-    table's palette when voxels are coloured by class (``semantic``), the stuff classes' swatches
+    space's colours when voxels are coloured by class (``semantic``), the stuff classes' swatches
     when things are coloured by instance, nothing in ``outcome`` mode (its legend is at the top)."""
     if mode == "outcome":
         return ""
-    pal = taxonomy.palette()
-    things = set(taxonomy.thing_ids())
-    shown = [c for c in class_ids if c and (mode == "semantic" or c not in things)]
-    swatches = ", ".join(f"<span style='color:rgb{tuple(int(x) for x in pal[c])}'>&#9632;</span> "
-                         f"{taxonomy.by_id(c).name}" for c in shown)
+    shown = [c for c in class_ids if (c or labels is not ROOT_LABELS) and (mode == "semantic" or c not in labels.things)]
+    swatches = ", ".join(f"<span style='color:rgb{tuple(int(x) for x in labels.colours[c])}'>&#9632;</span> "
+                         f"{labels.name(c)}" for c in shown)
     if mode == "semantic":
         return f"class colours: {swatches}"
     return f"things: a colour per instance; stuff: {swatches}" if swatches else "things: a colour per instance"
@@ -384,20 +772,19 @@ def stop_server(server) -> None:
         server.stop()
 
 
-def save_html(out: Path, samples: FrameSamples, preds: dict[int, Path] | None, budget: int, frames: list[int],
-              seconds_per_frame: float = 1.0) -> int:
-    """Writes the frames ``frames`` (sample indices) as one offline HTML page (viser's embedded
-    client and the scene, played back frame after frame); returns its size in bytes."""
+def save_html(out: Path, source, budget: int, seconds_per_frame: float = 1.0) -> int:
+    """Writes the frames of ``source`` (:class:`RootFrames` or :class:`PairFrames`) as one offline
+    HTML page (viser's embedded client and the scene, played back frame after frame); returns its
+    size in bytes."""
     server = start_server()
     try:
         nodes: dict = {}
         overlays: list = []
-        mode = "outcome" if preds else "semantic"
+        mode = "outcome" if source.has_pred else "semantic"
         serializer = None
-        for k in frames:
-            frame = samples.samples[k][1]
-            v = prepare_frame(samples, k, None if preds is None else preds[frame], budget)
-            draw_frame(server.scene, v, mode, "show", "camera", nodes, overlays)
+        for k in range(len(source)):
+            v = source.prepare(k, budget)
+            draw_frame(server.scene, v, mode, "show", "camera", nodes, overlays, labels=source.labels)
             if serializer is None:
                 serializer = server.get_scene_serializer()
             serializer.insert_sleep(seconds_per_frame)

@@ -8,10 +8,12 @@ y left, z up), ``centre = origin + (ijk + 0.5) * voxel_size``; cameras in the Op
 and units").
 
 * :func:`surface_voxels`: the occupied voxels with a free face (what the eye can see of a solid
-  grid), and :func:`level_of_detail`: one voxel per ``factor**3`` block until a point budget holds,
+  grid), :func:`block_surface`: the same of one stored column block given its neighbours' facing
+  planes (a frame read chunk by chunk), and :func:`level_of_detail`: one voxel per ``factor**3`` block until a point budget holds,
   so a 0.05 m frame stays interactive in a browser;
 * :func:`class_colours` / :func:`ghost`: colours from the one label table (instances hashed as
   every other picture: :mod:`carlaocc.stages.render.colours`), unobserved voxels washed out;
+  :func:`label_colours`: another label space's ids (Occ3D...) in the colours of their classes;
 * :func:`prediction_outcome`: every voxel occupied in the ground truth or a prediction as true
   positive, false positive, false negative or wrong class (:data:`OUTCOMES`);
 * :func:`flow_arrows`, :func:`box_edges`, :func:`camera_frustum`: the overlays.
@@ -26,8 +28,9 @@ from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import quaternion_wxyz
 from carlaocc.stages.render.colours import voxel_colours
 
-__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "box_edges", "camera_frustum", "class_colours", "flow_arrows", "ghost",
-           "level_of_detail", "linear_index", "prediction_outcome", "surface_voxels", "voxel_centres"]
+__all__ = ["OUTCOMES", "OUTCOME_COLOURS", "block_surface", "box_edges", "camera_frustum", "class_colours",
+           "flow_arrows", "ghost", "label_colours", "level_of_detail", "linear_index", "prediction_outcome",
+           "surface_voxels", "voxel_centres"]
 
 OUTCOMES = ("true positive", "false positive", "false negative", "wrong class")
 """The outcome of a voxel against the ground truth, by code 0..3: same class in both; occupied only
@@ -92,10 +95,78 @@ def surface_voxels(ijk: np.ndarray, shape) -> np.ndarray:
     return exposed
 
 
+@njit(cache=True)
+def _block_surface_kernel(sem, x_lo, x_hi, y_lo, y_hi, occupied):  # pragma: no cover - jitted
+    bx, by, bz = sem.shape
+    out = np.empty(occupied, np.int64)  # at most every occupied voxel is on the surface
+    col = np.empty(bz, np.uint8)
+    n = 0
+    for i in range(bx):
+        for j in range(by):
+            # the column and its four side neighbours, each contiguous along z (a neighbour
+            # across the block's x / y faces comes from the halo planes)
+            c = sem[i, j]
+            xm = x_lo[j] if i == 0 else sem[i - 1, j]
+            xp = x_hi[j] if i == bx - 1 else sem[i + 1, j]
+            ym = y_lo[i] if j == 0 else sem[i, j - 1]
+            yp = y_hi[i] if j == by - 1 else sem[i, j + 1]
+            # occupied with a free side neighbour: branch-free, so the loop vectorises
+            for k in range(bz):
+                col[k] = (c[k] != 0) & ((xm[k] == 0) | (xp[k] == 0) | (ym[k] == 0) | (yp[k] == 0))
+            # or a free neighbour above or below; the grid's top and bottom faces are free
+            for k in range(1, bz - 1):
+                col[k] |= (c[k] != 0) & ((c[k - 1] == 0) | (c[k + 1] == 0))
+            col[0] = c[0] != 0
+            col[bz - 1] = c[bz - 1] != 0
+            base = (i * by + j) * bz
+            for k in range(bz):
+                if col[k]:
+                    out[n] = base + k
+                    n += 1
+    return out[:n]
+
+
+def block_surface(block: np.ndarray, x_lo=None, x_hi=None, y_lo=None, y_hi=None, occupied: int | None = None) -> np.ndarray:
+    """Flat indices (C order in the block, int64, sorted) of the occupied voxels of one column
+    block of a grid (``block`` (bx, by, Z), nonzero = occupied, the grid's whole z range) that
+    have a free face neighbour, as :func:`surface_voxels` finds them on the whole grid.
+
+    ``x_lo`` / ``x_hi`` (by, Z) are the planes of the grid just before / after the block along x,
+    ``y_lo`` / ``y_hi`` (bx, Z) along y (nonzero = occupied); None where the block touches the
+    grid's border (outside the grid is free). So a grid read chunk by chunk never has to be
+    assembled: each block needs only its neighbours' facing planes. ``occupied``: the block's
+    nonzero count when the caller has it (else counted here)."""
+    block = np.asarray(block)
+    bx, by, bz = block.shape
+    free_x, free_y = np.zeros((by, bz), block.dtype), np.zeros((bx, bz), block.dtype)
+    planes = [free_x if x_lo is None else x_lo, free_x if x_hi is None else x_hi,
+              free_y if y_lo is None else y_lo, free_y if y_hi is None else y_hi]
+    for p, want in zip(planes, ((by, bz), (by, bz), (bx, bz), (bx, bz))):
+        if p.shape != want:
+            raise ValueError(f"a halo plane of shape {p.shape}; the block {block.shape} needs {want}")
+    return _block_surface_kernel(block, *(np.asarray(p, block.dtype) for p in planes), int(np.count_nonzero(block)) if occupied is None else int(occupied))
+
+
+@njit(cache=True)
+def _first_per_block(ijk, factor, dims):  # pragma: no cover - jitted
+    # one flag per coarse block; a voxel is kept when its block is not flagged yet
+    seen = np.zeros(dims[0] * dims[1] * dims[2], np.bool_)
+    keep = np.empty(len(ijk), np.int64)
+    n = 0
+    for r in range(len(ijk)):
+        key = ((ijk[r, 0] // factor) * dims[1] + ijk[r, 1] // factor) * dims[2] + ijk[r, 2] // factor
+        if not seen[key]:
+            seen[key] = True
+            keep[n] = r
+            n += 1
+    return keep[:n]
+
+
 def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
-    """``(keep, factor)``: indices into ``ijk`` of one voxel per ``factor``-cube block (the first
-    in the given order; ``factor`` the smallest power of two >= 1 leaving at most ``budget``
-    voxels) and that factor. Drawn ``factor`` times larger, the kept voxels cover the blocks."""
+    """``(keep, factor)``: indices into ``ijk`` (N, 3 non-negative voxel indices) of one voxel per
+    ``factor``-cube block (the first in the given order; ``factor`` the smallest power of two >= 1
+    leaving at most ``budget`` voxels), ascending, and that factor. Drawn ``factor`` times larger,
+    the kept voxels cover the blocks."""
     ijk = np.asarray(ijk, np.int64)
     if budget < 1:
         raise ValueError(f"budget {budget}: at least 1 voxel")
@@ -103,12 +174,11 @@ def level_of_detail(ijk: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
     keep = np.arange(len(ijk))
     if len(ijk) == 0:
         return keep, factor
+    top = ijk.max(axis=0)
     while len(keep) > budget:
         factor *= 2
-        # the block of every voxel as one flat index, then the first voxel of each block
-        blocks = ijk // factor
-        _, first = np.unique(linear_index(blocks, blocks.max(axis=0) + 1), return_index=True)
-        keep = np.sort(first)
+        # the first voxel of each block, in one pass over a flag per block (no sort)
+        keep = _first_per_block(ijk, factor, top // factor + 1)
     return keep, factor
 
 
@@ -117,16 +187,39 @@ def voxel_centres(ijk: np.ndarray, origin, voxel_size: float) -> np.ndarray:
     return (np.asarray(origin, np.float64) + (np.asarray(ijk, np.float64) + 0.5) * float(voxel_size)).astype(np.float32)
 
 
-def class_colours(semantic: np.ndarray, instance: np.ndarray | None = None, mode: str = "semantic") -> np.ndarray:
-    """uint8 RGB (N, 3): ``semantic`` the class's colour of the label table's palette; ``instance``
-    things (nonzero ``instance``) by their hashed instance colour, stuff by class."""
+def class_colours(semantic: np.ndarray, instance: np.ndarray | None = None, mode: str = "semantic",
+                  colours: np.ndarray | None = None) -> np.ndarray:
+    """uint8 RGB (N, 3): ``semantic`` the class's colour (``colours`` (256, 3) by label id, default
+    the label table's palette of CarlaOcc ids); ``instance`` things (nonzero ``instance``) by their
+    hashed instance colour, stuff by class."""
     semantic = np.asarray(semantic, np.uint8)
+    pal = _PALETTE if colours is None else np.asarray(colours, np.uint8)
     if mode == "semantic" or instance is None:
-        return _PALETTE[semantic]
+        return pal[semantic]
     if mode != "instance":
         raise ValueError(f"colour mode {mode!r}: semantic or instance")
     z = np.zeros(len(semantic))
-    return np.round(voxel_colours(semantic, np.asarray(instance, np.uint32), z, "instance", (0.0, 1.0))).astype(np.uint8)
+    instance = np.asarray(instance, np.uint32)
+    out = pal[semantic].copy()
+    things = instance != 0
+    out[things] = np.round(voxel_colours(semantic[things], instance[things], z[things], "instance", (0.0, 1.0))).astype(np.uint8)
+    return out
+
+
+def label_colours(from_carlaocc) -> np.ndarray:
+    """uint8 (256, 3) display colour of each id of another label space, given the id of every
+    CarlaOcc class there (``from_carlaocc[k]``, as :class:`carlaocc.stages.evaluation.LabelMap`
+    holds it): the palette colour of the first CarlaOcc class (by id, None excluded) mapped to
+    it, so Occ3D's ``car`` is drawn as Car and ``driveable_surface`` as Road; ids no class maps
+    to are grey."""
+    out = np.full((256, 3), 128, np.uint8)
+    seen = set()
+    for k, t in enumerate(from_carlaocc):
+        if k == 0 or t in seen or not 0 <= t < 255:  # 255: ignored, not a label
+            continue
+        seen.add(t)
+        out[t] = _PALETTE[k]
+    return out
 
 
 def ghost(colours: np.ndarray, observed: np.ndarray, strength: float = 0.75) -> np.ndarray:

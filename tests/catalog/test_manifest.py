@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -36,3 +37,33 @@ def test_split_lists_one_line_each(tmp_path):
     assert (tmp_path / "splits" / "train.txt").read_text() == "a\nb\n"
     assert (tmp_path / "splits" / "val.txt").read_text() == ""
     assert not [p for p in (tmp_path / "splits").iterdir() if p.name.startswith(".")]  # no partial files left
+
+
+def test_a_file_deep_in_an_export_finds_its_grid(tmp_path):
+    import pytest
+
+    from carlaocc.catalog.formats.manifest import find_grid_manifest, grid_of
+
+    one = grid_manifest("occ3d", "ego", [{"origin": [-40, -40, -1], "voxel_size": 0.4, "shape": [200, 200, 16]}],
+                        ["a", "free"], 1, "release")
+    save_grid_manifest(tmp_path / "one", one)
+    f = tmp_path / "one" / "gts" / "s" / "t" / "labels.npz"
+    doc, folder = find_grid_manifest(f)
+    assert folder == (tmp_path / "one").resolve()
+    assert grid_of(doc, f.resolve().relative_to(folder)) == {"origin": (-40.0, -40.0, -1.0), "voxel_size": 0.4,
+                                                             "shape": (200, 200, 16), "frame": "ego"}
+    # a grid per folder: the file's folder picks it
+    many = grid_manifest("carlaocc-release", "lidar", [
+        {"folder": "vs_0_1", "origin": [-25.6, -25.6, -3.0], "voxel_size": 0.1, "shape": [768, 512, 130]},
+        {"folder": "vs_0_4", "origin": [-25.6, -25.6, -2.4], "voxel_size": 0.4, "shape": [128, 128, 16]}],
+        ["a"], 0, "release")
+    save_grid_manifest(tmp_path / "many", many)
+    g = grid_of(find_grid_manifest(tmp_path / "many" / "Seq" / "occupancy" / "vs_0_4" / "0000.npz")[0],
+                Path("Seq/occupancy/vs_0_4/0000.npz"))
+    assert g["voxel_size"] == 0.4 and g["shape"] == (128, 128, 16) and g["frame"] == "lidar"
+    with pytest.raises(ValueError, match="vs_0_2"):
+        grid_of(many, Path("Seq/occupancy/vs_0_2/0000.npz"))
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "grid.json").write_text("[1, 2]")
+    with pytest.raises(ValueError, match="not a grid.json"):
+        find_grid_manifest(tmp_path / "bad" / "x.npz")

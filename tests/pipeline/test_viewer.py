@@ -44,8 +44,33 @@ def test_save_writes_one_offline_page(default_01, tmp_path):
     assert f"python -m webbrowser -t {out.resolve().as_uri()}" in r.output
     # the scene is inside the page, not fetched: no script or stylesheet from elsewhere
     assert "<script src=\"http" not in html and "<link rel=\"stylesheet\" href=\"http" not in html
+    # the recording inside: the scene, and the first view set where the live viewer sets it
+    # (behind and above the ego, looking ahead), not viser's default
+    messages = _recording(html)
+    from carlaocc.pipeline.commands.viewer import INITIAL_CAMERA
+
+    by_type = {}
+    for _, m in messages:
+        by_type.setdefault(m["type"], []).append(m)
+    assert [m["position"] for m in by_type["SetCameraPositionMessage"]] == [list(INITIAL_CAMERA[0])]
+    assert [m["look_at"] for m in by_type["SetCameraLookAtMessage"]] == [list(INITIAL_CAMERA[1])]
+    assert any(m["name"] == "/voxels/Road" for m in by_type["PointCloudMessage"])
     bad = CliRunner().invoke(app, ["view", "--root", default_01.url, "--save", str(tmp_path / "x.png")])
     assert bad.exit_code == 2 and "--save" in bad.output and not (tmp_path / "x.png").exists()
+
+
+def _recording(html: str) -> list:
+    """The messages of the viser recording a saved page embeds (base64 of viser's zstd framing
+    around msgpack: an 8-byte size, then the payload whose first 8 bytes size the metadata)."""
+    import base64
+
+    import msgspec
+    import zstandard
+
+    raw = base64.b64decode(html.split('window.__VISER_EMBED_DATA__="', 1)[1].split('"', 1)[0])
+    inner = zstandard.ZstdDecompressor().decompress(raw[8:], max_output_size=int.from_bytes(raw[:8], "little"))
+    n = int.from_bytes(inner[:8], "little")
+    return msgspec.msgpack.decode(inner[8:8 + n])["messages"]
 
 
 def _dense(s):
@@ -58,9 +83,12 @@ def test_a_prediction_with_errors_is_coloured_by_outcome(default_01, tmp_path):
     from carlaocc.pipeline.commands.viewer import open_frames, prediction_files, prepare_frame
     from carlaocc.stages.render.viewer import OUTCOMES
 
+    from carlaocc.catalog.samples import FrameSamples
+
     samples = open_frames(default_01.url, None, 0.1)
     seq, frame = samples.samples[0]
-    first = samples[0]
+    first = FrameSamples(default_01.url, voxel_size=0.1, occupancy="sparse", cameras=False, lidar=False, boxes=False,
+                         sequences=[seq])[0]
     gt = _dense(first)
     # the prediction: ground truth with some voxels dropped, some added, some relabelled
     rng = np.random.default_rng(0)
@@ -82,6 +110,49 @@ def test_a_prediction_with_errors_is_coloured_by_outcome(default_01, tmp_path):
     assert np.array_equal(v.outcome, expect)
     assert np.array_equal(v.semantic, np.where(p == 0, g, p))
     assert set(np.unique(v.outcome)) == set(range(len(OUTCOMES)))  # all four outcomes are drawn
+
+
+def test_the_surface_read_chunk_by_chunk_is_the_whole_frame_s(default_01):
+    # read_surface never assembles the frame; the reference: every occupied voxel read whole, then
+    # the surface of the whole set
+    from carlaocc.catalog.occupancy import OccupancyStore
+    from carlaocc.catalog.samples import FrameSamples
+    from carlaocc.catalog.store import Store
+    from carlaocc.pipeline.commands.viewer import load_masks, open_frames, prepare_frame, read_surface
+    from carlaocc.stages.render.viewer import surface_voxels
+
+    samples = open_frames(default_01.url, None, 0.1)
+    seq, frame = samples.samples[0]
+    full = FrameSamples(default_01.url, voxel_size=0.1, occupancy="sparse", cameras=False, lidar=False, boxes=False,
+                        sequences=[seq])[0]
+    rows = full["occ"]
+    on = surface_voxels(rows[:, :3], full["grid_shape"])
+    got = read_surface(OccupancyStore(Store(default_01.url)), seq, samples.grid(seq), frame)
+    assert got["occupied"] == len(rows)
+    assert np.array_equal(got["ijk"], rows[on, :3])  # the same voxels, in the same (C) order
+    assert np.array_equal(got["semantic"], rows[on, 3]) and np.array_equal(got["instance"], full["occ_instance"][on])
+    things = full["occ_instance"][on] != 0
+    assert things.any() and np.array_equal(got["flow"][things], full["occ_flow"][on][things])
+    # the masks, read later at the drawn voxels only
+    v = prepare_frame(samples, 0, None, budget=10**9)
+    assert v.mask_camera is None and len(v.centres) == int(on.sum())
+    load_masks(samples, 0, v)
+    assert np.array_equal(v.mask_camera, full["occ_mask_camera"][on])
+    assert np.array_equal(v.mask_lidar, full["occ_mask_lidar"][on])
+    assert not v.mask_camera.all()  # some surface is unobserved: the comparison means something
+    # the live viewer reads them when "unobserved" leaves "show", and ghosts what they mark
+    from carlaocc.pipeline.commands.viewer import RootFrames, Viewer, start_server, stop_server
+
+    server = start_server()
+    try:
+        viewer = Viewer(server, RootFrames(samples), 10**9, prepared={0: prepare_frame(samples, 0, None, 10**9)})
+        assert viewer.view(0).mask_camera is None
+        viewer.unobserved.value = "ghost"
+        viewer.draw()
+        assert np.array_equal(viewer.view(0).mask_camera, full["occ_mask_camera"][on])
+        assert "error" not in viewer.status.content
+    finally:
+        stop_server(server)
 
 
 def test_prediction_refusals(default_01, tmp_path):

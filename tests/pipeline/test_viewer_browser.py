@@ -54,14 +54,14 @@ def _wait_for_pixels(page, rgb, at_least: int, timeout: float = 90.0) -> tuple[i
 
 
 def test_viewer_draws_classes_and_a_toggle_removes_one(default_01, tmp_path):
-    from carlaocc.pipeline.commands.viewer import Viewer, open_frames, start_server, stop_server
+    from carlaocc.pipeline.commands.viewer import RootFrames, Viewer, open_frames, start_server, stop_server
     from carlaocc.schemas import taxonomy
 
     exe = chromium()
     samples = open_frames(default_01.url, None, 0.1)
     server = start_server("127.0.0.1", 0)
     try:
-        viewer = Viewer(server, samples, None, BUDGET)
+        viewer = Viewer(server, RootFrames(samples), BUDGET)
         v = viewer.view(0)
         # the two classes with the most drawn voxels: the road and the next (sidewalk, terrain...)
         ids, counts = np.unique(v.semantic, return_counts=True)

@@ -10,9 +10,9 @@ from hypothesis.extra.numpy import arrays
 
 from carlaocc.schemas.taxonomy import palette
 from carlaocc.stages.geometry import pose_matrix, rotation_from_quaternion
-from carlaocc.stages.render.viewer import (OUTCOMES, box_edges, camera_frustum, class_colours, flow_arrows, ghost,
-                                           level_of_detail, linear_index, prediction_outcome, surface_voxels,
-                                           voxel_centres)
+from carlaocc.stages.render.viewer import (OUTCOMES, block_surface, box_edges, camera_frustum, class_colours,
+                                           flow_arrows, ghost, label_colours, level_of_detail, linear_index,
+                                           prediction_outcome, surface_voxels, voxel_centres)
 
 grids = arrays(np.uint8, st.tuples(st.integers(1, 6), st.integers(1, 6), st.integers(1, 5)),
                elements=st.sampled_from([0, 0, 1, 14]))
@@ -37,6 +37,31 @@ def test_surface_voxels_match_a_loop(occ):
     ijk = np.argwhere(occ)
     mask = surface_voxels(ijk, occ.shape)
     assert {tuple(int(v) for v in r) for r in ijk[mask]} == _surface_loop(occ)
+
+
+@settings(max_examples=60, deadline=None)
+@given(grids, st.integers(1, 4), st.integers(1, 4))
+def test_block_surface_cut_into_blocks_matches_the_whole_grid(occ, cx, cy):
+    # the grid cut into (cx, cy, Z) column blocks as the store chunks it, each given only its
+    # neighbours' facing planes: the union of the blocks' surfaces is the whole grid's
+    X, Y, _ = occ.shape
+    got = set()
+    for x0 in range(0, X, cx):
+        for y0 in range(0, Y, cy):
+            x1, y1 = min(x0 + cx, X), min(y0 + cy, Y)
+            block = occ[x0:x1, y0:y1]
+            flat = block_surface(block, occ[x0 - 1, y0:y1] if x0 else None, occ[x1, y0:y1] if x1 < X else None,
+                                 occ[x0:x1, y0 - 1] if y0 else None, occ[x0:x1, y1] if y1 < Y else None)
+            assert np.all(np.diff(flat) > 0)  # sorted, C order within the block
+            got |= {(x0 + int(i), y0 + int(j), int(k)) for i, j, k in zip(*np.unravel_index(flat, block.shape))}
+    assert got == _surface_loop(occ)
+
+
+def test_block_surface_refuses_a_halo_of_the_wrong_shape():
+    import pytest
+
+    with pytest.raises(ValueError, match="halo plane"):
+        block_surface(np.ones((2, 3, 4), np.uint8), x_lo=np.ones((2, 4), np.uint8))
 
 
 def test_a_solid_block_shows_only_its_shell():
@@ -122,3 +147,27 @@ def test_camera_frustum_fov_and_pose_round_trip():
     assert abs(cam["fov"] - 2 * np.arctan(450 / 800)) < 1e-12 and abs(cam["aspect"] - 16 / 9) < 1e-12
     np.testing.assert_allclose(rotation_from_quaternion(cam["wxyz"]), T[:3, :3], atol=1e-9)
     np.testing.assert_allclose(cam["position"], T[:3, 3])
+
+
+def test_another_label_space_takes_its_first_carlaocc_class_colour():
+    from carlaocc.schemas.taxonomy import by_name, label_table
+    from carlaocc.stages.evaluation import label_map
+
+    lm = label_map("occ3d")
+    col = label_colours(lm.from_carlaocc)
+    pal = palette()
+    for occ3d_name, ours in (("car", "Car"), ("driveable_surface", "Road"), ("vegetation", "Vegetation")):
+        assert tuple(col[lm.names.index(occ3d_name)]) == tuple(pal[by_name(ours).id])
+    # every id a class maps to has the colour of the lowest such class; CarlaOcc's own map is the palette
+    table = label_table()
+    for t in set(lm.from_carlaocc) - {255}:
+        first = min(c.id for c in table.classes if c.id and lm.from_carlaocc[c.id] == t) \
+            if any(c.id and lm.from_carlaocc[c.id] == t for c in table.classes) else None
+        if first is not None:
+            assert tuple(col[t]) == tuple(pal[first])
+    own = label_colours(label_map("carlaocc").from_carlaocc)
+    assert all(tuple(own[c]) == tuple(pal[c]) for c in range(1, len(pal)))
+    # instance mode with another space's colours: stuff by that colour, things by instance
+    sem, inst = np.array([lm.names.index("driveable_surface"), lm.names.index("car")], np.uint8), np.array([0, 7])
+    out = class_colours(sem, inst, "instance", col)
+    assert tuple(out[0]) == tuple(col[sem[0]]) and tuple(out[1]) != tuple(col[sem[1]])
