@@ -58,12 +58,17 @@ def depth_normals(depth: np.ndarray, intrinsics, version: str = "d2nt_v2") -> np
         lap_h, lap_v = np.empty_like(depth), np.empty_like(depth)
         _laplacians(z, lap_h, lap_v)
         pow_h, pow_v = np.power(np.e, -lap_h).astype(np.float32), np.power(np.e, -lap_v).astype(np.float32)
-    # 3. gradients and normals; 4. v3's refinement; 5. the void's neighbourhood zeroed
-    raw = out if version != "d2nt_v3" else np.empty_like(out)
-    _d2nt_rows(z, pow_h, pow_v, K[0, 0], K[1, 1], K[0, 2], K[1, 2], version != "d2nt_basic", raw)
+    # 3. gradients and normals; 4. v3's refinement; 5. the void's neighbourhood zeroed: without
+    #    v3's refinement (which reads its neighbours' normals) those pixels are never computed,
+    #    their zeros left as they are
     if version == "d2nt_v3":
+        raw = np.empty_like(out)
+        _d2nt_rows(z, pow_h, pow_v, K[0, 0], K[1, 1], K[0, 2], K[1, 2], True, np.zeros((0, 0), np.bool_), raw)
         _mrf(z, raw, out)
-    _mask_void(depth, out)
+        _mask_void(depth, out)
+    else:
+        _d2nt_rows(z, pow_h, pow_v, K[0, 0], K[1, 1], K[0, 2], K[1, 2], version != "d2nt_basic",
+                   _near_void(depth), out)
     return out
 
 
@@ -142,14 +147,18 @@ def _dag_weights(p_prev, p_next):
 
 
 @njit(cache=True, nogil=True)
-def _d2nt_rows(z, pow_h, pow_v, fx, fy, u0, v0, dag, out):
+def _d2nt_rows(z, pow_h, pow_v, fx, fy, u0, v0, dag, skip, out):
     # core.depth2normal, one row at a time: the gradients Gu, Gv (get_filter or get_DAG_filter),
-    # the translation to a normal, vector_normalization
+    # the translation to a normal, vector_normalization; pixels ``skip`` marks (an (H, W) bool,
+    # or empty: none) are left as they are
     H, W = out.shape[0], out.shape[1]
     zero = np.float32(0.0)
+    some = skip.size > 0
     for v in range(H):
         vm = np.float32(np.float64(np.float32(v + 1)) - v0)  # v_map: float64 difference stored float32
         for u in range(W):
+            if some and skip[v, u]:
+                continue
             zc = z[v + 1, u + 1]
             zl, zr, zu, zd = z[v + 1, u], z[v + 1, u + 2], z[v, u + 1], z[v + 2, u + 1]
             if dag:
@@ -202,6 +211,22 @@ def _mrf(z, raw, out):
                 vv, uu = v, u
             for c in range(3):
                 out[v, u, c] = raw[vv, uu, c]
+
+
+@njit(cache=True, nogil=True)
+def _near_void(depth):
+    # (H, W) bool: the pixels whose 3x3 neighbourhood (clamped at the border) touches a pixel
+    # without a surface (the ones :func:`_mask_void` zeroes)
+    H, W = depth.shape
+    near = np.zeros((H, W), dtype=np.bool_)
+    for v in range(H):
+        for u in range(W):
+            if depth[v, u] > 0:
+                continue
+            for vv in range(max(v - 1, 0), min(v + 2, H)):
+                for uu in range(max(u - 1, 0), min(u + 2, W)):
+                    near[vv, uu] = True
+    return near
 
 
 @njit(cache=True, nogil=True)
