@@ -131,6 +131,25 @@ class RayScene:
         return self._transparent[face]
 
     @property
+    def semantic_table(self) -> np.ndarray:
+        """uint8 per triangle, its semantic label, plus a last :data:`SKY` for index -1 (a miss):
+        :meth:`labels` as a table, for compiled kernels; ``instance_table`` (uint32, last 0) and
+        the ``*_raw`` tables (the simulator's labels, see :meth:`labels`) likewise."""
+        return self._semantic
+
+    @property
+    def instance_table(self) -> np.ndarray:
+        return self._instance
+
+    @property
+    def semantic_table_raw(self) -> np.ndarray:
+        return self._raw_semantic
+
+    @property
+    def instance_table_raw(self) -> np.ndarray:
+        return self._raw_instance
+
+    @property
     def transparent_table(self) -> np.ndarray:
         """Bool per triangle, whether it is transparent, plus a last False for index -1 (a miss):
         :meth:`transparent` as a table, for compiled kernels."""
@@ -371,6 +390,27 @@ def rasterize_first_hits(vertices: np.ndarray, faces: np.ndarray, camera: Camera
     return best_t.astype(np.float32), best_f
 
 
+@njit(cache=True, nogil=True)
+def _hit_maps(t, face, max_depth, semantic, instance):
+    # one pass over a camera's hits: a miss (face -1) or a hit beyond ``max_depth`` (in t's
+    # dtype, as numpy compares an array with a Python float) becomes no surface (face -1, depth
+    # 0); depth float32, labels from the per-triangle tables (their last slot: no surface)
+    n = len(face)
+    depth = np.empty(n, dtype=np.float32)
+    sem = np.empty(n, dtype=semantic.dtype)
+    inst = np.empty(n, dtype=instance.dtype)
+    for i in range(n):
+        f = face[i]
+        if f < 0 or not t[i] <= max_depth:
+            face[i] = -1
+            depth[i] = 0.0
+            sem[i], inst[i] = semantic[-1], instance[-1]
+        else:
+            depth[i] = np.float32(t[i])
+            sem[i], inst[i] = semantic[f], instance[f]
+    return depth, sem, inst
+
+
 def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarray, max_depth: float = np.inf,
                   raw: bool = False, see_through: bool = True, nthreads: int = 0,
                   max_layers: int = 8, pixels: np.ndarray | None = None) -> tuple[CameraMaps, CameraMaps | None]:
@@ -397,17 +437,13 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     if pixels is not None:
         off = ~np.asarray(pixels, dtype=bool).reshape(-1)
         t[off], face[off] = np.inf, _MISS
-    far = (face < 0) | ~(t <= max_depth)  # misses and hits beyond range
-    face[far] = _MISS
-    sem, inst = scene.labels(face)
-    depth = t.copy()
-    depth[far] = 0.0
+    # misses and hits beyond range: no surface (face -1, depth 0, the sky's labels)
+    depth, sem, inst = _hit_maps(t, face, t.dtype.type(max_depth), scene.semantic_table, scene.instance_table)
     clean = CameraMaps(depth.reshape(H, W), sem.reshape(H, W), inst.reshape(H, W), face.reshape(H, W))
     if not raw:
         return clean, None
     # 2. continue the rays that stopped on glass, from just past the hit, until an opaque surface
-    t_raw, face_raw = t.astype(np.float64), face.copy()
-    t_raw[far] = np.inf
+    t_raw, face_raw = np.where(face < 0, np.inf, t.astype(np.float64)), face.copy()
     todo = np.flatnonzero(scene.transparent(face_raw)) if see_through else np.zeros(0, dtype=np.int64)
     if len(todo):
         # the rays on glass cast again from the camera: the continuation starts from the caster's
@@ -426,11 +462,8 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
         t_raw[todo] = start + t2  # inf stays inf on a miss
         face_raw[todo] = f2
         todo = todo[scene.transparent(f2)]
-    far = (face_raw < 0) | ~(t_raw <= max_depth)
-    face_raw[far] = _MISS
-    sem_r, inst_r = scene.labels(face_raw, raw=True)
-    depth_raw = t_raw.astype(np.float32)
-    depth_raw[far] = 0.0
+    depth_raw, sem_r, inst_r = _hit_maps(t_raw, face_raw, t_raw.dtype.type(max_depth), scene.semantic_table_raw,
+                                         scene.instance_table_raw)
     raw_maps = CameraMaps(depth_raw.reshape(H, W), sem_r.reshape(H, W), inst_r.reshape(H, W), face_raw.reshape(H, W))
     return clean, raw_maps
 
