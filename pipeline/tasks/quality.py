@@ -19,7 +19,7 @@ from carlaocc.pipeline.tasks.partitions import sequences
 from carlaocc.schemas.configs import QualityConfig
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.records import ClassQualityRecord, FrameRecord, FrameStatisticsRecord, QualityRecord
-from carlaocc.stages.quality import column_ranges, continuity_and_ranges, temporal_consistency_counts
+from carlaocc.stages.quality import continuity_and_ranges, temporal_consistency_counts
 from carlaocc.stages.quality.blocks import BitGrid, BlockedGrid
 from carlaocc.stages.quality.statistics import N_CLASSES, block_pairs, split_pairs
 from carlaocc.stages.scratch import scratch
@@ -181,10 +181,9 @@ def quality_task(store: Store, cfg: QualityConfig, part: Partition) -> dict[str,
     prev = None  # (semantic, observed mask, column ranges) of frame t - 1
     for t in range(first, last):
         sem = read("semantic", t)
-        if t >= stop:  # the next task's first frame, read for the last pair: its column ranges only
-            ranges = column_ranges(sem, out=range_buffers[t % 2])
-        else:  # the frame's continuity counts and its columns' occupied z ranges, in one pass
-            counts, ranges = continuity_and_ranges(sem, out=range_buffers[t % 2])
+        # the frame's continuity counts and its columns' occupied z ranges, in one pass
+        counts, ranges = continuity_and_ranges(sem, out=range_buffers[t % 2])
+        if t < stop:
             # 1. spatial continuity of the frame, per class
             occupied, isolated = int(counts.occupied[1:].sum()), int(counts.isolated[1:].sum())
             quality.append(QualityRecord(sequence_id=seq_id, voxel_size=voxel_size, frame_index=t,

@@ -171,36 +171,31 @@ def _masks(m, sem: BlockedGrid, name: str) -> tuple[BitGrid, int]:
     return out, len(masks)
 
 
-def column_ranges(semantic: np.ndarray, out: tuple[np.ndarray, np.ndarray] | None = None,
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def column_ranges(semantic: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per ``(i, j)`` column of a semantic grid (dense or :class:`~.blocks.BlockedGrid`): the
-    lowest and highest ``k`` with a nonzero label (``lo > hi`` when none: ``Z`` and -1), int32
-    ``(X, Y)`` each. Compute it once per frame and pass it to :func:`temporal_consistency_counts`
-    for both pairs the frame belongs to (:func:`~carlaocc.stages.quality.continuity.continuity_and_ranges`
-    gives it with the continuity counts in the same pass; this is the pass without them, for a
-    frame read only for its pair). ``out``: two C-contiguous int32 ``(X, Y)`` arrays to fill."""
+    lowest and highest ``k`` with a nonzero label (``lo > hi`` when none), int32 ``(X, Y)`` each.
+    Compute it once per frame and pass it to :func:`temporal_consistency_counts` for both pairs
+    the frame belongs to (:func:`~carlaocc.stages.quality.continuity.continuity_and_ranges` gives
+    it with the continuity counts in the same pass)."""
     grid = _semantic(semantic, "semantic")
-    X, Y, Z = grid.shape
-    if out is None:
-        out = (np.empty((X, Y), np.int32), np.empty((X, Y), np.int32))
-    if any(a.shape != (X, Y) or a.dtype != np.int32 or not a.flags.c_contiguous for a in out):
-        raise ValueError(f"out must be two C-contiguous int32 arrays of shape {(X, Y)}")
     ox, oy = grid.offsets()
-    _column_ranges(grid.flat, grid.words(), ox, oy, Z, out[0], out[1])
-    return out
+    return _column_ranges(grid.flat, grid.words(), ox, oy, grid.shape[2])
 
 
 @numba.njit(cache=True, nogil=True)
-def _column_ranges(flat, words, ox, oy, Z, lo, hi):  # pragma: no cover - numba
-    """Per (i, j) column into ``lo``, ``hi``: the lowest and highest k with a nonzero label (``Z``
-    and -1 when none)."""
+def _column_ranges(flat, words, ox, oy, Z):  # pragma: no cover - numba
+    """Per (i, j) column: the lowest and highest k with a nonzero label (lo > hi when none)."""
     X, Y = ox.size, oy.size
+    lo = np.full((X, Y), Z, dtype=np.int32)
+    hi = np.full((X, Y), -1, dtype=np.int32)
     for i in range(X):
         for j in range(Y):
             s = ox[i] + oy[j]
             first = first_nonzero(flat, words, s, s + Z) - s
-            lo[i, j] = first
-            hi[i, j] = -1 if first >= Z else last_nonzero(flat, words, s + first, s + Z) - s
+            if first < Z:
+                lo[i, j] = first
+                hi[i, j] = last_nonzero(flat, words, s + first, s + Z) - s
+    return lo, hi
 
 
 @numba.njit(cache=True, nogil=True)
