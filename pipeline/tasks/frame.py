@@ -31,6 +31,7 @@ from carlaocc.stages.scenes.people.pedestrians import rig_pedestrian
 _GEOMETRY_CACHE: OrderedDict[tuple, AssetGeometry] = OrderedDict()
 _RIG_CACHE: OrderedDict[tuple[str, str], object] = OrderedDict()
 _INDEX_CACHE: OrderedDict[tuple[str, str, str | None], object] = OrderedDict()
+_TABLE_CACHE: OrderedDict[tuple, list] = OrderedDict()
 
 
 def _cached(cache: OrderedDict, key, make, size: int):
@@ -54,15 +55,28 @@ def _mesh_geometry(store: Store, rel: str, key: tuple, build) -> AssetGeometry:
                    lambda: build(load_glb_arrays(data)), 1024)
 
 
+def library_rows(store: Store, model: type[AssetRecord] | type[PartRecord]) -> list:
+    """The rows of a mesh-library table (``AssetRecord`` or ``PartRecord``), validated once per
+    worker and content of its files: every frame's task reads the whole library's tables (some
+    2,000 rows at 0.05-0.1 CPU s of validation a frame); the same list comes back while no file
+    of the table changed (its rows are frozen records)."""
+    table = ParquetTable(store, model)
+    paths = table.paths()
+    digest = hashlib.sha256()
+    for rel in paths:
+        digest.update(rel.encode() + b"\0" + hashlib.sha256(store.read_bytes(rel)).digest())
+    return _cached(_TABLE_CACHE, (store.url, model.__name__, digest.hexdigest()), table.load, 8)
+
+
 def load_geometry(store: Store, asset_ids: set[str], placements: list[PlacementRecord]) -> dict[str, AssetGeometry]:
     """AssetGeometry of every id in ``asset_ids``: ADMesh assets (the parts table gives each part's
     class and closedness) or, for ids not in the library, the town stuff mesh of the placement that
     references it (one class per stuff placement; closedness measured)."""
-    assets = {a.asset_id: a for a in ParquetTable(store, AssetRecord).load()}
+    assets = {a.asset_id: a for a in library_rows(store, AssetRecord)}
     # parts by asset, once each: two source items with the same standardized geometry (two
     # identical files) are one asset whose parts both items' tables hold
     parts: dict[str, dict[int, PartRecord]] = {}
-    for p in ParquetTable(store, PartRecord).load():
+    for p in library_rows(store, PartRecord):
         parts.setdefault(p.asset_id, {}).setdefault(p.part_index, p)
     stuff = {pl.asset_id: pl for pl in placements if pl.asset_id not in assets}
     out: dict[str, AssetGeometry] = {}

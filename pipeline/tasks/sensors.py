@@ -23,7 +23,8 @@ from carlaocc.schemas.configs import DatasetConfig, SensorsConfig
 from carlaocc.schemas.records import LidarAgreementRecord, RectificationRecord
 from carlaocc.schemas.rig import RigConfig
 from carlaocc.stages.scenes.assembly import flatten
-from carlaocc.stages.sensors import CameraMaps, RayScene, camera_poses, recorded_stats, rectify_cameras, simulate_frame
+from carlaocc.stages.sensors import (CameraMaps, RayScene, camera_poses, recorded_stats, rectify_cameras, simulate_frame,
+                                    to_float16)
 from carlaocc.stages.sensors.recorded_lidar import lidar_agreement
 from carlaocc.stages.threads import kernel_threads
 
@@ -161,7 +162,7 @@ def sensors_task(store: Store, cfg: SensorsConfig, part: Partition) -> dict[str,
     records = []
     for cam in cams:
         rect, normal, raw, stats = per_camera[cam.name]
-        images = {"depth": rect.maps.depth, "semantic": rect.maps.semantic, "normal": normal.astype(np.float16)}
+        images = {"depth": rect.maps.depth, "semantic": rect.maps.semantic, "normal": to_float16(normal)}
         if rect.maps.instance is not None:
             images["instance"] = rect.maps.instance
         if recorded is not None:

@@ -131,6 +131,25 @@ class RayScene:
         return self._transparent[face]
 
     @property
+    def semantic_table(self) -> np.ndarray:
+        """uint8 per triangle, its semantic label, plus a last :data:`SKY` for index -1 (a miss):
+        :meth:`labels` as a table, for compiled kernels; ``instance_table`` (uint32, last 0) and
+        the ``*_raw`` tables (the simulator's labels, see :meth:`labels`) likewise."""
+        return self._semantic
+
+    @property
+    def instance_table(self) -> np.ndarray:
+        return self._instance
+
+    @property
+    def semantic_table_raw(self) -> np.ndarray:
+        return self._raw_semantic
+
+    @property
+    def instance_table_raw(self) -> np.ndarray:
+        return self._raw_instance
+
+    @property
     def transparent_table(self) -> np.ndarray:
         """Bool per triangle, whether it is transparent, plus a last False for index -1 (a miss):
         :meth:`transparent` as a table, for compiled kernels."""
@@ -265,23 +284,32 @@ def _screen_polygon(p, fx, fy, cx, cy, qx, qy):
 
 
 @njit(cache=True, nogil=True)
-def _row_span(qx, qy, m, y):
-    # x extent of the convex polygon on the line at height y (y clamped into the polygon's
-    # height: a row a rounding error outside still gets the nearest part)
+def _band_span(qx, qy, m, y0, y1):
+    # x extent of the convex polygon within the band y0 <= y <= y1 (the band clamped into the
+    # polygon's height: a row a rounding error outside still gets the nearest part): its corners
+    # inside the band and its edges' crossings of the band's two lines
     ymin, ymax = qy[0], qy[0]
     for k in range(1, m):
         ymin, ymax = min(ymin, qy[k]), max(ymax, qy[k])
-    y = min(max(y, ymin), ymax)
+    y0, y1 = min(max(y0, ymin), ymax), min(max(y1, ymin), ymax)
     lo, hi = math.inf, -math.inf
     for k in range(m):
-        x0, y0, x1, y1 = qx[k], qy[k], qx[(k + 1) % m], qy[(k + 1) % m]
-        if min(y0, y1) <= y <= max(y0, y1):
-            if y0 == y1:
-                lo, hi = min(lo, x0, x1), max(hi, x0, x1)
-            else:
-                x = x0 + (y - y0) / (y1 - y0) * (x1 - x0)
+        xa, ya, xb, yb = qx[k], qy[k], qx[(k + 1) % m], qy[(k + 1) % m]
+        if y0 <= ya <= y1:
+            lo, hi = min(lo, xa), max(hi, xa)
+        for y in (y0, y1):
+            if ya != yb and min(ya, yb) <= y <= max(ya, yb):
+                x = xa + (y - ya) / (yb - ya) * (xb - xa)
                 lo, hi = min(lo, x), max(hi, x)
     return lo, hi
+
+
+# The screen spans only choose which pixels the exact test above sees: a pixel's float32 ray passes
+# within ~1e-4 pixel of its centre (the direction's float32 rounding, 2**-24 relative, times a
+# focal length of ~1,000 pixels), so the polygon's extent over a band of rows +-0.01 pixel around
+# the row's centres, widened by 0.01 pixel, holds every pixel whose ray can meet the triangle
+# (whatever its edges' slopes); the span was a whole pixel wider on each side before.
+SPAN_MARGIN = 0.01  # pixels
 
 
 @njit(cache=True, nogil=True)
@@ -296,15 +324,18 @@ def _rasterize(V, F, o, to_camera, fx, fy, cx, cy, W, H, rays, best_t, best_f):
         for k, (x, y, z) in enumerate(((a0, a1, a2), (b0, b1, b2), (c0, c1, c2))):
             for r in range(3):
                 p[k, r] = to_camera[r, 0] * x + to_camera[r, 1] * y + to_camera[r, 2] * z
-        # 2. its screen polygon and the image rows it spans, widened by a pixel against rounding
-        #    (pixel j is sampled at j + 0.5); off screen: next
+        # 2. its screen polygon and the image rows whose centres (pixel j is sampled at j + 0.5)
+        #    it spans, widened by SPAN_MARGIN against rounding; off screen: next
         m = _screen_polygon(p, fx, fy, cx, cy, qx, qy)
         if m == 0:
             continue
         vmin, vmax = qy[:m].min(), qy[:m].max()
         if not (vmax >= -1.0 and vmin <= H + 1.0 and qx[:m].max() >= -1.0 and qx[:m].min() <= W + 1.0):
             continue
-        j0, j1 = max(math.floor(vmin - 0.5) - 1, 0), min(math.ceil(vmax - 0.5) + 1, H - 1)
+        j0 = max(math.ceil(vmin - 0.5 - SPAN_MARGIN), 0)
+        j1 = min(math.floor(vmax - 0.5 + SPAN_MARGIN), H - 1)
+        if j0 > j1:
+            continue
         # 3. the normal (degenerate triangles are never hit) and the plane's offset n . a
         n0 = (b1 - a1) * (c2 - a2) - (b2 - a2) * (c1 - a1)
         n1 = (b2 - a2) * (c0 - a0) - (b0 - a0) * (c2 - a2)
@@ -316,11 +347,11 @@ def _rasterize(V, F, o, to_camera, fx, fy, cx, cy, W, H, rays, best_t, best_f):
         e00, e01, e02 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
         e10, e11, e12 = b1 * c2 - b2 * c1, b2 * c0 - b0 * c2, b0 * c1 - b1 * c0
         e20, e21, e22 = c1 * a2 - c2 * a1, c2 * a0 - c0 * a2, c0 * a1 - c1 * a0
-        # 5. per row, the pixels of the polygon's span (widened by a pixel): inside all three
+        # 5. per row, the pixels of the polygon's span (widened by SPAN_MARGIN): inside all three
         #    planes (one sign), in front, nearest
         for v in range(j0, j1 + 1):
-            lo, hi = _row_span(qx, qy, m, v + 0.5)
-            i0, i1 = max(math.floor(lo - 0.5) - 1, 0), min(math.ceil(hi - 0.5) + 1, W - 1)
+            lo, hi = _band_span(qx, qy, m, v + 0.5 - SPAN_MARGIN, v + 0.5 + SPAN_MARGIN)
+            i0, i1 = max(math.ceil(lo - 0.5 - SPAN_MARGIN), 0), min(math.floor(hi - 0.5 + SPAN_MARGIN), W - 1)
             for u in range(i0, i1 + 1):
                 idx = v * W + u
                 r0, r1, r2 = np.float64(rays[idx, 3]), np.float64(rays[idx, 4]), np.float64(rays[idx, 5])
@@ -359,6 +390,27 @@ def rasterize_first_hits(vertices: np.ndarray, faces: np.ndarray, camera: Camera
     return best_t.astype(np.float32), best_f
 
 
+@njit(cache=True, nogil=True)
+def _hit_maps(t, face, max_depth, semantic, instance):
+    # one pass over a camera's hits: a miss (face -1) or a hit beyond ``max_depth`` (in t's
+    # dtype, as numpy compares an array with a Python float) becomes no surface (face -1, depth
+    # 0); depth float32, labels from the per-triangle tables (their last slot: no surface)
+    n = len(face)
+    depth = np.empty(n, dtype=np.float32)
+    sem = np.empty(n, dtype=semantic.dtype)
+    inst = np.empty(n, dtype=instance.dtype)
+    for i in range(n):
+        f = face[i]
+        if f < 0 or not t[i] <= max_depth:
+            face[i] = -1
+            depth[i] = 0.0
+            sem[i], inst[i] = semantic[-1], instance[-1]
+        else:
+            depth[i] = np.float32(t[i])
+            sem[i], inst[i] = semantic[f], instance[f]
+    return depth, sem, inst
+
+
 def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarray, max_depth: float = np.inf,
                   raw: bool = False, see_through: bool = True, nthreads: int = 0,
                   max_layers: int = 8, pixels: np.ndarray | None = None) -> tuple[CameraMaps, CameraMaps | None]:
@@ -385,17 +437,13 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
     if pixels is not None:
         off = ~np.asarray(pixels, dtype=bool).reshape(-1)
         t[off], face[off] = np.inf, _MISS
-    far = (face < 0) | ~(t <= max_depth)  # misses and hits beyond range
-    face[far] = _MISS
-    sem, inst = scene.labels(face)
-    depth = t.copy()
-    depth[far] = 0.0
+    # misses and hits beyond range: no surface (face -1, depth 0, the sky's labels)
+    depth, sem, inst = _hit_maps(t, face, t.dtype.type(max_depth), scene.semantic_table, scene.instance_table)
     clean = CameraMaps(depth.reshape(H, W), sem.reshape(H, W), inst.reshape(H, W), face.reshape(H, W))
     if not raw:
         return clean, None
     # 2. continue the rays that stopped on glass, from just past the hit, until an opaque surface
-    t_raw, face_raw = t.astype(np.float64), face.copy()
-    t_raw[far] = np.inf
+    t_raw, face_raw = np.where(face < 0, np.inf, t.astype(np.float64)), face.copy()
     todo = np.flatnonzero(scene.transparent(face_raw)) if see_through else np.zeros(0, dtype=np.int64)
     if len(todo):
         # the rays on glass cast again from the camera: the continuation starts from the caster's
@@ -414,11 +462,8 @@ def render_camera(scene: RayScene, camera: CameraSpec, camera_to_scene: np.ndarr
         t_raw[todo] = start + t2  # inf stays inf on a miss
         face_raw[todo] = f2
         todo = todo[scene.transparent(f2)]
-    far = (face_raw < 0) | ~(t_raw <= max_depth)
-    face_raw[far] = _MISS
-    sem_r, inst_r = scene.labels(face_raw, raw=True)
-    depth_raw = t_raw.astype(np.float32)
-    depth_raw[far] = 0.0
+    depth_raw, sem_r, inst_r = _hit_maps(t_raw, face_raw, t_raw.dtype.type(max_depth), scene.semantic_table_raw,
+                                         scene.instance_table_raw)
     raw_maps = CameraMaps(depth_raw.reshape(H, W), sem_r.reshape(H, W), inst_r.reshape(H, W), face_raw.reshape(H, W))
     return clean, raw_maps
 

@@ -264,6 +264,23 @@ def test_damaged_arrays_are_named(store, kind):
             call()
 
 
+def test_layouts_read_from_the_metadata_are_zarrs(store, kind):
+    # the writers' layout (shape, chunks, dtype) is parsed from each array's zarr.json: the same
+    # as zarr-python's view of every array the store knows, created and replaced
+    s = kind.cls(store)
+    for other in (False, True):
+        kind.create(s, 3, other)
+        s = kind.cls(store)  # a fresh store object: nothing cached
+        root = zarr.open_group(store=zarr_store(store, s.zarr_root), mode="r")
+        for name in kind.names:
+            arr = root[s.array_path("seq", kind.group, name)]
+            assert s._layout("seq", kind.group, name) == (arr.shape, arr.chunks, np.dtype(arr.dtype))
+    # a damaged root (or array metadata) falls back to zarr, which names the damage
+    store.fs.pipe_file(store.path(f"{s.zarr_root}/zarr.json"), b"{not json")
+    with pytest.raises(StoreError, match=f"damaged .*{s.zarr_root}"):
+        kind.cls(store)._layout("seq", kind.group, kind.names[0])
+
+
 def test_frame_keys():
     assert parse_frame_key("occupancy.zarr/s/0.25/semantic[12]") == ("occupancy.zarr", "s/0.25/semantic", 12)
     assert parse_frame_key("sensors.zarr/s/cam/depth[3]") == ("sensors.zarr", "s/cam/depth", 3)

@@ -76,6 +76,24 @@ def test_camera_rays_give_planar_depth_of_a_wall():
     assert np.allclose((d @ pose[:3, :3])[:, 2], 1.0)
 
 
+def test_hits_beyond_the_maximum_depth_are_no_surface():
+    # a wall at planar depth d: within max_depth it is seen, beyond it every map says "no
+    # surface" (depth 0, the sky's label, instance 0, face -1), in the clean and the raw maps
+    rig = front_rig()
+    cam = rig.cameras[0]
+    pose = camera_poses(rig)[cam.name]
+    scene = RayScene(flatten([quad(30.0, -100, 100, -50, 50, BUILDING, 5)]))
+    d = 30.0 - pose[0, 3]
+    for max_depth, seen in ((d + 1.0, True), (d - 1.0, False)):
+        for maps in render_camera(scene, cam, pose, max_depth=max_depth, raw=True):
+            if seen:
+                assert np.allclose(maps.depth, d, atol=1e-4) and (maps.face >= 0).all()
+                assert (maps.semantic == BUILDING).all() and (maps.instance == 5).all()
+            else:
+                assert (maps.depth == 0).all() and (maps.face == -1).all()
+                assert (maps.semantic == SKY).all() and (maps.instance == 0).all()
+
+
 def test_rig_camera_rays_are_the_bundle_computed_once():
     from carlaocc.stages.sensors.raycast import rig_camera_rays
 
