@@ -10,7 +10,7 @@ Two sources of frames, one viewer (:class:`Viewer`, :func:`save_html`):
   :class:`carlaocc.catalog.samples.FrameSamples`. With ``--pred``, prediction files on the root's
   grid.
 * :class:`PairFrames` (``--pred P --gt G``): a prediction tree against its ground-truth tree,
-  paired and read by ``carlaocc eval ssc``'s own functions (:mod:`carlaocc.pipeline.cli.evaluate`)
+  paired and read by ``carlaocc eval ssc``'s own functions (:mod:`carlaocc.catalog.formats.predictions`)
   in its label space (``--map``), each frame on the grid and in the frame of the export's
   ``grid.json`` (:mod:`carlaocc.catalog.formats.manifest`).
 
@@ -432,7 +432,7 @@ def pair_frames(pred: Path, gt: Path, map_name: str = "carlaocc", table: str | N
     """A prediction tree against its ground-truth tree, paired and read as ``carlaocc eval ssc``
     pairs and reads them (by relative path without suffix; labels in ``map_name``), each frame on
     the grid its export's ``grid.json`` states."""
-    from carlaocc.pipeline.cli.evaluate import InputError, pair_files
+    from carlaocc.catalog.formats.predictions import InputError, pair_files
     from carlaocc.stages.evaluation import label_map
 
     try:
@@ -498,7 +498,7 @@ class PairFrames:
             raise ViewerError(f"--gt {self.gt}: {exc}") from None
 
     def prepare(self, k: int, budget: int) -> FrameView:
-        from carlaocc.pipeline.cli.evaluate import InputError, load_occupancy
+        from carlaocc.catalog.formats.predictions import InputError, load_occupancy
 
         t0 = time.perf_counter()
         _, pf, gf = self.pairs[self.indices[k]]
