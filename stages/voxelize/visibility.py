@@ -592,9 +592,10 @@ def _cell_bounds(oz, m, r_in, r_out):
 # Rows of the sparse part's int64 state S (one row per name, max(rays, nz, buckets) wide): per ray
 # its lowest and highest cell in the current column, its successor in its bucket's list and
 # whether it has left the fan; the two column lists (rays to refresh now / in the next column);
-# per cell the number of live rays covering it; per bucket the first ray of its list.
-_LO, _HI, _NEXT, _DEAD, _LIST0, _LIST1, _COUNT, _HEAD = 0, 1, 2, 3, 4, 5, 6, 7
-_SPARSE_ROWS = 8
+# per cell the number of live rays covering it; per bucket the first ray of its list; the cells
+# whose count falls by one at the start of the next column (a ray's end carried over, step 5).
+_LO, _HI, _NEXT, _DEAD, _LIST0, _LIST1, _COUNT, _HEAD, _PEND = 0, 1, 2, 3, 4, 5, 6, 7, 8
+_SPARSE_ROWS = 9
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -648,8 +649,17 @@ def _move_cells(S, U, l0, h0, l1, h1, nz):
             U[c >> 6] = (U[c >> 6] & ~(np.uint64(1) << sh)) | (np.uint64(n > 0) << sh)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _count_cell(S, U, c, d):
+    """Add ``d`` to the count of cell ``c`` (in the grid) and set its bit of ``U`` to count > 0."""
+    n = S[_COUNT, c] + d
+    S[_COUNT, c] = n
+    sh = np.uint64(c & 63)
+    U[c >> 6] = (U[c >> 6] & ~(np.uint64(1) << sh)) | (np.uint64(n > 0) << sh)
+
+
 @njit(cache=True, nogil=True)
-def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp):
+def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp, npend):
     """Bring the live rays whose cells may have changed up to this column, then count them.
 
     Gathered into the list row ``now`` (which already holds the ``nt`` rays filed for this
@@ -658,8 +668,15 @@ def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp):
     cells, exactly as :func:`_cell_lo` and :func:`_cell_hi` give them, move its counts if they
     changed; then it is filed where they may change next: the bucket of that distance from
     ``r0``, or the other list row (the next column), or nowhere beyond the footprint's end
-    ``r1``. Returns the next column's list length and the new ``bp``."""
+    ``r1``. A ray whose cells in the next column are known now -- the single cell of its far
+    end, one cell less than here -- is not refreshed there: the cell it leaves goes into the
+    ``npend`` pending decrements, applied first thing in the next column. Returns the next
+    column's list length, the new ``bp`` and the number of pending decrements."""
     nb = S.shape[1]
+    # 0. the cells the rays carried over from the last column left
+    for i in range(npend):
+        _count_cell(S, U, S[_PEND, i], -1)
+    npend = 0
     # 1. gather the due rays
     kb = min(int(r_out - r0), nb - 1)  # noqa: RUF046
     while bp < kb:
@@ -712,7 +729,21 @@ def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp):
                 U[c >> 6] = (U[c >> 6] & ~(np.uint64(1) << sh)) | (np.uint64(n > 0) << sh)
             else:
                 _move_cells(S, U, l0, h0, lo, hi, nz)
-        t = _next_change(m, oz, lo, hu)
+        # the ray's cells in the next column, whose near end is this column's far end: from the
+        # cell P of that end, as long as its far end stays in P (until the distance below). When
+        # that is P and one more cell of here, the other cell's count falls by one next column
+        # and the ray is not refreshed there (the same counts, one refresh less a cell crossed)
+        p = int(math.floor(zh if m > 0.0 else zl))  # noqa: RUF046
+        if hi == lo + 1 and (p == lo or p == hi):
+            c = hi if p == lo else lo
+            if 0 <= c <= top:
+                S[_PEND, npend] = c
+                npend += 1
+            S[_LO, v] = p
+            S[_HI, v] = p
+            t = _next_change(m, oz, p, p)
+        else:
+            t = _next_change(m, oz, lo, hu)
         if t > r_out:
             if t <= r1:
                 bk = int(t - r0)  # noqa: RUF046
@@ -722,7 +753,7 @@ def _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nt, bp):
         else:  # (a change may come in the very next column; or a NaN)
             S[nxt_row, nn] = v
             nn += 1
-    return nn, bp
+    return nn, bp, npend
 
 
 @njit(cache=True, nogil=True)
@@ -730,7 +761,7 @@ def _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz):
     """Enter the sparse part of a fan (its rays at least a voxel apart from here on): no cell
     counted, no bucket filled, then every live ray (runs ``ra``, ``rb``) refreshed as in
     :func:`_sparse_column` from list row ``_LIST0``. Returns the next column's list length (in
-    row ``_LIST1``)."""
+    row ``_LIST1``) and number of pending decrements."""
     for c in range(nz):
         S[_COUNT, c] = 0
     for q in range(U.shape[0]):
@@ -746,8 +777,8 @@ def _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz):
             S[_LIST0, nt] = v
             nt += 1
     # (every bucket lies beyond this column: bp = the last one, nothing gathered)
-    nn, _ = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, _LIST0, nt, S.shape[1])
-    return nn
+    nn, _, npend = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, _LIST0, nt, S.shape[1], 0)
+    return nn, npend
 
 
 @njit(cache=True, nogil=True)
@@ -793,6 +824,7 @@ def _fan(occ, mask, acc, R, S, due, U, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz
     sparse = False
     nc = 0
     bp = 0
+    npend = 0
     now = _LIST0
     # 3. column by column, while some ray is alive
     while nr > 0:
@@ -805,10 +837,10 @@ def _fan(occ, mask, acc, R, S, due, U, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz
         dense = gmax * r_out < 1.0
         if not dense:
             if sparse:
-                nc, bp = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nc, bp)
+                nc, bp, npend = _sparse_column(M, due, S, U, oz, r_in, r_out, r0, r1, nz, now, nc, bp, npend)
                 now = _LIST1 if now == _LIST0 else _LIST0
             else:
-                nc = _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz)
+                nc, npend = _start_sparse(M, due, S, U, ra, rb, nr, oz, r_in, r_out, r0, r1, nz)
                 now = _LIST1
                 bp = 0
                 sparse = True
