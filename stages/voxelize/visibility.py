@@ -848,6 +848,18 @@ def _fan(occ, mask, acc, R, S, due, U, ra, rb, sa, sb, nx, ny, nz, W, ox, oy, oz
         for ru in range(nr):
             a = ra[ru]
             b = rb[ru]
+            # 3'. the common case first: no ray of the run ends here (R falls with |m|: its
+            #     smallest values are at the run's ends), the run's range [lo of a, hi of b] is in
+            #     the grid and free: nothing of 3a-3c applies and 3d marks that range (the very
+            #     values the steps below compute)
+            if R[a] > r_out and R[b] > r_out:
+                lo_c = _cell_lo(oz, M[a], r_in, r_out)
+                hi_c = _cell_hi(oz, M[b], r_in, r_out)
+                if 0 <= lo_c and hi_c < nz and _next_occupied(occ, cb, lo_c, hi_c) < 0:
+                    if dense:
+                        _mark_range(acc, lo_c, hi_c)
+                    ns = _append_run(sa, sb, ns, a, b)
+                    continue
             # 3a. rays ending in this column: at the run's ends, one by one
             a0 = a
             while a <= b and R[a] <= r_out:
