@@ -179,7 +179,7 @@ def _atomic_or(typingctx, arr, idx, val):
     return sig, codegen
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _or_word(mask, w, bits):
     """OR ``bits`` into ``mask[w]``, atomically and only when that changes the word (most words
     a ray reaches near a sensor are already set: no needless cache-line traffic between threads)."""
@@ -193,7 +193,7 @@ def _range_bits(lo, hi):
     return (_ONES >> np.uint64(63 - (hi - lo))) << np.uint64(lo)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _mark_range(acc, lo, hi):
     """Set cells ``lo..hi`` (``lo <= hi``) of the column accumulator ``acc`` (W words)."""
     q0 = lo >> 6
@@ -204,7 +204,7 @@ def _mark_range(acc, lo, hi):
         acc[q] |= _range_bits(a, b)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _next_occupied(occ, cb, k, hi):
     """The lowest occupied cell in ``[k, hi]`` of the column whose words start at ``cb``, or -1."""
     if k > hi:
@@ -221,7 +221,7 @@ def _next_occupied(occ, cb, k, hi):
         w = occ[cb + q]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _next_free(occ, cb, k, hi):
     """The lowest free cell in ``[k, hi]`` of the column, or ``hi + 1``."""
     q = k >> 6
@@ -485,7 +485,7 @@ def _below(oz, m, r_in, r_out, bound, upper):
     return _cell_hi(oz, m, r_in, r_out) < bound
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _last_ray(oz, M, r_in, r_out, start, b, bound, upper):
     """The last ray index in ``[start, b]`` for which :func:`_below` holds, given that it holds
     for ``start`` (or ``start`` is one before the run) and is monotone (true, then false):
