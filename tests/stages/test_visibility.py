@@ -684,3 +684,58 @@ def test_sparse_fans_equal_every_ray_in_every_column(scene):
     got = fan_mask(occ, _unit_grid(occ.shape), fans, t_range).astype(bool)
     want = _fan_rays_one_by_one(occ, o, h, slopes, t_range)
     np.testing.assert_array_equal(got, want)
+
+
+@st.composite
+def _edge_fan_scene(draw):
+    # fans that start dense (rays less than a voxel apart) and turn sparse inside the grid, from
+    # origins in, beside, above or below the grid; columns of 63-65 / 127-129 cells (ranges ending
+    # on and across word boundaries); columns occupied only below or only above the fan's rays
+    # (their occupied runs outside a run's range: the free-run shortcut, step 3 of Algorithm 2),
+    # walls at the grid's edges; dyadic origins and slopes put ray ends exactly on cell faces
+    shape = (draw(st.integers(1, 14)), draw(st.integers(1, 14)), draw(st.sampled_from([1, 5, 63, 64, 65, 127, 128, 129])))
+    nx, ny, nz = shape
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    occ = np.zeros(shape, bool)
+    band = draw(st.sampled_from(["none", "below", "above", "both", "random", "edges"]))
+    k = draw(st.integers(0, nz))
+    if band in ("below", "both"):
+        occ[:, :, :k] = rng.random((nx, ny, 1)) < 0.7
+    if band in ("above", "both"):
+        occ[:, :, max(k, nz - draw(st.integers(1, 8))):] = rng.random((nx, ny, 1)) < 0.7
+    if band == "random":
+        occ = rng.random(shape) < draw(st.sampled_from([0.01, 0.05]))
+    if band == "edges":
+        occ[[0, -1]] = True
+        occ[:, [0, -1]] = True
+    where = draw(st.sampled_from(["inside", "beside", "above", "below"]))
+    a = round(draw(st.floats(0.0, 2 * np.pi)), 6)
+    if where == "inside":
+        o = np.array([draw(st.floats(0.0, nx)), draw(st.floats(0.0, ny)), draw(st.floats(0.0, nz))])
+    else:
+        dist = draw(st.floats(1.0, 20.0))
+        o = np.array([nx / 2 - dist * np.cos(a), ny / 2 - dist * np.sin(a), draw(st.floats(0.0, nz))])
+        o[2] = {"beside": o[2], "above": nz + draw(st.floats(0.0, 6.0)), "below": -draw(st.floats(0.0, 6.0))}[where]
+    if draw(st.booleans()):
+        o = np.round(o * 16) / 16
+    n = draw(st.integers(2, 60))
+    # neighbouring rays a voxel apart somewhere between 0.5 and 20 voxels from the origin
+    gap = 1.0 / draw(st.floats(0.5, 20.0))
+    slopes = draw(st.floats(-1.5, 1.5)) + gap * (np.arange(n) - n / 2) + rng.normal(0, 0.1 * gap, n) * draw(st.booleans())
+    if draw(st.booleans()):
+        slopes = np.round(slopes * 64) / 64
+    slopes = np.unique(slopes)
+    t_range = draw(st.sampled_from([np.inf, draw(st.floats(0.0, 40.0))]))
+    return occ, o, np.array([np.cos(a), np.sin(a)]), slopes, t_range
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_edge_fan_scene())
+def test_fans_from_dense_to_sparse_equal_every_ray_in_every_column(scene):
+    # the union of every ray's cells in every column, exactly: the dense part's intervals, the
+    # free-run shortcut and the sparse part's carried-over cells all give the rays' own cells
+    occ, o, h, slopes, t_range = scene
+    fans = Fans(origins=o[None], headings=h[None], slopes=slopes[None])
+    got = fan_mask(occ, _unit_grid(occ.shape), fans, t_range).astype(bool)
+    want = _fan_rays_one_by_one(occ, o, h, slopes, t_range)
+    np.testing.assert_array_equal(got, want)
