@@ -14,7 +14,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from typer.core import TyperCommand
 
 from carlaocc.catalog.store import StoreError
@@ -100,6 +99,9 @@ def export_cmd(
     sequence: Annotated[Optional[list[str]], typer.Option("--sequence", help="sequence id(s) to export (default: all voxelized)")] = None,
     label_encoding: Annotated[Optional[str], typer.Option("--label-encoding", help="carlaocc-npz / carlaocc-release labels: bits (semantic << 11 | instance, what the release's code writes and its loader reads; default) | decimal (semantic * 1000 + instance, the release's documentation; the files say so in a label_encoding key)")] = None,
 ) -> None:
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
     from carlaocc.catalog.formats import FormatError
     from carlaocc.pipeline.commands.export import FORMATS, export, frame_count, resolve_voxel_size
 
