@@ -354,18 +354,20 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
             if t.box is not None:
                 things.append(_tile_box(t.plan.instance_id, t.box, x0, shape))
                 _LOCAL.dirty.append((shape, things[-1][1:]))  # before painting: see _instance_buffer
-            # the tile's voxel units: an integer shift, exact in float64 (into a reused buffer)
-            P = np.subtract(t.P, offset, out=scratch("tile_vertices", t.P.size, np.float64).reshape(t.P.shape))
             p = t.plan
             inst_dirty |= p.instance_id != 0
             # step d: interior first, then the surface (same labels; order matters across meshes)
-            if p.fill and p.closed:
-                paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
-            elif p.fill:
-                paint_winding_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id,
-                                       t.tree, offset)
-            paint_surface(P, faces, shape, sem_flat, inst_flat if inst_dirty else None, p.semantic_id,
-                          p.instance_id)
+            if p.fill:
+                # the tile's voxel units: an integer shift, exact in float64 (into a reused buffer)
+                P = np.subtract(t.P, offset, out=scratch("tile_vertices", t.P.size, np.float64).reshape(t.P.shape))
+                if p.closed:
+                    paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
+                else:
+                    paint_winding_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id,
+                                           t.tree, offset)
+            # the surface shifts the vertices itself (the same subtraction, no shifted copy)
+            paint_surface(t.P, faces, shape, sem_flat, inst_flat if inst_dirty else None, p.semantic_id,
+                          p.instance_id, shift_x=x0)
         yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape),
                    np.array(things, dtype=np.int64).reshape(-1, 7))
 
