@@ -14,7 +14,8 @@ takes when given no ``--origin``/``--shape``):
   code before this work), whose file is read with :func:`carlaocc.catalog.voxel_file.load_voxels`.
 
 Each child's wall time, CPU time (user + system, from ``os.wait4``: that child alone) and peak
-RSS are printed with the ratios; the voxel sets are compared (IoU, as bench_voxelize does:
+RSS (the child is started by a small runner process, not by this one, whose own RSS Linux would
+count in the child's peak) are printed with the ratios; the voxel sets are compared (IoU, as bench_voxelize does:
 open3d's voxels outside the grid dropped) so the speed is not bought with a wrong answer, and
 the other installation's arrays must equal ours exactly.
 
@@ -56,21 +57,40 @@ print(f"open3d: read {t1 - t0:.2f} s, voxelize {t2 - t1:.2f} s, get_voxels {t3 -
 """
 
 
+# Starts argv[1:] and prints its wall seconds and os.wait4 rusage as JSON on the last line of
+# stderr. The measured child is started from this small interpreter, not from the benchmark's own
+# process: Linux carries a process's peak RSS across exec (and a vfork child shares its parent's
+# memory until then), so a child of the benchmark, which holds the street scene, would report the
+# benchmark's RSS as its own peak (0.49 GiB where the command itself peaks at 0.35).
+RUNNER = r"""
+import json, os, subprocess, sys, time
+t0 = time.perf_counter()
+proc = subprocess.Popen(sys.argv[1:])
+_, status, ru = os.wait4(proc.pid, 0)
+proc.returncode = os.waitstatus_to_exitcode(status)
+print(json.dumps({"wall_s": time.perf_counter() - t0, "code": proc.returncode, "user_s": ru.ru_utime,
+                  "sys_s": ru.ru_stime, "maxrss_kib": ru.ru_maxrss}), file=sys.stderr)
+"""
+
+
 def _run(cmd: list[str], cwd: str) -> dict:
-    """Run ``cmd`` as a child; its wall seconds, CPU seconds (user, system) and peak RSS (GiB)
-    from ``os.wait4`` (this child's own rusage, not the maximum over every child)."""
+    """Run ``cmd`` as a child of a small runner; its wall seconds, CPU seconds (user, system) and
+    peak RSS (GiB) from ``os.wait4`` (this child's own rusage, not the maximum over every child)."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, cwd=cwd, stdout=out, stderr=err, text=True)
-        _, status, ru = os.wait4(proc.pid, 0)  # reaps the child: Popen must not wait for it again
-        wall = time.perf_counter() - t0
-        proc.returncode = code = os.waitstatus_to_exitcode(status)
+        subprocess.run([sys.executable, "-S", "-c", RUNNER, *cmd], cwd=cwd, stdout=out, stderr=err, text=True,
+                       check=False)
         out.seek(0), err.seek(0)
         stdout, stderr = out.read(), err.read()
-    if code != 0:
-        raise RuntimeError(f"{' '.join(cmd)} exited {code}:\n{stdout}\n{stderr}")
-    return {"wall_s": wall, "user_s": ru.ru_utime, "sys_s": ru.ru_stime, "cpu_s": ru.ru_utime + ru.ru_stime,
-            "peak_gib": ru.ru_maxrss / 2**20, "stdout": stdout, "stderr": stderr}
+    lines = stderr.rstrip("\n").splitlines()
+    try:
+        ru = json.loads(lines[-1])
+    except (IndexError, ValueError):
+        raise RuntimeError(f"{' '.join(cmd)}: the runner failed:\n{stderr}") from None
+    stderr = "\n".join(lines[:-1])
+    if ru["code"] != 0:
+        raise RuntimeError(f"{' '.join(cmd)} exited {ru['code']}:\n{stdout}\n{stderr}")
+    return {"wall_s": ru["wall_s"], "user_s": ru["user_s"], "sys_s": ru["sys_s"], "cpu_s": ru["user_s"] + ru["sys_s"],
+            "peak_gib": ru["maxrss_kib"] / 2**20, "stdout": stdout, "stderr": stderr}
 
 
 def _best(cmd: list[str], cwd: str, repeat: int) -> dict:

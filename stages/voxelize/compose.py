@@ -44,12 +44,14 @@ shift is exact, and check equality on random scenes).
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 from collections.abc import Iterator
 import numpy as np
+from numba import njit
 
 from carlaocc.schemas.grid import GridSpec
 from carlaocc.schemas.meshes import SceneMesh
@@ -97,6 +99,10 @@ def _fuse(meshes: Sequence[SceneMesh], fill: str = "auto") -> list[tuple[np.ndar
             inst = 0 if m.is_stuff else int(m.instance_id)
             out.append((m.vertices, m.faces, int(m.semantic_id), inst, bool(m.is_stuff), filled, bool(m.closed), (pos,)))
     for sem, members in stuff.items():
+        if len(members) == 1:  # nothing to fuse: the mesh as it is (no copy of its arrays)
+            m = meshes[members[0]]
+            out.append((m.vertices, m.faces, sem, 0, True, False, False, tuple(members)))
+            continue
         verts, faces, offset = [], [], 0
         for pos in members:
             v = np.asarray(meshes[pos].vertices, dtype=np.float64).reshape(-1, 3)
@@ -117,14 +123,30 @@ def _cull(V: np.ndarray, F: np.ndarray, whole: bool, lo: np.ndarray, hi: np.ndar
         if len(fin) == 0:
             return F[:0]
         return F if np.all((fin.min(axis=0) <= hi) & (fin.max(axis=0) >= lo)) else F[:0]
-    # per-triangle bounding boxes, one axis at a time (cheaper than reducing (M, 3, 3) arrays)
-    keep = np.ones(len(F), dtype=bool)
-    for axis in range(3):
-        c = V[:, axis][F]  # (M, 3)
-        tmin = np.minimum(np.minimum(c[:, 0], c[:, 1]), c[:, 2])
-        tmax = np.maximum(np.maximum(c[:, 0], c[:, 1]), c[:, 2])
-        keep &= (tmin <= hi[axis]) & (tmax >= lo[axis])  # NaN compares False: dropped
-    return F[keep]
+    # per-triangle bounding boxes against the box, in one compiled pass over the faces
+    return F[_touching_faces(V, F, np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))]
+
+
+@njit(cache=True, nogil=True)
+def _touching_faces(V, F, lo, hi):
+    """Step b's test per face: its bounding box (over its three corners) touches the closed box
+    [lo, hi] on every axis; a face with a NaN coordinate is dropped (it compares False)."""
+    keep = np.empty(F.shape[0], dtype=np.bool_)
+    for t in range(F.shape[0]):
+        ok = True
+        for axis in range(3):
+            c0 = V[F[t, 0], axis]
+            c1 = V[F[t, 1], axis]
+            c2 = V[F[t, 2], axis]
+            # NaN: no comparison holds (np.minimum/np.maximum propagate it to the same effect)
+            if c0 != c0 or c1 != c1 or c2 != c2:
+                ok = False
+                break
+            if not (min(c0, min(c1, c2)) <= hi[axis] and max(c0, max(c1, c2)) >= lo[axis]):
+                ok = False
+                break
+        keep[t] = ok
+    return keep
 
 
 def _up_axis(up) -> np.ndarray | None:
@@ -222,6 +244,7 @@ class _TiledMesh:
         else:
             self.box = None
         self._tree: WindingTree | None = None
+        self._bins: tuple[int, int, np.ndarray, np.ndarray] | None = None
 
     @property
     def tree(self) -> WindingTree:
@@ -230,16 +253,72 @@ class _TiledMesh:
             self._tree = winding_tree(self.P, self.plan.faces)
         return self._tree
 
-    def faces_for(self, x0: int, x1: int) -> np.ndarray | None:
+    def faces_for(self, x0: int, x1: int, tile_x: int | None = None, X: int | None = None) -> np.ndarray | None:
         """Faces that can touch voxels [x0, x1) (closed boxes: [x0, x1] in voxel units); a filled
-        mesh keeps all its faces (the parity needs every crossing) or none."""
-        slack = 1e-6
+        mesh keeps all its faces (the parity needs every crossing) or none. Given the tiling
+        (``tile_x``, grid width ``X``, with ``x0`` a multiple of ``tile_x``), the faces are
+        binned to the tiles once and a tile takes its bin: the same faces, in the same order."""
+        slack = _FACE_SLACK
         if self.hi < x0 - slack or self.lo > x1 + slack:
             return None
         if self.plan.fill:
             return self.plan.faces
+        if tile_x is not None:
+            if self._bins is None or self._bins[:2] != (tile_x, X):
+                self._bins = (tile_x, X, *_bin_faces(self.xmin, self.xmax, tile_x, X, slack))
+            _, _, ptr, order = self._bins
+            k = x0 // tile_x
+            sel = order[ptr[k]:ptr[k + 1]]
+            return self.plan.faces[sel] if len(sel) else None
         keep = (self.xmax >= x0 - slack) & (self.xmin <= x1 + slack)
         return self.plan.faces[keep] if keep.any() else None
+
+
+# Slack (voxel units) of the per-tile face selection: a face whose x range comes this close to a
+# tile is given to it (the kernel decides exactly).
+_FACE_SLACK = 1e-6
+
+
+@njit(cache=True, nogil=True)
+def _bin_faces(xmin, xmax, tile_x, X, slack):
+    """The faces of each tile of width ``tile_x`` over ``X`` voxels: tile k (voxels [x0, x1),
+    x0 = k * tile_x, x1 = min(x0 + tile_x, X)) owns ``order[ptr[k]:ptr[k + 1]]``, the faces with
+    ``xmax >= x0 - slack`` and ``xmin <= x1 + slack`` (the test of the untiled selection, in the
+    same float arithmetic), ascending. A face with a non-finite x range is in no tile (the kernel
+    drops it anyway)."""
+    nt = (X + tile_x - 1) // tile_x
+    nf = xmin.shape[0]
+    # 1. per face, the tiles its x range might reach (one voxel of margin), tested exactly
+    counts = np.zeros(nt + 1, dtype=np.int64)
+    for f in range(nf):
+        a, b = xmin[f], xmax[f]
+        if not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        k0 = max(int(math.floor((min(max(a, -2.0), X + 2.0) - 1.0) / tile_x)), 0)
+        k1 = min(int(math.floor((min(max(b, -2.0), X + 2.0) + 1.0) / tile_x)), nt - 1)
+        for k in range(k0, k1 + 1):
+            x0 = k * tile_x
+            x1 = min(x0 + tile_x, X)
+            if b >= x0 - slack and a <= x1 + slack:
+                counts[k + 1] += 1
+    for k in range(nt):
+        counts[k + 1] += counts[k]
+    # 2. the same test again, writing each face into the bins it passed (faces ascend per bin)
+    order = np.empty(counts[nt], dtype=np.int64)
+    cur = counts[:-1].copy()
+    for f in range(nf):
+        a, b = xmin[f], xmax[f]
+        if not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        k0 = max(int(math.floor((min(max(a, -2.0), X + 2.0) - 1.0) / tile_x)), 0)
+        k1 = min(int(math.floor((min(max(b, -2.0), X + 2.0) + 1.0) / tile_x)), nt - 1)
+        for k in range(k0, k1 + 1):
+            x0 = k * tile_x
+            x1 = min(x0 + tile_x, X)
+            if b >= x0 - slack and a <= x1 + slack:
+                order[cur[k]] = f
+                cur[k] += 1
+    return counts, order
 
 
 def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
@@ -263,25 +342,32 @@ def voxelize_tiles(meshes: Sequence[SceneMesh], grid: GridSpec, tile_x: int,
         n = shape[0] * Y * Z
         sem_flat = scratch("tile_semantic", n, np.uint8, zero=True)
         inst_flat = _instance_buffer(n)
+        # the tile's instance buffer is all zero until a mesh with a nonzero instance id paints
+        # into it: until then stuff (instance 0) need not write its zeros there
+        inst_dirty = False
         offset[0] = x0
         things = []
         for t in tiled:
-            faces = t.faces_for(x0, x1)
+            faces = t.faces_for(x0, x1, tile_x, X)
             if faces is None:
                 continue
             if t.box is not None:
                 things.append(_tile_box(t.plan.instance_id, t.box, x0, shape))
                 _LOCAL.dirty.append((shape, things[-1][1:]))  # before painting: see _instance_buffer
-            # the tile's voxel units: an integer shift, exact in float64
-            P = t.P - offset
             p = t.plan
+            inst_dirty |= p.instance_id != 0
             # step d: interior first, then the surface (same labels; order matters across meshes)
-            if p.fill and p.closed:
-                paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
-            elif p.fill:
-                paint_winding_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id,
-                                       t.tree, offset)
-            paint_surface(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
+            if p.fill:
+                # the tile's voxel units: an integer shift, exact in float64 (into a reused buffer)
+                P = np.subtract(t.P, offset, out=scratch("tile_vertices", t.P.size, np.float64).reshape(t.P.shape))
+                if p.closed:
+                    paint_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id)
+                else:
+                    paint_winding_interior(P, faces, shape, sem_flat, inst_flat, p.semantic_id, p.instance_id,
+                                           t.tree, offset)
+            # the surface shifts the vertices itself (the same subtraction, no shifted copy)
+            paint_surface(t.P, faces, shape, sem_flat, inst_flat if inst_dirty else None, p.semantic_id,
+                          p.instance_id, shift_x=x0)
         yield Tile(x0, sem_flat.reshape(shape), inst_flat.reshape(shape),
                    np.array(things, dtype=np.int64).reshape(-1, 7))
 
@@ -299,10 +385,13 @@ def _instance_buffer(n: int) -> np.ndarray:
     abandoned halfway is still cleaned by the next call."""
     dirty = getattr(_LOCAL, "dirty", None)
     buf = scratch("tile_instance", n, np.uint32)
-    full = buf if buf.base is None else buf.base  # (a reallocated buffer is fresh zeros)
-    if dirty is None:  # the thread's first tile: zero the whole buffer once
-        full[:] = 0
-    else:
+    full = buf if buf.base is None else buf.base
+    if full is not getattr(_LOCAL, "buffer", None):
+        # a buffer this thread has not painted yet: scratch made it with np.zeros, so it is zero
+        # and its pages are not even mapped until something is painted (a run without things
+        # never touches them)
+        _LOCAL.buffer = full
+    elif dirty is not None:
         for shape, (i0, i1, j0, j1, k0, k1) in dirty:
             size = shape[0] * shape[1] * shape[2]
             if size <= full.size:

@@ -233,14 +233,15 @@ def _sat_uvw(au, av, aw, bu, bv, bw, cu, cv, cw, iu, iv, iw):
 
 
 @njit(cache=True, nogil=True)
-def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
-    """Write (val_a, val_b) into every voxel the closed box of which meets triangle t."""
+def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b, x0):
+    """Write (val_a, val_b) into every voxel the closed box of which meets triangle t, its
+    vertices ``P`` shifted by ``-x0`` along x (the same subtraction as shifting ``P`` first)."""
     a = faces[t, 0]
     b = faces[t, 1]
     c = faces[t, 2]
-    ax, ay, az = P[a, 0], P[a, 1], P[a, 2]
-    bx, by, bz = P[b, 0], P[b, 1], P[b, 2]
-    cx, cy, cz = P[c, 0], P[c, 1], P[c, 2]
+    ax, ay, az = P[a, 0] - x0, P[a, 1], P[a, 2]
+    bx, by, bz = P[b, 0] - x0, P[b, 1], P[b, 2]
+    cx, cy, cz = P[c, 0] - x0, P[c, 1], P[c, 2]
     # drop triangles with a NaN/inf coordinate
     if not math.isfinite(ax + ay + az + bx + by + bz + cx + cy + cz):
         return
@@ -354,14 +355,14 @@ def _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write
 
 
 @njit(cache=True, nogil=True)
-def _surface_paint_serial(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
+def _surface_paint_serial(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b, x0):
     """Paint every surface voxel of every triangle, in the calling thread."""
     for t in range(faces.shape[0]):
-        _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b)
+        _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b, x0)
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def _surface_paint_parallel(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b):
+def _surface_paint_parallel(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, write_b, x0):
     """Paint every surface voxel of every triangle, triangles spread over numba's threads."""
     nt = faces.shape[0]
     nchunks = (nt + _CHUNK - 1) // _CHUNK
@@ -371,7 +372,7 @@ def _surface_paint_parallel(P, faces, nx, ny, nz, out_a, out_b, val_a, val_b, wr
     for s in prange(_STRIPES):
         for ch in range(s, nchunks, _STRIPES):
             for t in range(ch * _CHUNK, min((ch + 1) * _CHUNK, nt)):
-                _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b)
+                _surface_triangle(P, faces, t, nx, ny, nz, out_a, out_b, val_a, val_b, write_b, x0)
 
 
 @njit(cache=True, nogil=True)
@@ -691,9 +692,11 @@ def _use_threads(work: int, threshold: int) -> bool:
     return work >= threshold and numba.get_num_threads() > 1
 
 
-def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
+def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b, shift_x: float = 0.0) -> None:
     """Write ``val_a`` into flat ``out_a`` (and ``val_b`` into flat ``out_b`` unless it is None)
-    at every surface voxel of the mesh given in voxel units ``P`` (see :func:`to_voxel_units`).
+    at every surface voxel of the mesh given in voxel units ``P`` (see :func:`to_voxel_units`),
+    moved by ``-shift_x`` along x first (a tile's first index: the same result as painting
+    ``P - (shift_x, 0, 0)``, without the shifted copy).
 
     Meshes of at least ``PARALLEL_MIN_TRIANGLES`` triangles use numba's threads
     (``numba.set_num_threads``, per calling thread); smaller ones run in the calling thread.
@@ -706,7 +709,7 @@ def paint_surface(P, faces, shape, out_a, out_b, val_a, val_b) -> None:
     if out_b is None:
         out_b = np.zeros(1, dtype=np.uint32)
     kernel = _surface_paint_parallel if _use_threads(len(F), PARALLEL_MIN_TRIANGLES) else _surface_paint_serial
-    kernel(P, F, nx, ny, nz, out_a, out_b, out_a.dtype.type(val_a), out_b.dtype.type(val_b), write_b)
+    kernel(P, F, nx, ny, nz, out_a, out_b, out_a.dtype.type(val_a), out_b.dtype.type(val_b), write_b, float(shift_x))
 
 
 def surface_voxels(vertices, faces, origin, voxel_size: float, shape) -> np.ndarray:
@@ -811,8 +814,8 @@ def warmup() -> None:
         inst = np.zeros(64, dtype=dtype_b)
         paint_surface(P, tet_f, shape, sem, inst, 1, 1)
         paint_interior(P, tet_f, shape, sem, inst, 1, 1)
-        _surface_paint_parallel(P, tet_f, 4, 4, 4, sem, inst, np.uint8(1), dtype_b(1), True)
+        _surface_paint_parallel(P, tet_f, 4, 4, 4, sem, inst, np.uint8(1), dtype_b(1), True, 0.0)
     words = np.zeros(8, dtype=np.uint64)
     mask = words.view(np.uint8)
-    _surface_paint_parallel(P, tet_f, 4, 4, 4, mask, np.zeros(1, np.uint32), np.uint8(1), np.uint32(0), False)
+    _surface_paint_parallel(P, tet_f, 4, 4, 4, mask, np.zeros(1, np.uint32), np.uint8(1), np.uint32(0), False, 0.0)
     _mask_to_indices_parallel(mask, words, np.ones(1, dtype=np.uint8), _BLOCK_WORDS)

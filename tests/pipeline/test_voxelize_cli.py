@@ -135,3 +135,17 @@ def test_a_surface_run_imports_only_what_it_uses(tmp_path):
     assert "numba" in loaded and (tmp_path / "x.npz").exists()  # the check sees what it ran
     assert not loaded & {"trimesh", "zarr", "scipy.ndimage", "dask", "distributed", "pyarrow"}, sorted(
         loaded & {"trimesh", "zarr", "scipy.ndimage", "dask", "distributed", "pyarrow"})
+
+
+def test_the_threads_wait_asleep_unless_the_user_chose(tmp_path, cube_obj, monkeypatch):
+    # numba's OpenMP threads must not spin while waiting (CPU burnt on a busy machine); a wait
+    # policy the user set is kept
+    args = ["voxelize", str(cube_obj), "--class", "Car", "--voxel-size", "0.25", "--out", str(tmp_path / "c.npz")]
+    monkeypatch.delenv("OMP_WAIT_POLICY", raising=False)
+    assert cli.invoke(app, args).exit_code == 0
+    import os
+
+    assert os.environ["OMP_WAIT_POLICY"] == "PASSIVE"
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    assert cli.invoke(app, args).exit_code == 0
+    assert os.environ["OMP_WAIT_POLICY"] == "ACTIVE"

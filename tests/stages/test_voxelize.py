@@ -384,6 +384,24 @@ def test_car_on_road_overwrites_the_shared_voxels():
     assert elevation_order([car, road], grid) == [1, 0]
 
 
+@pytest.mark.parametrize("tile", [1, 3, 64])
+def test_higher_stuff_takes_a_things_voxels_with_instance_zero(tile):
+    # a stuff plane above a car's floor is written after the car: where it crosses the car, its
+    # voxels are stuff with instance 0, in every tile (stuff writes no instance ids into a tile
+    # no thing has painted, and must where one has); tiles without the car hold no instance at all
+    grid = _grid()
+    car = _box((-1.0, -0.5, 0.0), (1.0, 0.5, 1.5), CAR, 7)
+    shelf = _stuff(*_plane(0.55), ROAD)  # z = 0.55 m: inside voxel layer k = 6 (origin -1 m, 0.25 m)
+    sem, inst = voxelize_scene([shelf, car], grid, tile_x=tile)
+    assert elevation_order([shelf, car], grid) == [1, 0]
+    P = to_voxel_units(np.array([[-1.0, -0.5, 0.0]]), grid.origin, grid.voxel_size)
+    i0, j0, _ = P[0].astype(int)
+    inside = (slice(i0 + 1, i0 + 7), slice(j0 + 1, j0 + 3), 6)  # the shelf's layer within the car
+    assert (sem[inside] == ROAD).all() and (inst[inside] == 0).all()
+    assert (sem[i0 + 1:i0 + 7, j0 + 1:j0 + 3, 7] == CAR).all()  # the car's interior above the shelf
+    assert (inst[sem == CAR] == 7).all() and (inst[sem != CAR] == 0).all()
+
+
 def test_building_wins_over_terrain():
     grid = _grid()
     Vt, Ft = _plane(0.0)
