@@ -6,6 +6,7 @@ a LocalCluster's teardown that prints nothing after a successful run."""
 
 from __future__ import annotations
 
+import importlib
 import math
 import socket
 import subprocess
@@ -304,7 +305,9 @@ def test_main_is_the_last_net(monkeypatch, capsys):
     def broken_app():
         raise MemoryError("out of memory while starting")
 
-    monkeypatch.setattr(cli_pkg, "app", broken_app)
+    # the Typer application main runs is the attribute of the module carlaocc.pipeline.cli.app (the
+    # package's own `app` is a lazy view of it: see COMMAND_MODULES)
+    monkeypatch.setattr(importlib.import_module("carlaocc.pipeline.cli.app"), "app", broken_app)
     monkeypatch.setattr(sys, "argv", ["carlaocc", "status"])
     # main leaves the process with os._exit (tests/pipeline/test_exit.py runs that for real): here,
     # an ordinary SystemExit, so the test process lives on
