@@ -660,7 +660,7 @@ class Viewer:
         try:
             v = self.view(k)
         except ViewerError as exc:
-            self.status.content = f"frame {self.source.names[k]}: error: {exc}"
+            self.status.content = f"frame {wrappable(self.source.names[k])}: error: {exc}"
             return
         if self.unobserved.value != "show":
             self.source.masks(k, v)
@@ -675,9 +675,15 @@ class Viewer:
         self.class_legend.content = class_legend_text(sorted(self.class_boxes), self.mode.value, self.labels)
         lod = "" if v.point_size <= self.source.voxel_size * 1.01 else \
             f", level of detail {v.point_size:g} m (budget {self.budget:,})"
-        self.status.content = (f"frame {self.source.names[k]}: {len(v.centres):,} surface voxels of "
+        self.status.content = (f"frame {wrappable(self.source.names[k])}: {len(v.centres):,} surface voxels of "
                                f"{v.occupied:,}{lod}; prepared in {v.seconds:.2f} s")
         self.prefetch(k + 1)
+
+
+def wrappable(name: str) -> str:
+    """``name`` (a frame's path in a prediction tree can be long) with a zero-width space after
+    each ``/``, so the panel's status line wraps it there instead of running out of the panel."""
+    return name.replace("/", "/\u200b")
 
 
 def draw_frame(scene, v: FrameView, mode: str, unobserved: str, mask: str, nodes: dict, overlays: list, *,

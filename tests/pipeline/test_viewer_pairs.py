@@ -95,6 +95,17 @@ def test_occ3d_tree_on_the_ego_grid_with_its_masks(default_01, tmp_path):
                                [to_ego[:3, :3] @ c["position"] + to_ego[:3, 3] for c in plain.cameras], atol=1e-9)
     np.testing.assert_allclose(rooted.ego, np.eye(4), atol=1e-9)  # the ego at the Occ3D grid's origin
     assert np.array_equal(rooted.outcome, v.outcome)  # the voxels are the trees' whatever the root
+    # the live viewer's status line names the frame by its path, breakable at each "/" (a long
+    # path does not run out of the panel)
+    from carlaocc.pipeline.commands.viewer import Viewer, start_server, stop_server
+
+    server = start_server()
+    try:
+        viewer = Viewer(server, src, 10**9, prepared={0: v})
+        status = viewer.status.content
+        assert "error" not in status and key.replace("/", "/\u200b") in status
+    finally:
+        stop_server(server)
     # the command: one offline page of the pair
     page = tmp_path / "pair.html"
     r = CliRunner().invoke(app, ["view", "--pred", str(tmp_path / "pred"), "--gt", str(out), "--map", "occ3d",
