@@ -37,8 +37,9 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("docs/viewer.png"))
     ap.add_argument("--size", default="1280x760")
     args = ap.parse_args()
-    from carlaocc.pipeline.commands.viewer import (RootFrames, Viewer, open_frames, pair_frames, prediction_files,
+    from carlaocc.pipeline.commands.viewer import (RootFrames, Viewer, open_frames, prediction_files,
                                                     start_server, stop_server)
+    from carlaocc.pipeline.commands.viewer_pairs import pair_frames
 
     exe = headless_chromium.find_chromium()
     if exe is None:

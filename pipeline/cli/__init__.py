@@ -35,7 +35,7 @@ import signal
 import sys
 import traceback
 
-from carlaocc.pipeline.cli import app as _app_module  # the Typer application (typer, the error path)
+from carlaocc.pipeline.cli import app as app_module  # the Typer application (typer, the error path)
 from carlaocc.pipeline.cli.common import DEBUG_HINT, debug_enabled, one_line
 from carlaocc.pipeline.cli.exit import exit_code, leave
 
@@ -76,7 +76,7 @@ def load_commands(args: list[str] | None = None) -> None:
         if module == "evaluate":
             from carlaocc.pipeline.cli.evaluate import eval_app
 
-            _app_module.app.add_typer(eval_app, name="eval")
+            app_module.app.add_typer(eval_app, name="eval")
 
 
 _LOADED: set[str] = set()
@@ -85,7 +85,7 @@ _LOADED: set[str] = set()
 def __getattr__(name: str):
     if name == "app":
         load_commands()
-        return _app_module.app
+        return app_module.app
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -134,7 +134,7 @@ def main() -> None:
     install_stop_handlers()
     try:
         load_commands(sys.argv[1:])
-        _app_module.app()
+        app_module.app()
         code = 0
     except SystemExit as exc:
         code = exit_code(exc)

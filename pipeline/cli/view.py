@@ -61,8 +61,9 @@ def view(
     tree against its ground-truth tree, any pair carlaocc eval ssc reads, without a root. Needs
     the viewer extra."""
     import_viser()
-    from carlaocc.pipeline.commands.viewer import (RootFrames, ViewerError, Viewer, open_frames, pair_frames,
+    from carlaocc.pipeline.commands.viewer import (RootFrames, ViewerError, Viewer, open_frames,
                                                     prediction_files, save_html, start_server, stop_server)
+    from carlaocc.pipeline.commands.viewer_pairs import pair_frames
 
     if save is not None and save.suffix.lower() not in (".html", ".htm"):
         fail(f"--save {save}: an .html file")

@@ -46,7 +46,7 @@ def _check_against_dense(v, gt: np.ndarray, pred: np.ndarray, free: int, origin,
 
 
 def test_occ3d_tree_on_the_ego_grid_with_its_masks(default_01, tmp_path):
-    from carlaocc.pipeline.commands.viewer import pair_frames
+    from carlaocc.pipeline.commands.viewer_pairs import pair_frames
 
     out = tmp_path / "occ3d"
     r = CliRunner().invoke(app, ["export", "occ3d", "--res", "0.1", "--root", default_01.url, "--out", str(out),
@@ -79,7 +79,8 @@ def test_occ3d_tree_on_the_ego_grid_with_its_masks(default_01, tmp_path):
     assert tuple(src.labels.colours[4]) == tuple(palette()[by_name("Car").id])
     # with the root: its boxes and cameras on the frame the path names, moved into the ego frame
     from carlaocc.catalog.samples import FrameSamples
-    from carlaocc.pipeline.commands.viewer import RootFrames, open_frames, sample_of_key
+    from carlaocc.pipeline.commands.viewer import RootFrames, open_frames
+    from carlaocc.pipeline.commands.viewer_pairs import sample_of_key
 
     samples = open_frames(default_01.url, SEQ, 0.1)
     key = src.names[0]  # gts/<seq>/<seq>_<frame:06d>/labels
@@ -116,7 +117,7 @@ def test_occ3d_tree_on_the_ego_grid_with_its_masks(default_01, tmp_path):
 
 def test_carlaocc_npz_tree_on_the_lidar_grid(default_01, tmp_path):
     from carlaocc.catalog.formats import load_carlaocc_npz
-    from carlaocc.pipeline.commands.viewer import pair_frames
+    from carlaocc.pipeline.commands.viewer_pairs import pair_frames
 
     out = tmp_path / "npz"
     r = CliRunner().invoke(app, ["export", "carlaocc-npz", "--res", "0.1", "--root", default_01.url, "--out", str(out),
@@ -144,7 +145,7 @@ def test_carlaocc_npz_tree_on_the_lidar_grid(default_01, tmp_path):
 
 def test_release_tree_takes_the_grid_of_its_folder(release_01, tmp_path):
     from carlaocc.catalog.formats import load_carlaocc_npz
-    from carlaocc.pipeline.commands.viewer import pair_frames
+    from carlaocc.pipeline.commands.viewer_pairs import pair_frames
 
     grids = {g["folder"]: g for g in json.loads((release_01 / "grid.json").read_text())["grids"]}
     folder = sorted(release_01.glob("*/occupancy/vs_0_2_forward_view"))[0]
